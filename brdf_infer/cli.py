@@ -1,0 +1,372 @@
+"""Command line ``brdf-infer`` (also ``python -m brdf_infer``).
+
+Each subcommand takes a scene (built-in name or TOML path; default ``lya``). With ``--json``
+stdout holds exactly one JSON object; progress goes to stderr. Bad input prints one line on
+stderr and exits with code 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any, NoReturn
+
+import numpy as np
+
+from brdf_infer.errors import BadInputError
+
+EXIT_BAD_INPUT = 2
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse that reports a usage error in one line (exit code 2)."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message} (see --help)\n")
+
+
+def _progress(message: str) -> None:
+    print(message, file=sys.stderr, flush=True)
+
+
+def _emit_json(content: dict[str, Any]) -> None:
+    print(json.dumps(content))
+
+
+def _table(headers: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
+    widths = [max(len(h), *(len(r[i]) for r in rows)) for i, h in enumerate(headers)]
+    lines = ["  ".join(h.rjust(w) for h, w in zip(headers, widths, strict=True))]
+    lines.append("  ".join("-" * w for w in widths))
+    lines += ["  ".join(c.rjust(w) for c, w in zip(row, widths, strict=True)) for row in rows]
+    return "\n".join(lines)
+
+
+# --------------------------------------------------------------------------- fit
+
+
+def _paper_fit_payload(scene, measurements, selection: str | None) -> dict[str, Any]:
+    from brdf_infer.paper_fit import paper_fit
+    from brdf_infer.params import params_to_dict
+
+    start = time.perf_counter()
+    result = paper_fit(scene, measurements, selection=selection)
+    seconds = time.perf_counter() - start
+    return {
+        "method": "paper",
+        "scene": scene.name,
+        "selection": selection or scene.paper_fit.selection,
+        "params": params_to_dict(result.params),
+        "sigma_e": result.sigma_e,
+        "sigma_re": result.sigma_re,
+        "n_points": result.n_points,
+        "seconds": seconds,
+    }
+
+
+def _print_params_table(params: dict[str, float]) -> None:
+    units = {
+        "brdf0": "sr^-1",
+        "a1": "deg^-2",
+        "a2": "deg^(-1-alpha)",
+        "a3": "deg^(-2-alpha)",
+        "alpha": "-",
+        "theta_s0": "deg",
+    }
+    print(
+        _table(
+            ["parameter", "value", "unit"], [[k, f"{v:.4g}", units[k]] for k, v in params.items()]
+        )
+    )
+
+
+def _command_fit(args: argparse.Namespace) -> None:
+    from brdf_infer.scene import load_scene
+
+    scene = load_scene(args.scene)
+    measurements = scene.load_measurements()
+    if args.grid:
+        payload = _grid_payload(scene, measurements, args.selection)
+    else:
+        payload = _paper_fit_payload(scene, measurements, args.selection)
+    if args.json:
+        _emit_json(payload)
+        return
+    print(f"paper fit (Sec. 4.2) of scene '{scene.name}', selection '{payload['selection']}'")
+    _print_params_table(payload["params"])
+    print(
+        _table(
+            ["points", "sigma_E [%]", "sigma_RE [%]", "time [s]"],
+            [
+                [
+                    str(payload["n_points"]),
+                    f"{100 * payload['sigma_e']:.2f}",
+                    f"{100 * payload['sigma_re']:.2f}",
+                    f"{payload['seconds']:.3f}",
+                ]
+            ],
+        )
+    )
+    if args.grid:
+        print(f"grid search: least total relative error {100 * payload['sigma_tre']:.2f} %")
+
+
+def _grid_payload(scene, measurements, selection: str | None) -> dict[str, Any]:
+    from brdf_infer.paper_fit import paper_grid_search
+    from brdf_infer.params import params_to_dict
+
+    alphas = np.arange(1.5, 8.01, 0.25)
+    theta_s0s = np.arange(-40.0, 10.01, 2.0)
+    _progress(f"grid search over {alphas.size} x {theta_s0s.size} (alpha, theta_s0) ...")
+    start = time.perf_counter()
+    grid = paper_grid_search(scene, measurements, alphas, theta_s0s, selection=selection)
+    seconds = time.perf_counter() - start
+    best = grid.best
+    return {
+        "method": "paper",
+        "scene": scene.name,
+        "selection": selection or scene.paper_fit.selection,
+        "params": params_to_dict(best.params),
+        "sigma_e": best.sigma_e,
+        "sigma_re": best.sigma_re,
+        "sigma_tre": float(grid.sigma_tre.min()),
+        "n_points": best.n_points,
+        "grid": {"alpha": alphas.tolist(), "theta_s0": theta_s0s.tolist()},
+        "seconds": seconds,
+    }
+
+
+# --------------------------------------------------------------------------- tis / brdf
+
+
+def _timed(function, *args, **kwargs):
+    """(result, seconds of the first call incl. compilation, seconds of a second call)."""
+    import jax
+
+    start = time.perf_counter()
+    result = jax.block_until_ready(function(*args, **kwargs))
+    first = time.perf_counter() - start
+    start = time.perf_counter()
+    jax.block_until_ready(function(*args, **kwargs))
+    return result, first, time.perf_counter() - start
+
+
+def _command_tis(args: argparse.Namespace) -> None:
+    from brdf_infer.model import tis_with_error
+    from brdf_infer.params import resolve_params
+
+    params = resolve_params(args.params)
+    theta_i = _angles(args.theta_i, "--theta-i", 0.0, 90.0, upper_open=True)
+    (values, errors), first, second = _timed(tis_with_error, theta_i, params, fold=not args.no_fold)
+    values, errors = np.asarray(values), np.asarray(errors)
+    if args.json:
+        _emit_json(
+            {
+                "theta_i_deg": theta_i.tolist(),
+                "tis": values.tolist(),
+                "abs_error": errors.tolist(),
+                "fold": not args.no_fold,
+                "seconds": second,
+                "compile_seconds": first - second,
+            }
+        )
+        return
+    print(f"TIS, Eq. (9), parameters '{args.params}', folding {'off' if args.no_fold else 'on'}")
+    rows = [
+        [f"{t:g}", f"{100 * v:.4f}", f"{e:.1e}"]
+        for t, v, e in zip(theta_i, values, errors, strict=True)
+    ]
+    print(_table(["theta_i [deg]", "TIS [%]", "quadrature error [-]"], rows))
+    print(
+        f"time: {1e3 * second:.2f} ms for {theta_i.size} angles (+{first - second:.2f} s compile)"
+    )
+
+
+def _angles(values, option: str, low: float, high: float, upper_open: bool = False) -> np.ndarray:
+    array = np.asarray(values, dtype=float)
+    bad = ~np.isfinite(array) | (array < low) | ((array >= high) if upper_open else (array > high))
+    if bad.any():
+        bracket = ")" if upper_open else "]"
+        raise BadInputError(
+            f"{array[bad][0]:g} deg is outside [{low:g}, {high:g}{bracket}", field=option
+        )
+    return array
+
+
+def _command_brdf(args: argparse.Namespace) -> None:
+    from brdf_infer.model import brdf_hemisphere, brdf_inplane
+    from brdf_infer.params import resolve_params
+
+    params = resolve_params(args.params)
+    theta_i = _angles(args.theta_i, "--theta-i", 0.0, 90.0, upper_open=True)
+    if args.phi is None:
+        theta_s = _angles(args.theta_s, "--theta-s", -90.0, 90.0)
+        phi = None
+    else:
+        theta_s = _angles(args.theta_s, "--theta-s", 0.0, 90.0)
+        phi = np.asarray(args.phi, float)
+    arrays = [theta_i, theta_s] + ([] if phi is None else [phi])
+    try:
+        arrays = np.broadcast_arrays(*arrays)
+    except ValueError:
+        raise BadInputError(
+            "--theta-i, --theta-s and --phi need equal lengths (or length 1)", field="--theta-s"
+        ) from None
+    if phi is None:
+        values = brdf_inplane(arrays[0], arrays[1], params, fold=args.fold)
+    else:
+        values = brdf_hemisphere(arrays[0], arrays[1], arrays[2], params, fold=not args.no_fold)
+    payload = {
+        "theta_i_deg": arrays[0].tolist(),
+        "theta_s_deg": arrays[1].tolist(),
+        "brdf": np.asarray(values).tolist(),
+    }
+    if phi is not None:
+        payload["phi_deg"] = arrays[2].tolist()
+    if args.json:
+        _emit_json(payload)
+        return
+    headers = ["theta_i [deg]", "theta_s [deg]" if phi is None else "theta [deg]"]
+    headers += [] if phi is None else ["phi [deg]"]
+    rows = [
+        [f"{v:g}" for v in column] + [f"{b:.4e}"]
+        for *column, b in zip(*arrays, payload["brdf"], strict=True)
+    ]
+    print(_table([*headers, "BRDF [sr^-1]"], rows))
+
+
+# --------------------------------------------------------------------------- scenes / run
+
+
+def _command_scenes(args: argparse.Namespace) -> None:
+    from brdf_infer.scene import BUILTIN_SCENES, load_scene
+
+    scenes = [load_scene(name) for name in BUILTIN_SCENES]
+    entries = [{"name": s.name, "description": s.description, "path": str(s.path)} for s in scenes]
+    if args.json:
+        _emit_json({"scenes": entries})
+        return
+    print(_table(["scene", "description"], [[e["name"], e["description"]] for e in entries]))
+
+
+def _command_run(args: argparse.Namespace) -> None:
+    from brdf_infer._atomic import atomic_write_json
+    from brdf_infer.model import tis_with_error
+    from brdf_infer.params import Params
+    from brdf_infer.scene import load_scene
+
+    start = time.perf_counter()
+    scene = load_scene(args.scene)
+    measurements = scene.load_measurements()
+    out = Path(args.out) if args.out else Path("reports") / scene.name
+    _progress(f"[1/2] paper fit of scene '{scene.name}' ({len(measurements)} measurements)")
+    fit = _paper_fit_payload(scene, measurements, None)
+    _progress("[2/2] TIS of the fitted model")
+    params = Params(**fit["params"])
+    theta_i = np.array([0.0, 5.0, 30.0, 50.0, 70.0, 80.0])
+    values, errors = tis_with_error(theta_i, params, constants=scene.model.constants)
+    tis_payload = {
+        "theta_i_deg": theta_i.tolist(),
+        "tis": np.asarray(values).tolist(),
+        "abs_error": np.asarray(errors).tolist(),
+    }
+    atomic_write_json(out / "fit_paper.json", fit)
+    atomic_write_json(out / "tis_paper.json", tis_payload)
+    seconds = time.perf_counter() - start
+    if args.json:
+        _emit_json({"out": str(out), "fit": fit, "tis": tis_payload, "seconds": seconds})
+        return
+    print(
+        f"scene '{scene.name}': paper fit (selection '{fit['selection']}', {fit['n_points']} points)"
+    )
+    _print_params_table(fit["params"])
+    print(f"sigma_E = {100 * fit['sigma_e']:.2f} %   sigma_RE = {100 * fit['sigma_re']:.2f} %")
+    rows = [
+        [f"{t:g}", f"{100 * v:.3f}", f"{e:.1e}"]
+        for t, v, e in zip(theta_i, tis_payload["tis"], tis_payload["abs_error"], strict=True)
+    ]
+    print(_table(["theta_i [deg]", "TIS [%]", "quadrature error [-]"], rows))
+    print(f"results written to {out}/ in {seconds:.1f} s")
+
+
+# --------------------------------------------------------------------------- parser
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``brdf-infer`` argument parser."""
+    parser = _Parser(
+        prog="brdf-infer",
+        description="Bayesian BRDF/TIS inference for black coatings (Strumik et al. 2024).",
+    )
+    commands = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    def scene_command(name: str, help_text: str) -> argparse.ArgumentParser:
+        command = commands.add_parser(name, help=help_text, description=help_text)
+        command.add_argument("scene", nargs="?", default="lya", help="built-in name or TOML path")
+        command.add_argument("--json", action="store_true", help="one JSON object on stdout")
+        return command
+
+    run = scene_command("run", "main job: fit the scene and write results to reports/<scene>/")
+    run.add_argument("--out", help="output directory (default reports/<scene>)")
+    run.set_defaults(handler=_command_run)
+
+    fit = scene_command("fit", "fit Eq. (7) to the scene's measurements")
+    fit.add_argument("--method", choices=["paper"], default="paper", help="fit method")
+    fit.add_argument("--selection", help="data selection for --method paper (default: scene's)")
+    fit.add_argument("--grid", action="store_true", help="grid search over (alpha, theta_s0)")
+    fit.set_defaults(handler=_command_fit)
+
+    tis = commands.add_parser("tis", help="total integrated scatter, Eq. (9)")
+    tis.add_argument("--params", default="uv-paper", help="parameter set name or JSON file")
+    tis.add_argument("--theta-i", type=float, nargs="+", default=[0, 5, 30, 50, 70])
+    tis.add_argument("--no-fold", action="store_true", help="leave out the folding of Eq. (10)")
+    tis.add_argument("--json", action="store_true", help="one JSON object on stdout")
+    tis.set_defaults(handler=_command_tis)
+
+    brdf = commands.add_parser("brdf", help="BRDF, in-plane Eq. (7) or hemisphere Eq. (8)")
+    brdf.add_argument("--params", default="uv-paper", help="parameter set name or JSON file")
+    brdf.add_argument("--theta-i", type=float, nargs="+", required=True)
+    brdf.add_argument(
+        "--theta-s",
+        type=float,
+        nargs="+",
+        required=True,
+        help="in-plane theta_s (without --phi) or polar theta (with --phi) [deg]",
+    )
+    brdf.add_argument("--phi", type=float, nargs="+", help="azimuth [deg], forward plane at 180")
+    brdf.add_argument("--fold", action="store_true", help="in-plane: apply Eq. (10)")
+    brdf.add_argument("--no-fold", action="store_true", help="hemisphere: leave out Eq. (10)")
+    brdf.add_argument("--json", action="store_true", help="one JSON object on stdout")
+    brdf.set_defaults(handler=_command_brdf)
+
+    scenes = commands.add_parser("scenes", help="list the built-in scenes")
+    scenes.add_argument("--json", action="store_true", help="one JSON object on stdout")
+    scenes.set_defaults(handler=_command_scenes)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line; returns the exit code (2 for bad input)."""
+    from brdf_infer._precision import Float32Error, require_float64
+
+    args = build_parser().parse_args(argv)
+    try:
+        require_float64()
+        args.handler(args)
+    except (BadInputError, Float32Error) as error:
+        print(f"brdf-infer: error: {error}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        print("brdf-infer: interrupted", file=sys.stderr)
+        return 130
+    return 0
+
+
+def entry_point() -> None:
+    """Console-script entry point."""
+    import brdf_infer  # noqa: F401  (switches JAX to float64 before any work)
+
+    sys.exit(main())

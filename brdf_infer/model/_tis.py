@@ -1,0 +1,114 @@
+"""Total integrated scatter, Eq. (9), reduced exactly to a 1-D integral in θ.
+
+With Eq. (8) the azimuthal integral is closed-form: ∫w dφ = W (see
+:func:`azimuthal_weight_integral`), so
+
+    TIS(θi) = ∫₀^{π/2} [W·BRDF⁺(θ) + (2π − W)·BRDF⁻(θ)] cos θ sin θ dθ.
+
+The integrand has kinks where a branch reaches θs0 (at θ = |θs0|) and a steep shoulder at
+the folding angle θsf; the integral is split there and each panel uses Gauss–Legendre.
+"""
+
+from __future__ import annotations
+
+from functools import partial
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.typing import ArrayLike
+
+from brdf_infer._units import DEG
+from brdf_infer.model._hemisphere import azimuthal_weight_integral
+from brdf_infer.model._inplane import log_brdf_inplane
+from brdf_infer.params import PAPER_CONSTANTS, HemisphereConstants, Params
+
+DEFAULT_NODES = 64  # Gauss–Legendre nodes per panel; see tests/test_tis.py for the error
+
+
+def _gauss_legendre(nodes: int) -> tuple[np.ndarray, np.ndarray]:
+    x, w = np.polynomial.legendre.leggauss(nodes)
+    return x, w
+
+
+def _panel_edges(params: Params, fold: bool, constants: HemisphereConstants) -> jnp.ndarray:
+    """Sorted panel edges in [0°, 90°]: the ends, |θs0| and (with folding) θsf."""
+    kinks = [jnp.clip(jnp.abs(params.theta_s0), 0.0, 90.0)]
+    if fold:
+        kinks.append(jnp.clip(jnp.asarray(constants.fold_theta_sf_deg, float), 0.0, 90.0))
+    return jnp.concatenate([jnp.zeros(1), jnp.sort(jnp.stack(kinks)), jnp.full(1, 90.0)])
+
+
+def _tis_single(
+    theta_i_deg: jnp.ndarray,
+    params: Params,
+    fold: bool,
+    constants: HemisphereConstants,
+    nodes: int,
+) -> jnp.ndarray:
+    """TIS for one θi and one parameter set (scalars)."""
+    x, w = _gauss_legendre(nodes)
+    edges = _panel_edges(params, fold, constants)
+    lower, upper = edges[:-1, None], edges[1:, None]
+    half = 0.5 * (upper - lower)
+    theta = lower + half * (x[None, :] + 1.0)  # [deg], shape (panels, nodes)
+    weights = half * w[None, :] * DEG  # dθ in radians
+    forward_weight = azimuthal_weight_integral(theta_i_deg, constants) * DEG  # [rad]
+    forward = jnp.exp(log_brdf_inplane(theta_i_deg, theta, params, fold, constants))
+    backward = jnp.exp(log_brdf_inplane(theta_i_deg, -theta, params, False, constants))
+    projected = 0.5 * jnp.sin(2.0 * theta * DEG)  # cos θ sin θ
+    integrand = (forward_weight * forward + (2.0 * jnp.pi - forward_weight) * backward) * projected
+    return jnp.sum(weights * integrand)
+
+
+@partial(jax.jit, static_argnames=("fold", "nodes"))
+def tis(
+    theta_i_deg: ArrayLike,
+    params: Params,
+    fold: bool = True,
+    constants: HemisphereConstants = PAPER_CONSTANTS,
+    nodes: int = DEFAULT_NODES,
+) -> jnp.ndarray:
+    """Total integrated scatter TIS(θi) of Eq. (9) for the BRDF of Eqs. (7), (8), (10).
+
+    Exact 1-D reduction with Gauss–Legendre panels split at the kinks; relative error below
+    1e-10 for the published parameter sets at the default ``nodes``.
+
+    Args:
+        theta_i_deg: incidence angles θi [deg], any shape.
+        params: ``Params``; fields may be arrays of one common (batch) shape, e.g. draws.
+        fold: include the folding term of Eq. (10).
+        constants: Δφ and folding constants.
+        nodes: Gauss–Legendre nodes per panel.
+
+    Returns:
+        TIS as a fraction, shape ``batch_shape + theta_i_deg.shape``.
+    """
+    theta_i = jnp.asarray(theta_i_deg, float)
+    fields = [jnp.asarray(value, float) for value in params]
+    batch_shape = jnp.broadcast_shapes(*(field.shape for field in fields))
+    flat = Params(*(jnp.broadcast_to(field, batch_shape).reshape(-1) for field in fields))
+    over_angles = jax.vmap(_tis_single, in_axes=(0, None, None, None, None))
+    over_params = jax.vmap(over_angles, in_axes=(None, 0, None, None, None))
+    values = over_params(theta_i.reshape(-1), flat, fold, constants, nodes)
+    return values.reshape(batch_shape + theta_i.shape)
+
+
+def tis_with_error(
+    theta_i_deg: ArrayLike,
+    params: Params,
+    fold: bool = True,
+    constants: HemisphereConstants = PAPER_CONSTANTS,
+    nodes: int = DEFAULT_NODES,
+) -> tuple[jnp.ndarray, jnp.ndarray]:
+    """TIS and a conservative estimate of its absolute quadrature error.
+
+    The estimate is |TIS(nodes) − TIS(nodes/2)|, the error of the coarser rule, which bounds
+    the error of the returned finer one for this smooth-by-panel integrand.
+
+    Returns:
+        (tis, abs_error), both of the shape returned by :func:`tis`.
+    """
+    fine = tis(theta_i_deg, params, fold, constants, nodes)
+    coarse = tis(theta_i_deg, params, fold, constants, max(nodes // 2, 2))
+    return fine, jnp.abs(fine - coarse)

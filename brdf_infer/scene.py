@@ -1,0 +1,272 @@
+"""Scenes: a TOML file naming the measurements, the geometry of each series, the error model
+and the analysis settings (DESIGN.md, "Scene TOML"). Built-in scenes ship in ``data/``.
+
+Schema (keys other than these are errors; defaults in brackets)::
+
+    name = "my-coating"                      # required
+    description = "..."                      # [""]
+    wavelength_nm = 121.6                    # [unset]
+    measurements = "my_measurements.csv"     # required, relative to the scene file
+    [series.NAME]                            # one table per series named in the CSV
+    aperture_diameter_mm = 7.2               # required, > 0
+    aperture_distance_mm = 103.8             # required, > 0
+    [errors]
+    reflectance_rel = 0.065                  # [0.065] relative 1σ of the raw reflectance
+    angle_deg = 1.0                          # [1.0] 1σ of θi and θs [deg]
+    [model]
+    fold = false                             # [false] Eq. (10) in in-plane predictions
+    c1 = -0.95                               # [paper] Eq. (8) Δφ slope
+    c2_deg = 90.5                            # [paper] Eq. (8) Δφ offset [deg]
+    fold_a_per_deg = 0.35                    # [paper] Eq. (10) a [deg⁻¹]
+    fold_theta_sf_deg = 87.0                 # [paper] Eq. (10) θsf [deg]
+    [paper_fit]
+    alpha = 4.5                              # [4.5] fixed α of the linear regression
+    theta_s0_deg = -12.0                     # [-12.0] fixed θs0 [deg]
+    selection = "paper"                      # ["paper"] see brdf_infer.paper_fit.SELECTIONS
+    [outputs]
+    theta_i_deg = [18, 45, 60, 75, 80]       # [these] incidence angles of BRDF products [deg]
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from brdf_infer._resources import data_path
+from brdf_infer.errors import BadInputError
+from brdf_infer.measurements import Measurements, load_measurements
+from brdf_infer.params import PAPER_CONSTANTS, HemisphereConstants
+
+BUILTIN_SCENES: tuple[str, ...] = ("lya",)
+DEFAULT_SCENE = "lya"
+_SCENE_SUFFIX = ".scene.toml"
+
+
+@dataclass(frozen=True)
+class SeriesGeometry:
+    """Detector aperture of one measurement series (Eq. 6).
+
+    Attributes:
+        aperture_diameter_mm: diameter d [mm].
+        aperture_distance_mm: aperture–sample distance r [mm].
+    """
+
+    aperture_diameter_mm: float
+    aperture_distance_mm: float
+
+
+@dataclass(frozen=True)
+class ErrorModel:
+    """Measurement uncertainties (Sec. 3, 5.3).
+
+    Attributes:
+        reflectance_rel: relative 1σ of the raw reflectance [-].
+        angle_deg: 1σ of the angles θi, θs [deg].
+    """
+
+    reflectance_rel: float = 0.065
+    angle_deg: float = 1.0
+
+
+@dataclass(frozen=True)
+class ModelSettings:
+    """Which model components the scene uses, and the constants of Eqs. (8), (10).
+
+    Attributes:
+        fold: apply the folding term of Eq. (10) to in-plane predictions.
+        constants: out-of-plane and folding constants.
+    """
+
+    fold: bool = False
+    constants: HemisphereConstants = PAPER_CONSTANTS
+
+
+@dataclass(frozen=True)
+class PaperFitSettings:
+    """The paper's linear regression (Sec. 4.2).
+
+    Attributes:
+        alpha: fixed exponent α [-].
+        theta_s0_deg: fixed θs0 [deg].
+        selection: name of the data selection (``brdf_infer.paper_fit.SELECTIONS``).
+    """
+
+    alpha: float = 4.5
+    theta_s0_deg: float = -12.0
+    selection: str = "paper"
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A validated scene."""
+
+    name: str
+    path: Path
+    measurements_path: Path
+    series: dict[str, SeriesGeometry]
+    description: str = ""
+    wavelength_nm: float | None = None
+    errors: ErrorModel = field(default_factory=ErrorModel)
+    model: ModelSettings = field(default_factory=ModelSettings)
+    paper_fit: PaperFitSettings = field(default_factory=PaperFitSettings)
+    output_theta_i_deg: tuple[float, ...] = (18.0, 45.0, 60.0, 75.0, 80.0)
+
+    def load_measurements(self) -> Measurements:
+        """The scene's measurement table, validated against its series."""
+        return load_measurements(self.measurements_path, known_series=self.series)
+
+    def apertures(self, measurements: Measurements) -> tuple[np.ndarray, np.ndarray]:
+        """Aperture diameter d and distance r [mm] of each measurement row's series."""
+        d = np.array([self.series[s].aperture_diameter_mm for s in measurements.series])
+        r = np.array([self.series[s].aperture_distance_mm for s in measurements.series])
+        return d, r
+
+
+def _number(table: dict, key: str, path: Path, *, default: Any = None, positive=False) -> Any:
+    value = table.get(key, default)
+    if value is None:
+        raise BadInputError("missing required key", file=path, field=key)
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise BadInputError(f"expected a number, got {value!r}", file=path, field=key)
+    if positive and not value > 0:
+        raise BadInputError(f"must be > 0, got {value!r}", file=path, field=key)
+    return float(value)
+
+
+def _table(document: dict, key: str, path: Path, allowed: set[str]) -> dict:
+    table = document.get(key, {})
+    if not isinstance(table, dict):
+        raise BadInputError(f"expected a table [{key}]", file=path, field=key)
+    for name in table:
+        if name not in allowed:
+            raise BadInputError(
+                f"unknown key (allowed in [{key}]: {', '.join(sorted(allowed))})",
+                file=path,
+                field=f"{key}.{name}",
+            )
+    return table
+
+
+def _string(document: dict, key: str, path: Path, default: str | None = None) -> str:
+    value = document.get(key, default)
+    if value is None:
+        raise BadInputError("missing required key", file=path, field=key)
+    if not isinstance(value, str):
+        raise BadInputError(f"expected a string, got {value!r}", file=path, field=key)
+    return value
+
+
+_TOP_KEYS = {
+    "name",
+    "description",
+    "wavelength_nm",
+    "measurements",
+    "series",
+    "errors",
+    "model",
+    "paper_fit",
+    "outputs",
+}
+
+
+def parse_scene(document: dict, path: Path) -> Scene:
+    """Validate a parsed scene TOML document (see the module docstring for the schema)."""
+    for key in document:
+        if key not in _TOP_KEYS:
+            raise BadInputError(
+                f"unknown key (allowed: {', '.join(sorted(_TOP_KEYS))})", file=path, field=key
+            )
+    series_table = document.get("series")
+    if not isinstance(series_table, dict) or not series_table:
+        raise BadInputError(
+            "at least one [series.NAME] table is required", file=path, field="series"
+        )
+    series = {}
+    for name, entry in series_table.items():
+        table = _table(series_table, name, path, {"aperture_diameter_mm", "aperture_distance_mm"})
+        prefix = f"series.{name}."
+        try:
+            series[name] = SeriesGeometry(
+                _number(table, "aperture_diameter_mm", path, positive=True),
+                _number(table, "aperture_distance_mm", path, positive=True),
+            )
+        except BadInputError as error:
+            raise BadInputError(error.problem, file=path, field=prefix + str(error.field)) from None
+    errors = _table(document, "errors", path, {"reflectance_rel", "angle_deg"})
+    model = _table(document, "model", path, {"fold", *HemisphereConstants._fields})
+    paper = _table(document, "paper_fit", path, {"alpha", "theta_s0_deg", "selection"})
+    outputs = _table(document, "outputs", path, {"theta_i_deg"})
+    fold = model.get("fold", False)
+    if not isinstance(fold, bool):
+        raise BadInputError(f"expected true or false, got {fold!r}", file=path, field="model.fold")
+    constants = HemisphereConstants(
+        *(
+            _number(model, name, path, default=getattr(PAPER_CONSTANTS, name))
+            for name in HemisphereConstants._fields
+        )
+    )
+    theta_i_out = outputs.get("theta_i_deg", list(Scene.output_theta_i_deg))
+    if not isinstance(theta_i_out, list) or not all(
+        isinstance(v, int | float) and not isinstance(v, bool) and 0 <= v < 90 for v in theta_i_out
+    ):
+        raise BadInputError(
+            "expected a list of angles in [0, 90) deg", file=path, field="outputs.theta_i_deg"
+        )
+    wavelength = document.get("wavelength_nm")
+    measurements = _string(document, "measurements", path)
+    return Scene(
+        name=_string(document, "name", path),
+        path=path,
+        description=_string(document, "description", path, default=""),
+        wavelength_nm=None if wavelength is None else _number(document, "wavelength_nm", path),
+        measurements_path=(path.parent / measurements),
+        series=series,
+        errors=ErrorModel(
+            reflectance_rel=_number(errors, "reflectance_rel", path, default=0.065),
+            angle_deg=_number(errors, "angle_deg", path, default=1.0),
+        ),
+        model=ModelSettings(fold=fold, constants=constants),
+        paper_fit=PaperFitSettings(
+            alpha=_number(paper, "alpha", path, default=4.5, positive=True),
+            theta_s0_deg=_number(paper, "theta_s0_deg", path, default=-12.0),
+            selection=_string(paper, "selection", path, default="paper"),
+        ),
+        output_theta_i_deg=tuple(float(v) for v in theta_i_out),
+    )
+
+
+def scene_file(name_or_path: str | Path) -> Path:
+    """The TOML file of a built-in scene name or of a path."""
+    text = str(name_or_path)
+    if text in BUILTIN_SCENES:
+        return data_path(text + _SCENE_SUFFIX)
+    path = Path(text)
+    if path.is_file():
+        return path
+    if path.exists():
+        raise BadInputError("is not a file", file=path)
+    raise BadInputError(
+        f"neither a built-in scene ({', '.join(BUILTIN_SCENES)}) nor an existing TOML file",
+        file=text,
+    )
+
+
+def load_scene(name_or_path: str | Path = DEFAULT_SCENE) -> Scene:
+    """Load and validate a scene by built-in name (``lya``) or TOML path.
+
+    Raises:
+        BadInputError: unreadable file, TOML syntax error, unknown key, wrong type.
+    """
+    path = scene_file(name_or_path)
+    try:
+        with path.open("rb") as handle:
+            document = tomllib.load(handle)
+    except tomllib.TOMLDecodeError as error:
+        raise BadInputError(f"invalid TOML: {error}", file=path) from None
+    except (OSError, UnicodeDecodeError) as error:
+        raise BadInputError(f"cannot read: {error}", file=path) from None
+    return parse_scene(document, path)
