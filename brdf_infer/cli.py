@@ -280,7 +280,8 @@ def _command_run(args: argparse.Namespace) -> None:
         _emit_json({"out": str(out), "fit": fit, "tis": tis_payload, "seconds": seconds})
         return
     print(
-        f"scene '{scene.name}': paper fit (selection '{fit['selection']}', {fit['n_points']} points)"
+        f"scene '{scene.name}': paper fit "
+        f"(selection '{fit['selection']}', {fit['n_points']} points)"
     )
     _print_params_table(fit["params"])
     print(f"sigma_E = {100 * fit['sigma_e']:.2f} %   sigma_RE = {100 * fit['sigma_re']:.2f} %")

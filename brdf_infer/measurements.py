@@ -101,8 +101,8 @@ def _read_rows(path: Path) -> tuple[list[str], list[tuple[int, list[str]]]]:
     rows = [(reader.line_num, cells) for cells in reader if any(c.strip() for c in cells)]
     if not rows:
         raise BadInputError("empty file: expected a header and measurement rows", file=path)
-    header_line, header = rows[0]
-    return [name.strip() for name in header], [(line, cells) for line, cells in rows[1:]]
+    header = rows[0][1]
+    return [name.strip() for name in header], rows[1:]
 
 
 def load_measurements(path: str | Path, known_series: Iterable[str] | None = None) -> Measurements:

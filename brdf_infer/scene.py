@@ -137,16 +137,17 @@ def _number(table: dict, key: str, path: Path, *, default: Any = None, positive=
     return float(value)
 
 
-def _table(document: dict, key: str, path: Path, allowed: set[str]) -> dict:
+def _table(document: dict, key: str, path: Path, allowed: set[str], parent: str = "") -> dict:
+    label = parent + key
     table = document.get(key, {})
     if not isinstance(table, dict):
-        raise BadInputError(f"expected a table [{key}]", file=path, field=key)
+        raise BadInputError(f"expected a table [{label}]", file=path, field=label)
     for name in table:
         if name not in allowed:
             raise BadInputError(
-                f"unknown key (allowed in [{key}]: {', '.join(sorted(allowed))})",
+                f"unknown key (allowed in [{label}]: {', '.join(sorted(allowed))})",
                 file=path,
-                field=f"{key}.{name}",
+                field=f"{label}.{name}",
             )
     return table
 
@@ -186,8 +187,10 @@ def parse_scene(document: dict, path: Path) -> Scene:
             "at least one [series.NAME] table is required", file=path, field="series"
         )
     series = {}
-    for name, entry in series_table.items():
-        table = _table(series_table, name, path, {"aperture_diameter_mm", "aperture_distance_mm"})
+    for name in series_table:
+        table = _table(
+            series_table, name, path, {"aperture_diameter_mm", "aperture_distance_mm"}, "series."
+        )
         prefix = f"series.{name}."
         try:
             series[name] = SeriesGeometry(

@@ -1,0 +1,78 @@
+"""The command line's JSON contracts (DESIGN.md) and human output."""
+
+import json
+
+import numpy as np
+import pytest
+
+from brdf_infer.params import PARAM_NAMES
+from tests.helpers import run_cli, run_cli_process
+
+
+def json_of(capsys, *argv):
+    code, out, err = run_cli(*argv, "--json", capsys=capsys)
+    assert code == 0, err
+    return json.loads(out)
+
+
+def test_fit_paper_json_contract(capsys):
+    payload = json_of(capsys, "fit", "--method", "paper")
+    assert set(payload) >= {"params", "sigma_e", "sigma_re", "n_points", "seconds"}
+    assert list(payload["params"]) == list(PARAM_NAMES)
+    assert payload["n_points"] == 19
+    assert abs(payload["params"]["brdf0"] / 1.14e-2 - 1) < 0.05
+
+
+def test_tis_json_reproduces_table_three(capsys):
+    payload = json_of(capsys, "tis", "--params", "vis-paper", "--theta-i", "5", "30", "50", "70")
+    assert payload["theta_i_deg"] == [5.0, 30.0, 50.0, 70.0]
+    np.testing.assert_allclose(
+        np.array(payload["tis"]) * 100, [0.816, 1.093, 1.686, 3.992], atol=5e-4
+    )
+
+
+def test_tis_no_fold_and_params_from_fit_json(tmp_path, capsys):
+    fit = json_of(capsys, "fit")
+    path = tmp_path / "fit.json"
+    path.write_text(json.dumps(fit))
+    folded = json_of(capsys, "tis", "--params", str(path), "--theta-i", "70")["tis"][0]
+    unfolded = json_of(capsys, "tis", "--params", str(path), "--theta-i", "70", "--no-fold")["tis"][
+        0
+    ]
+    assert abs(folded - 0.058) < 5e-4 and unfolded > folded
+
+
+def test_brdf_json_in_plane_and_hemisphere(capsys):
+    in_plane = json_of(
+        capsys, "brdf", "--params", "uv-paper", "--theta-i", "18", "--theta-s", "-30", "18"
+    )
+    assert in_plane["brdf"][0] == pytest.approx(1.14e-2, rel=1e-12)
+    hemisphere = json_of(capsys, "brdf", "--theta-i", "70", "--theta-s", "60", "--phi", "0", "180")
+    assert hemisphere["brdf"][0] == pytest.approx(1.14e-2, rel=1e-12)
+    assert hemisphere["brdf"][1] > 10 * hemisphere["brdf"][0]
+
+
+def test_scenes_lists_the_default(capsys):
+    assert "lya" in [entry["name"] for entry in json_of(capsys, "scenes")["scenes"]]
+
+
+def test_human_tables_show_error_beside_time(capsys):
+    code, out, _ = run_cli("tis", "--params", "vis-paper", "--theta-i", "5", "70", capsys=capsys)
+    assert code == 0 and "quadrature error" in out and "ms for 2 angles" in out
+    code, out, _ = run_cli("fit", capsys=capsys)
+    assert code == 0 and "sigma_E [%]" in out and "time [s]" in out
+
+
+def test_run_writes_results_atomically(tmp_path, capsys):
+    code, out, err = run_cli("run", "--out", str(tmp_path / "out"), capsys=capsys)
+    assert code == 0, err
+    fit = json.loads((tmp_path / "out" / "fit_paper.json").read_text())
+    assert fit["n_points"] == 19
+    assert not list((tmp_path / "out").glob("*.tmp"))
+    assert "results written to" in out
+
+
+def test_json_stdout_is_one_object_in_a_real_process():
+    result = run_cli_process("tis", "--theta-i", "0", "--json")
+    assert result.returncode == 0, result.stderr
+    assert json.loads(result.stdout)["tis"][0] == pytest.approx(0.0358, abs=2e-4)
