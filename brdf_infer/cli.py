@@ -83,11 +83,97 @@ def _print_params_table(params: dict[str, float]) -> None:
     )
 
 
+def _lsq_payload(scene, measurements, args: argparse.Namespace) -> dict[str, Any]:
+    from brdf_infer.lsq import fit_lsq
+    from brdf_infer.observations import build_observation_model
+    from brdf_infer.paper_fit import paper_fit
+    from brdf_infer.params import PARAM_NAMES, params_to_dict
+
+    _progress(f"least squares: {args.starts} starts, solver {args.solver} ...")
+    result = fit_lsq(
+        scene,
+        measurements,
+        starts=args.starts,
+        solver=args.solver,
+        seed=args.seed,
+        scale_covariance=args.scale_covariance,
+    )
+    model = build_observation_model(scene, measurements)
+    paper_cost = float(model.chi2(paper_fit(scene, measurements).params))
+    return {
+        "method": "lsq",
+        "scene": scene.name,
+        "params": params_to_dict(result.params),
+        "cost": result.cost,
+        "reduced_chi2": result.reduced_chi2,
+        "paper_fit_cost": paper_cost,
+        "sigma": result.sigma,
+        "correlation": result.correlation.tolist(),
+        "correlation_names": list(PARAM_NAMES),
+        "internal": result.internal,
+        "sigma_internal": result.sigma_internal,
+        "condition_number": result.condition_number,
+        "covariance_scaled": result.covariance_scaled,
+        "n_points": result.n_points,
+        "free": list(result.free),
+        "starts": result.starts,
+        "starts_converged": result.starts_converged,
+        "start_costs": result.start_costs.tolist(),
+        "start_status": result.start_status,
+        "solver": result.solver,
+        "seconds": result.seconds,
+        "compile_seconds": result.compile_seconds,
+        "warnings": result.warnings,
+    }
+
+
+def _print_lsq(payload: dict[str, Any]) -> None:
+    print(f"least-squares fit of scene '{payload['scene']}' ({payload['solver']})")
+    rows = [
+        [name, f"{value:.4g}", f"{payload['sigma'][name]:.2g}"]
+        for name, value in payload["params"].items()
+    ]
+    print(_table(["parameter", "value", "1 sigma"], rows))
+    print(
+        _table(
+            ["points", "chi2", "chi2 (paper fit)", "cond(J)", "starts at best", "time [s]"],
+            [
+                [
+                    str(payload["n_points"]),
+                    f"{payload['cost']:.4f}",
+                    f"{payload['paper_fit_cost']:.4f}",
+                    f"{payload['condition_number']:.2g}",
+                    f"{payload['starts_converged']}/{payload['starts']}",
+                    f"{payload['seconds']:.3f} (+{payload['compile_seconds']:.1f} compile)",
+                ]
+            ],
+        )
+    )
+    names = list(payload["params"])
+    correlation = payload["correlation"]
+    print("correlation:")
+    print(
+        _table(
+            ["", *names],
+            [[a, *(f"{c:+.2f}" for c in row)] for a, row in zip(names, correlation, strict=True)],
+        )
+    )
+    for warning in payload["warnings"]:
+        print(f"warning: {warning}")
+
+
 def _command_fit(args: argparse.Namespace) -> None:
     from brdf_infer.scene import load_scene
 
     scene = load_scene(args.scene)
     measurements = scene.load_measurements()
+    if args.method == "lsq":
+        payload = _lsq_payload(scene, measurements, args)
+        if args.json:
+            _emit_json(payload)
+        else:
+            _print_lsq(payload)
+        return
     if args.grid:
         payload = _grid_payload(scene, measurements, args.selection)
     else:
@@ -314,8 +400,16 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--out", help="output directory (default reports/<scene>)")
     run.set_defaults(handler=_command_run)
 
-    fit = scene_command("fit", "fit Eq. (7) to the scene's measurements")
-    fit.add_argument("--method", choices=["paper"], default="paper", help="fit method")
+    fit = scene_command(
+        "fit", "fit Eq. (7): the paper's regression or least squares over all six parameters"
+    )
+    fit.add_argument("--method", choices=["paper", "lsq"], default="paper", help="fit method")
+    fit.add_argument("--starts", type=int, default=16, help="lsq: number of starts")
+    fit.add_argument("--solver", choices=["lm", "gauss-newton", "dogleg"], default="lm")
+    fit.add_argument("--seed", type=int, default=0, help="lsq: seed of the starting points")
+    fit.add_argument(
+        "--scale-covariance", action="store_true", help="lsq: scale covariance by reduced chi2"
+    )
     fit.add_argument("--selection", help="data selection for --method paper (default: scene's)")
     fit.add_argument("--grid", action="store_true", help="grid search over (alpha, theta_s0)")
     fit.set_defaults(handler=_command_fit)

@@ -25,6 +25,10 @@ Schema (keys other than these are errors; defaults in brackets)::
     selection = "paper"                      # ["paper"] see brdf_infer.paper_fit.SELECTIONS
     [outputs]
     theta_i_deg = [18, 45, 60, 75, 80]       # [these] incidence angles of BRDF products [deg]
+    [priors.NAME]                            # NAME in brdf0, a1, a2, a3, alpha, theta_s0
+    kind = "normal"                          # [brdf_infer.priors.DEFAULT_PRIORS] see priors.py
+    loc = 0.0
+    scale = 10.0
 """
 
 from __future__ import annotations
@@ -39,9 +43,10 @@ import numpy as np
 from brdf_infer._resources import data_path
 from brdf_infer.errors import BadInputError
 from brdf_infer.measurements import Measurements, load_measurements
-from brdf_infer.params import PAPER_CONSTANTS, HemisphereConstants
+from brdf_infer.params import PAPER_CONSTANTS, PARAM_NAMES, HemisphereConstants
+from brdf_infer.priors import DEFAULT_PRIORS, Prior, parse_prior
 
-BUILTIN_SCENES: tuple[str, ...] = ("lya",)
+BUILTIN_SCENES: tuple[str, ...] = ("lya", "lya-fixed")
 DEFAULT_SCENE = "lya"
 _SCENE_SUFFIX = ".scene.toml"
 
@@ -114,6 +119,12 @@ class Scene:
     model: ModelSettings = field(default_factory=ModelSettings)
     paper_fit: PaperFitSettings = field(default_factory=PaperFitSettings)
     output_theta_i_deg: tuple[float, ...] = (18.0, 45.0, 60.0, 75.0, 80.0)
+    priors: dict[str, Prior] = field(default_factory=lambda: dict(DEFAULT_PRIORS))
+
+    @property
+    def free_parameters(self) -> tuple[str, ...]:
+        """Names of the parameters that are not fixed, in ``Params`` order."""
+        return tuple(name for name in PARAM_NAMES if not self.priors[name].fixed)
 
     def load_measurements(self) -> Measurements:
         """The scene's measurement table, validated against its series."""
@@ -171,6 +182,7 @@ _TOP_KEYS = {
     "model",
     "paper_fit",
     "outputs",
+    "priors",
 }
 
 
@@ -219,6 +231,9 @@ def parse_scene(document: dict, path: Path) -> Scene:
         raise BadInputError(
             "expected a list of angles in [0, 90) deg", file=path, field="outputs.theta_i_deg"
         )
+    prior_table = _table(document, "priors", path, set(PARAM_NAMES))
+    priors = dict(DEFAULT_PRIORS)
+    priors.update({name: parse_prior(name, table, path) for name, table in prior_table.items()})
     wavelength = document.get("wavelength_nm")
     measurements = _string(document, "measurements", path)
     return Scene(
@@ -239,6 +254,7 @@ def parse_scene(document: dict, path: Path) -> Scene:
             selection=_string(paper, "selection", path, default="paper"),
         ),
         output_theta_i_deg=tuple(float(v) for v in theta_i_out),
+        priors=priors,
     )
 
 

@@ -1,0 +1,351 @@
+"""Least-squares fit of Eq. (7) with optimistix: multi-start, batched, with covariance.
+
+The residuals are the standardised ln R residuals of :mod:`brdf_infer.observations` (the same
+error model the posterior uses). The solver works on the free parameters' internal
+coordinates (:mod:`brdf_infer.coordinates`), with α and θs0 mapped through a logistic transform
+onto their bounds. The covariance is the Gauss–Newton (JᵀJ)⁻¹ in the internal coordinates, not
+scaled by the reduced χ² unless asked (the error model's σ are absolute), carried to paper
+units by the delta method.
+"""
+
+from __future__ import annotations
+
+import functools
+import time
+from dataclasses import dataclass, field
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+
+from brdf_infer.coordinates import ANGLE_SCALE_DEG, INTERNAL_NAMES, from_internal, to_internal
+from brdf_infer.errors import BadInputError
+from brdf_infer.measurements import Measurements
+from brdf_infer.observations import build_observation_model, standardized_residuals
+from brdf_infer.params import PARAM_NAMES, Params
+from brdf_infer.priors import DEFAULT_BOUNDS
+from brdf_infer.scene import Scene
+
+SOLVERS = {
+    "lm": optx.LevenbergMarquardt,
+    "gauss-newton": optx.GaussNewton,
+    "dogleg": optx.Dogleg,
+}
+CONVERGED_COST_TOLERANCE = 1e-6  # relative (χ² units, at least 1e-6 absolute)
+ILL_CONDITIONED = 1e8  # condition number of J in internal coordinates
+_STATUS_NAMES = {int(item._value): name for name, item in optx.RESULTS._name_to_item.items()}
+
+
+@dataclass(frozen=True)
+class LsqResult:
+    """Outcome of :func:`fit_lsq`; every number in paper units unless named otherwise.
+
+    Attributes:
+        params: best-fit parameters.
+        cost: χ² = Σ ((ln R_pred − ln R_obs)/σ)² at the optimum.
+        reduced_chi2: χ² / (n_points − n_free).
+        sigma: 1σ per parameter (0 for fixed ones), linearised: for a2 and a3 it is only
+            meaningful when α is well determined, since a2 = b2·90^−(1+α) (see
+            ``sigma_internal``).
+        internal: the optimum in internal coordinates (:mod:`brdf_infer.coordinates`).
+        sigma_internal: 1σ in internal coordinates, where the linearisation holds better.
+        correlation: 6×6 correlation matrix (identity rows for fixed parameters).
+        condition_number: of the Jacobian in the internal coordinates.
+        covariance_scaled: whether the covariance was multiplied by the reduced χ².
+        n_points: number of residuals.
+        free: names of the fitted parameters.
+        starts: number of starts.
+        starts_converged: starts whose cost is within tolerance of the best.
+        start_costs: χ² reached by each start.
+        start_status: optimistix status of each start.
+        solver: solver name.
+        seconds: run time of the batched solve (compilation excluded).
+        compile_seconds: compilation time.
+        warnings: identifiability and convergence warnings, in words.
+    """
+
+    params: Params
+    cost: float
+    reduced_chi2: float
+    sigma: dict[str, float]
+    internal: dict[str, float]
+    sigma_internal: dict[str, float]
+    correlation: np.ndarray
+    condition_number: float
+    covariance_scaled: bool
+    n_points: int
+    free: tuple[str, ...]
+    starts: int
+    starts_converged: int
+    start_costs: np.ndarray
+    start_status: list[str]
+    solver: str
+    seconds: float
+    compile_seconds: float
+    warnings: list[str] = field(default_factory=list)
+
+
+def _bounds(scene: Scene, name: str) -> tuple[float, float] | None:
+    """Internal-coordinate bounds of a bounded parameter (α, θs0), else None."""
+    if name not in DEFAULT_BOUNDS:
+        return None
+    prior = scene.priors[name]
+    lower, upper = prior.lower, prior.upper
+    default = DEFAULT_BOUNDS[name]
+    lower = lower if np.isfinite(lower) else default[0]
+    upper = upper if np.isfinite(upper) else default[1]
+    scale = ANGLE_SCALE_DEG if name == "theta_s0" else 1.0
+    return lower / scale, upper / scale
+
+
+class _Transform(NamedTuple):
+    """Free unconstrained vector u ↔ full internal vector z (fixed entries filled in).
+
+    A pytree of arrays, so that one compiled solver serves every dataset of the same shape.
+    """
+
+    base: jnp.ndarray  # full internal vector holding the fixed values
+    lower: jnp.ndarray  # bounds of the free entries (unused where not bounded)
+    upper: jnp.ndarray
+    bounded: jnp.ndarray
+
+    def free_to_full(self, z_free: jnp.ndarray, free_index: tuple[int, ...]) -> jnp.ndarray:
+        return self.base.at[np.array(free_index, int)].set(z_free)
+
+    def to_free(self, u: jnp.ndarray) -> jnp.ndarray:
+        squashed = self.lower + (self.upper - self.lower) * jax.nn.sigmoid(u)
+        return jnp.where(self.bounded, squashed, u)
+
+    def from_free(self, z_free: np.ndarray) -> np.ndarray:
+        lower, upper = np.asarray(self.lower), np.asarray(self.upper)
+        fraction = np.clip((z_free - lower) / (upper - lower), 1e-9, 1 - 1e-9)
+        return np.where(np.asarray(self.bounded), np.log(fraction) - np.log1p(-fraction), z_free)
+
+
+def _transform(scene: Scene) -> _Transform:
+    fixed_params = Params(
+        *(scene.priors[name].value if scene.priors[name].fixed else 1.0 for name in PARAM_NAMES)
+    )
+    bounds = [_bounds(scene, name) for name in scene.free_parameters]
+    return _Transform(
+        base=to_internal(fixed_params),
+        lower=jnp.array([b[0] if b else 0.0 for b in bounds]),
+        upper=jnp.array([b[1] if b else 1.0 for b in bounds]),
+        bounded=jnp.array([b is not None for b in bounds]),
+    )
+
+
+def _free_index(scene: Scene) -> tuple[int, ...]:
+    return tuple(PARAM_NAMES.index(name) for name in scene.free_parameters)
+
+
+def _residuals_free(z_free, data, transform, free_index, fold, constants):
+    params = from_internal(transform.free_to_full(z_free, free_index))
+    return standardized_residuals(params, data, fold, constants)
+
+
+@functools.cache
+def _batched_solver(solver: str, rtol: float, atol: float, max_steps: int, free_index, fold):
+    """Compiled-once solver: (u0 batch, data, transform, constants) → (z_free, cost, status)."""
+    method = SOLVERS[solver](rtol=rtol, atol=atol)
+
+    def solve_one(u0, data, transform, constants):
+        def residuals(u, _args):
+            z_free = transform.to_free(u)
+            return _residuals_free(z_free, data, transform, free_index, fold, constants)
+
+        solution = optx.least_squares(residuals, method, u0, max_steps=max_steps, throw=False)
+        cost = jnp.sum(residuals(solution.value, None) ** 2)
+        return transform.to_free(solution.value), cost, solution.result._value
+
+    return jax.jit(jax.vmap(solve_one, in_axes=(0, None, None, None)))
+
+
+def _start_points(scene: Scene, transform: _Transform, starts: int, seed: int, init) -> np.ndarray:
+    """Starting internal free vectors drawn uniformly from the priors' start ranges."""
+    rng = np.random.default_rng(seed)
+    columns = []
+    for position, name in enumerate(scene.free_parameters):
+        low, high = scene.priors[name].start_range()
+        if name == "theta_s0":
+            low, high = low / ANGLE_SCALE_DEG, high / ANGLE_SCALE_DEG
+        if transform.bounded[position]:
+            low = max(low, transform.lower[position])
+            high = min(high, transform.upper[position])
+            span = high - low
+            low, high = low + 0.02 * span, high - 0.02 * span
+        columns.append(rng.uniform(low, high, starts))
+    points = np.stack(columns, 1)
+    if init is not None:
+        points[0] = np.asarray(to_internal(init))[list(_free_index(scene))]
+    return points
+
+
+def fit_lsq(
+    scene: Scene,
+    measurements: Measurements,
+    *,
+    starts: int = 16,
+    solver: str = "lm",
+    seed: int = 0,
+    init: Params | None = None,
+    scale_covariance: bool = False,
+    rtol: float = 1e-10,
+    atol: float = 1e-10,
+    max_steps: int = 1000,
+) -> LsqResult:
+    """Multi-start least-squares fit of the scene's free parameters.
+
+    Args:
+        scene: error model, priors (start ranges, bounds, fixed values), model components.
+        measurements: the rows to fit (every sample individually).
+        starts: number of starting points, solved together in one compiled, vmapped call.
+        solver: ``lm`` (Levenberg–Marquardt), ``gauss-newton`` or ``dogleg``.
+        seed: seed of the starting points.
+        init: if given, the first start (the others stay random).
+        scale_covariance: multiply the covariance by the reduced χ² (not done when χ² ≈ 0).
+        rtol, atol: solver tolerances.
+        max_steps: solver step limit per start.
+
+    Raises:
+        BadInputError: unknown solver, fewer than one start, or fewer points than free
+            parameters.
+    """
+    if solver not in SOLVERS:
+        raise BadInputError(
+            f"unknown solver {solver!r} (known: {', '.join(SOLVERS)})", field="--solver"
+        )
+    if starts < 1:
+        raise BadInputError(f"need at least one start, got {starts}", field="--starts")
+    model = build_observation_model(scene, measurements)
+    free = scene.free_parameters
+    if model.n_points < len(free):
+        raise BadInputError(
+            f"{model.n_points} measurements cannot constrain {len(free)} free parameters "
+            "(fix some in the scene's [priors])",
+            file=measurements.path,
+        )
+    transform = _transform(scene)
+    free_index = _free_index(scene)
+    arguments = (model.data, transform, model.constants)
+    z0 = _start_points(scene, transform, starts, seed, init)
+    u0 = jnp.asarray(np.stack([transform.from_free(z) for z in z0]))
+    solve = _batched_solver(solver, rtol, atol, max_steps, free_index, model.fold)
+    clock = time.perf_counter()
+    compiled = solve.lower(u0, *arguments).compile()
+    compile_seconds = time.perf_counter() - clock
+    clock = time.perf_counter()
+    z_free, costs, status = jax.block_until_ready(compiled(u0, *arguments))
+    seconds = time.perf_counter() - clock
+
+    costs = np.where(np.isfinite(costs), np.asarray(costs), np.inf)
+    best_index = int(np.argmin(costs))
+    best_cost = float(costs[best_index])
+    tolerance = CONVERGED_COST_TOLERANCE * max(1.0, best_cost)
+    converged = int(np.sum(np.abs(costs - best_cost) <= tolerance))
+    z_best = np.asarray(z_free[best_index])
+    z_full = transform.free_to_full(jnp.asarray(z_best), free_index)
+    params = Params(*(float(v) for v in from_internal(z_full)))
+
+    dof = model.n_points - len(free)
+    reduced = best_cost / dof if dof > 0 else float("nan")
+
+    def residuals_free(z_free):
+        return _residuals_free(
+            z_free, model.data, transform, free_index, model.fold, model.constants
+        )
+
+    def free_to_paper(z_free):
+        return jnp.stack(from_internal(transform.free_to_full(z_free, free_index)))
+
+    covariance_free, condition, warnings = _internal_covariance(
+        residuals_free, z_best, reduced if scale_covariance else None
+    )
+    jacobian_paper = np.asarray(jax.jacfwd(free_to_paper)(jnp.asarray(z_best)))
+    covariance = jacobian_paper @ covariance_free @ jacobian_paper.T
+    sigma_internal = np.zeros(6)
+    sigma_internal[list(free_index)] = np.sqrt(np.clip(np.diag(covariance_free), 0.0, None))
+    sigma = np.sqrt(np.clip(np.diag(covariance), 0.0, None))
+    warnings += _identifiability_warnings(
+        scene, measurements, params, sigma, condition, transform, z_best
+    )
+    if converged < 0.8 * starts:
+        warnings.append(
+            f"only {converged} of {starts} starts reached the best cost {best_cost:.6g}"
+        )
+    return LsqResult(
+        params=params,
+        cost=best_cost,
+        reduced_chi2=reduced,
+        sigma=dict(zip(PARAM_NAMES, map(float, sigma), strict=True)),
+        internal=dict(zip(INTERNAL_NAMES, map(float, z_full), strict=True)),
+        sigma_internal=dict(zip(INTERNAL_NAMES, map(float, sigma_internal), strict=True)),
+        correlation=_correlation(covariance, sigma),
+        condition_number=condition,
+        covariance_scaled=bool(scale_covariance and "zero residual" not in " ".join(warnings)),
+        n_points=model.n_points,
+        free=free,
+        starts=starts,
+        starts_converged=converged,
+        start_costs=costs,
+        start_status=[_STATUS_NAMES.get(int(s), str(int(s))) for s in np.asarray(status)],
+        solver=solver,
+        seconds=seconds,
+        compile_seconds=compile_seconds,
+        warnings=warnings,
+    )
+
+
+def _internal_covariance(residuals_free, z_best, reduced_chi2):
+    """(JᵀJ)⁻¹ in the free internal coordinates (pseudo-inverse), and cond(J)."""
+    warnings = []
+    jacobian = np.asarray(jax.jacfwd(residuals_free)(jnp.asarray(z_best)))
+    singular_values = np.linalg.svd(jacobian, compute_uv=False)
+    condition = (
+        float(singular_values[0] / singular_values[-1]) if singular_values[-1] > 0 else np.inf
+    )
+    _, s, vt = np.linalg.svd(jacobian, full_matrices=False)
+    keep = s > s[0] * 1e-14
+    covariance_free = (vt[keep].T / s[keep] ** 2) @ vt[keep]
+    if not keep.all():
+        warnings.append("the Jacobian is singular: some parameter combinations are not determined")
+    if reduced_chi2 is not None:
+        if reduced_chi2 > 1e-20:
+            covariance_free = covariance_free * reduced_chi2
+        else:
+            warnings.append("zero residual: covariance left unscaled by the reduced chi2")
+    return covariance_free, condition, warnings
+
+
+def _correlation(covariance: np.ndarray, sigma: np.ndarray) -> np.ndarray:
+    positive = sigma > 0
+    outer = np.outer(np.where(positive, sigma, 1.0), np.where(positive, sigma, 1.0))
+    correlation = np.where(np.outer(positive, positive), covariance / outer, 0.0)
+    np.fill_diagonal(correlation, 1.0)
+    return np.clip(correlation, -1.0, 1.0)
+
+
+def _identifiability_warnings(scene, measurements, params, sigma, condition, transform, z_best):
+    warnings = []
+    if condition > ILL_CONDITIONED:
+        warnings.append(
+            f"ill-conditioned Jacobian (condition number {condition:.2g}): the data do not "
+            "identify every parameter combination; see the correlation matrix"
+        )
+    if "theta_s0" in scene.free_parameters and np.min(measurements.theta_s_deg) > params.theta_s0:
+        warnings.append(
+            f"theta_s0 is not identified directly: no measurement lies below theta_s0 = "
+            f"{params.theta_s0:.3g} deg (lowest theta_s = {np.min(measurements.theta_s_deg):.3g} "
+            f"deg); it is constrained only through the curve's shape above it "
+            f"(1 sigma = {sigma[5]:.3g} deg)"
+        )
+    for position, name in enumerate(scene.free_parameters):
+        if not transform.bounded[position]:
+            continue
+        value = z_best[position]
+        lower, upper = float(transform.lower[position]), float(transform.upper[position])
+        if min(value - lower, upper - value) < 1e-3 * (upper - lower):
+            warnings.append(f"{name} ended at a bound of its range: the optimum may lie beyond it")
+    return warnings
