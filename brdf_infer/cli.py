@@ -348,6 +348,7 @@ def _command_run(args: argparse.Namespace) -> None:
     scene = load_scene(args.scene)
     measurements = scene.load_measurements()
     out = Path(args.out) if args.out else Path("reports") / scene.name
+    out.mkdir(parents=True, exist_ok=True)  # fail before any work if it cannot be written
     _progress(f"[1/2] paper fit of scene '{scene.name}' ({len(measurements)} measurements)")
     fit = _paper_fit_payload(scene, measurements, None)
     _progress("[2/2] TIS of the fitted model")
@@ -377,6 +378,13 @@ def _command_run(args: argparse.Namespace) -> None:
     ]
     print(_table(["theta_i [deg]", "TIS [%]", "quadrature error [-]"], rows))
     print(f"results written to {out}/ in {seconds:.1f} s")
+
+
+def _command_bench(args: argparse.Namespace) -> None:
+    from brdf_infer.bench import write_report
+
+    path = write_report(Path(args.out), args.quick, progress=_progress)
+    print(f"benchmark report written to {path}")
 
 
 # --------------------------------------------------------------------------- parser
@@ -437,6 +445,11 @@ def build_parser() -> argparse.ArgumentParser:
     brdf.add_argument("--json", action="store_true", help="one JSON object on stdout")
     brdf.set_defaults(handler=_command_brdf)
 
+    bench = commands.add_parser("bench", help="error-against-run-time benchmarks")
+    bench.add_argument("--quick", action="store_true", help="small sizes, under a minute")
+    bench.add_argument("--out", default="reports/benchmarks.md", help="Markdown report path")
+    bench.set_defaults(handler=_command_bench)
+
     scenes = commands.add_parser("scenes", help="list the built-in scenes")
     scenes.add_argument("--json", action="store_true", help="one JSON object on stdout")
     scenes.set_defaults(handler=_command_scenes)
@@ -453,6 +466,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         args.handler(args)
     except (BadInputError, Float32Error) as error:
         print(f"brdf-infer: error: {error}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except OSError as error:
+        where = f"{error.filename}: " if error.filename else ""
+        print(f"brdf-infer: error: {where}{error.strerror or error}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:
         print("brdf-infer: interrupted", file=sys.stderr)

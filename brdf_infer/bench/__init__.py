@@ -1,0 +1,5 @@
+"""Benchmarks (``brdf-infer bench``): error next to run time, compile time apart."""
+
+from brdf_infer.bench._report import write_report
+
+__all__ = ["write_report"]
