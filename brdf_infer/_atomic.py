@@ -19,11 +19,19 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
             stream.write(data)
             stream.flush()
             os.fsync(stream.fileno())
-        os.replace(temporary, path)
+        publish(temporary, path)
     except BaseException:
         Path(temporary).unlink(missing_ok=True)
         raise
     return path
+
+
+def publish(temporary: str | Path, path: str | Path) -> None:
+    """Give ``temporary`` the permissions of a normally created file, then rename it."""
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(temporary, 0o666 & ~umask)
+    os.replace(temporary, path)
 
 
 def atomic_write_json(path: str | Path, content: Any) -> Path:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import signal
 import sys
 import time
 from collections.abc import Sequence
@@ -244,8 +245,11 @@ def _command_tis(args: argparse.Namespace) -> None:
     from brdf_infer.model import tis_with_error
     from brdf_infer.params import resolve_params
 
-    params = resolve_params(args.params)
     theta_i = _angles(args.theta_i, "--theta-i", 0.0, 90.0, upper_open=True)
+    if args.run is not None:
+        _tis_from_run(args, theta_i)
+        return
+    params = resolve_params(args.params)
     (values, errors), first, second = _timed(tis_with_error, theta_i, params, fold=not args.no_fold)
     values, errors = np.asarray(values), np.asarray(errors)
     if args.json:
@@ -268,6 +272,91 @@ def _command_tis(args: argparse.Namespace) -> None:
     print(_table(["theta_i [deg]", "TIS [%]", "quadrature error [-]"], rows))
     print(
         f"time: {1e3 * second:.2f} ms for {theta_i.size} angles (+{first - second:.2f} s compile)"
+    )
+
+
+def _tis_from_run(args: argparse.Namespace, theta_i: np.ndarray) -> None:
+    from brdf_infer.posterior import load_run_draws, tis_band
+
+    start = time.perf_counter()
+    params, fold, constants = load_run_draws(Path(args.run))
+    band = tis_band(params, theta_i, fold and not args.no_fold, constants)
+    seconds = time.perf_counter() - start
+    if args.json:
+        _emit_json({**band, "draws": int(np.size(params.brdf0)), "seconds": seconds})
+        return
+    print(f"TIS, Eq. (9), over {np.size(params.brdf0)} posterior draws of {args.run}")
+    rows = [
+        [f"{t:g}", *(f"{100 * band[k][i]:.3f}" for k in ("median", "lo68", "hi68", "lo95", "hi95"))]
+        for i, t in enumerate(theta_i)
+    ]
+    headers = ["theta_i [deg]", "median [%]", "16 % [%]", "84 % [%]", "2.5 % [%]", "97.5 % [%]"]
+    print(_table(headers, rows))
+    print(f"time: {seconds:.2f} s")
+
+
+def _command_posterior(args: argparse.Namespace) -> None:
+    from brdf_infer.posterior import run_posterior
+    from brdf_infer.scene import load_scene
+
+    scene = load_scene(args.scene)
+    measurements = scene.load_measurements()
+    out = Path(args.out) if args.out else Path("reports") / scene.name / args.sampler
+    out.mkdir(parents=True, exist_ok=True)  # fail before any work if it cannot be written
+    if args.sampler == "nuts":
+        what = f"{args.chains} chains x ({args.warmup} warmup + {args.draws} draws)"
+    else:
+        what = f"{args.walkers} walkers x {args.steps} steps ({args.warmup} burn-in)"
+    _progress(f"posterior of scene '{scene.name}' with {args.sampler}: {what} ...")
+    run = run_posterior(
+        scene,
+        measurements,
+        sampler=args.sampler,
+        chains=args.chains,
+        draws=args.draws,
+        warmup=args.warmup
+        if args.warmup is not None
+        else (1000 if args.sampler == "nuts" else 4000),
+        walkers=args.walkers,
+        steps=args.steps,
+        seed=args.seed,
+        out=out,
+        resume=args.resume,
+        angle_error=args.angle_error,
+        hierarchical=args.hierarchical,
+    )
+    summary = run.summary
+    if args.json:
+        _emit_json({"out": str(out), **summary})
+        return
+    _print_posterior_summary(summary, out)
+
+
+def _print_posterior_summary(summary: dict[str, Any], out: Path) -> None:
+    diagnostics = summary["diagnostics"]
+    rows = [
+        [
+            name,
+            f"{values['mean']:.4g}",
+            f"{values['sd']:.2g}",
+            f"{values['r_hat']:.3f}",
+            f"{values['ess_bulk']:.0f}",
+            f"{values['ess_tail']:.0f}",
+        ]
+        for name, values in diagnostics["parameters"].items()
+    ]
+    print(f"posterior of scene '{summary['scene']}' ({summary['sampler']})")
+    print(_table(["parameter", "mean", "sd", "R-hat", "ESS bulk", "ESS tail"], rows))
+    tis70 = summary["tis_70deg"]
+    print(
+        f"TIS(70 deg) = {100 * tis70['median']:.2f} % "
+        f"(95 %: {100 * tis70['lo95']:.2f}-{100 * tis70['hi95']:.2f} %; paper ~5.8 %)"
+    )
+    verdict = "; ".join(diagnostics["failures"]) or "all diagnostics pass"
+    seconds = summary["seconds"]
+    print(f"diagnostics: {verdict}")
+    print(
+        f"sampling {seconds['sampling']:.1f} s, total {seconds['total']:.1f} s; results in {out}/"
     )
 
 
@@ -422,8 +511,31 @@ def build_parser() -> argparse.ArgumentParser:
     fit.add_argument("--grid", action="store_true", help="grid search over (alpha, theta_s0)")
     fit.set_defaults(handler=_command_fit)
 
+    posterior = scene_command("posterior", "sample the posterior with NUTS or emcee")
+    posterior.add_argument("--sampler", choices=["nuts", "emcee"], default="nuts")
+    posterior.add_argument("--chains", type=int, default=4, help="NUTS chains")
+    posterior.add_argument("--draws", type=int, default=1000, help="NUTS draws per chain")
+    posterior.add_argument(
+        "--warmup", type=int, help="NUTS warmup per chain (1000) or emcee burn-in steps (4000)"
+    )
+    posterior.add_argument("--walkers", type=int, default=24, help="emcee walkers")
+    posterior.add_argument("--steps", type=int, default=20000, help="emcee steps")
+    posterior.add_argument("--seed", type=int, default=0)
+    posterior.add_argument("--out", help="output directory (default reports/<scene>/<sampler>)")
+    posterior.add_argument(
+        "--resume", action="store_true", help="continue an interrupted emcee run"
+    )
+    posterior.add_argument(
+        "--angle-error", action="store_true", help="propagate the 1-deg angle uncertainty"
+    )
+    posterior.add_argument(
+        "--hierarchical", action="store_true", help="per-sample offsets with a learned scale"
+    )
+    posterior.set_defaults(handler=_command_posterior)
+
     tis = commands.add_parser("tis", help="total integrated scatter, Eq. (9)")
     tis.add_argument("--params", default="uv-paper", help="parameter set name or JSON file")
+    tis.add_argument("--run", help="posterior run directory: credible band over its draws")
     tis.add_argument("--theta-i", type=float, nargs="+", default=[0, 5, 30, 50, 70])
     tis.add_argument("--no-fold", action="store_true", help="leave out the folding of Eq. (10)")
     tis.add_argument("--json", action="store_true", help="one JSON object on stdout")
@@ -456,11 +568,16 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _interrupt(signum, frame) -> NoReturn:
+    raise KeyboardInterrupt
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit code (2 for bad input)."""
     from brdf_infer._precision import Float32Error, require_float64
 
     args = build_parser().parse_args(argv)
+    signal.signal(signal.SIGTERM, _interrupt)
     try:
         require_float64()
         args.handler(args)
@@ -472,7 +589,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"brdf-infer: error: {where}{error.strerror or error}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:
-        print("brdf-infer: interrupted", file=sys.stderr)
+        print("brdf-infer: interrupted (an emcee run continues with --resume)", file=sys.stderr)
         return 130
     return 0
 

@@ -1,0 +1,39 @@
+"""Posterior over the six parameters of Eq. (7): NumPyro NUTS and emcee from one model,
+with ArviZ diagnostics and credible bands for the BRDF and the TIS."""
+
+from brdf_infer.posterior._bands import QUANTILES, compute_bands, draws_params, tis_band
+from brdf_infer.posterior._model import PosteriorModel, build_posterior_model, choose_anchors
+from brdf_infer.posterior._results import (
+    BANDS_FILE,
+    POSTERIOR_FILE,
+    SUMMARY_FILE,
+    THRESHOLDS,
+    diagnostics,
+    inference_data,
+    load_run_draws,
+)
+from brdf_infer.posterior._run import CHECKPOINT_FILE, PosteriorRun, run_posterior
+from brdf_infer.posterior._samplers import Draws, run_emcee, run_nuts
+
+__all__ = [
+    "BANDS_FILE",
+    "CHECKPOINT_FILE",
+    "POSTERIOR_FILE",
+    "QUANTILES",
+    "SUMMARY_FILE",
+    "THRESHOLDS",
+    "Draws",
+    "PosteriorModel",
+    "PosteriorRun",
+    "build_posterior_model",
+    "choose_anchors",
+    "compute_bands",
+    "diagnostics",
+    "draws_params",
+    "inference_data",
+    "load_run_draws",
+    "run_emcee",
+    "run_nuts",
+    "run_posterior",
+    "tis_band",
+]

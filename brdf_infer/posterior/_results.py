@@ -1,0 +1,180 @@
+"""Posterior results on disk: ArviZ InferenceData, summary and bands, written atomically."""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import arviz as az
+import jax
+import numpy as np
+from numpyro.infer import Predictive, log_likelihood
+
+import brdf_infer
+from brdf_infer._atomic import atomic_write_json, publish
+from brdf_infer.errors import BadInputError
+from brdf_infer.params import PARAM_NAMES
+from brdf_infer.posterior._model import PosteriorModel
+from brdf_infer.posterior._samplers import Draws
+
+POSTERIOR_FILE, SUMMARY_FILE, BANDS_FILE = "posterior.nc", "summary.json", "bands.json"
+THRESHOLDS = {"r_hat": 1.01, "ess": 400, "bfmi": 0.3, "tau_multiple": 50}
+
+
+def _versions() -> dict[str, str]:
+    import emcee
+    import numpyro
+    import optimistix
+
+    return {
+        "brdf_infer": brdf_infer.__version__,
+        "jax": jax.__version__,
+        "numpyro": numpyro.__version__,
+        "emcee": emcee.__version__,
+        "arviz": az.__version__,
+        "optimistix": optimistix.__version__,
+    }
+
+
+def inference_data(model: PosteriorModel, draws: Draws, seed: int) -> az.InferenceData:
+    """ArviZ InferenceData with posterior, sample_stats, log_likelihood, posterior_predictive,
+    observed_data and constant_data; the six ``Params`` fields in paper units in the posterior."""
+    chains, n_draws = next(iter(draws.sites.values())).shape[:2]
+    flat = {k: v.reshape(chains * n_draws, *v.shape[2:]) for k, v in draws.sites.items()}
+    sampled = {k: v for k, v in flat.items() if k not in ("obs",)}
+    log_lik = log_likelihood(model, sampled)["obs"].reshape(chains, n_draws, -1)
+    predictive = Predictive(model, posterior_samples=sampled, return_sites=["obs"])
+    replicated = predictive(jax.random.PRNGKey(seed + 7))["obs"].reshape(chains, n_draws, -1)
+    data = model.data
+    idata = az.from_dict(
+        posterior=dict(draws.sites),
+        sample_stats=draws.stats,
+        log_likelihood={"obs": np.asarray(log_lik)},
+        posterior_predictive={"obs": np.asarray(replicated)},
+        observed_data={"obs": np.asarray(data.log_reflectance)},
+        constant_data={
+            "theta_i_deg": np.asarray(data.theta_i_deg),
+            "theta_s_deg": np.asarray(data.theta_s_deg),
+            "log_aperture": np.asarray(data.log_aperture),
+            "sigma": np.asarray(data.sigma),
+            "sample_index": model.sample_index,
+        },
+        dims={
+            "obs": ["row"],
+            "theta_i_deg": ["row"],
+            "theta_s_deg": ["row"],
+            "log_aperture": ["row"],
+            "sigma": ["row"],
+            "sample_index": ["row"],
+            "anchor_excess": ["anchor"],
+        },
+    )
+    scene = model.scene
+    idata.posterior.attrs.update(
+        {
+            "scene": scene.name,
+            "scene_file": str(scene.path),
+            "scene_toml": scene.path.read_text(),
+            "sampler": draws.sampler,
+            "settings": json.dumps(draws.settings),
+            "seed": seed,
+            "fold": int(scene.model.fold),
+            "constants": json.dumps(scene.model.constants._asdict()),
+            "angle_error_deg": model.angle_error_deg,
+            "hierarchical": int(model.hierarchical),
+            "anchors": json.dumps(None if model.anchors is None else model.anchors.tolist()),
+            "versions": json.dumps(_versions()),
+            "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+        }
+    )
+    return idata
+
+
+def diagnostics(idata: az.InferenceData, draws: Draws) -> dict[str, Any]:
+    """R-hat, bulk/tail ESS per sampled parameter (paper units; fixed ones are listed apart),
+    divergences and BFMI (NUTS), run length in autocorrelation times (emcee), and the list of
+    thresholds that failed (:data:`THRESHOLDS`)."""
+    sampled = [name for name in PARAM_NAMES if np.ptp(np.asarray(idata.posterior[name])) > 0]
+    summary = az.summary(idata, var_names=sampled, kind="all", round_to="none")
+    result: dict[str, Any] = {
+        "r_hat_max": float(summary["r_hat"].max()),
+        "ess_bulk_min": float(summary["ess_bulk"].min()),
+        "ess_tail_min": float(summary["ess_tail"].min()),
+        "parameters": {
+            name: {column: float(summary.loc[name, column]) for column in summary.columns}
+            for name in sampled
+        },
+        "fixed": [name for name in PARAM_NAMES if name not in sampled],
+    }
+    if draws.sampler == "nuts":
+        result["divergences"] = int(np.sum(draws.stats["diverging"]))
+        result["bfmi_min"] = float(np.min(az.bfmi(idata)))
+    else:
+        result["steps_per_autocorrelation_time"] = draws.extra["steps_per_autocorrelation_time"]
+        result["autocorrelation_time_max"] = float(np.max(draws.extra["autocorrelation_time"]))
+        result["acceptance_fraction"] = draws.extra["acceptance_fraction"]
+        result["thin"] = draws.extra["thin"]
+    failures = []
+    if result["r_hat_max"] > THRESHOLDS["r_hat"]:
+        failures.append(f"R-hat {result['r_hat_max']:.3f} > {THRESHOLDS['r_hat']}")
+    for kind in ("bulk", "tail"):
+        if result[f"ess_{kind}_min"] < THRESHOLDS["ess"]:
+            failures.append(f"{kind} ESS {result[f'ess_{kind}_min']:.0f} < {THRESHOLDS['ess']}")
+    if result.get("divergences", 0) > 0:
+        failures.append(f"{result['divergences']} divergent transitions")
+    if result.get("bfmi_min", 1.0) < THRESHOLDS["bfmi"]:
+        failures.append(f"BFMI {result['bfmi_min']:.2f} < {THRESHOLDS['bfmi']}")
+    if result.get("steps_per_autocorrelation_time", np.inf) < THRESHOLDS["tau_multiple"]:
+        failures.append(
+            f"emcee ran {result['steps_per_autocorrelation_time']:.0f} autocorrelation "
+            f"times < {THRESHOLDS['tau_multiple']}"
+        )
+    result["failures"] = failures
+    return result
+
+
+def write_inference_data(idata: az.InferenceData, path: Path) -> None:
+    """Write netCDF atomically: a temporary file beside ``path``, then ``os.replace``."""
+    handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    os.close(handle)
+    try:
+        idata.to_netcdf(temporary)
+        publish(temporary, path)
+    except BaseException:
+        Path(temporary).unlink(missing_ok=True)
+        raise
+
+
+def write_results(out: Path, idata: az.InferenceData, summary: dict, bands: dict) -> None:
+    """posterior.nc, summary.json and bands.json into ``out``, each atomically."""
+    out.mkdir(parents=True, exist_ok=True)
+    write_inference_data(idata, out / POSTERIOR_FILE)
+    atomic_write_json(out / BANDS_FILE, bands)
+    atomic_write_json(out / SUMMARY_FILE, summary)
+
+
+def load_run_draws(run: Path):
+    """(Params of every draw, fold, constants) of a posterior run directory.
+
+    Raises:
+        BadInputError: no readable posterior.nc in ``run``.
+    """
+    from brdf_infer.params import HemisphereConstants, Params
+
+    path = run / POSTERIOR_FILE
+    if not path.is_file():
+        raise BadInputError("no posterior.nc here (run 'brdf-infer posterior' first)", file=run)
+    try:
+        posterior = az.from_netcdf(path).posterior
+    except (OSError, ValueError) as error:
+        raise BadInputError(f"cannot read: {error}", file=path) from None
+    missing = [name for name in PARAM_NAMES if name not in posterior]
+    if missing:
+        raise BadInputError(f"posterior lacks {', '.join(missing)}", file=path)
+    params = Params(*(np.asarray(posterior[name]).reshape(-1) for name in PARAM_NAMES))
+    constants = HemisphereConstants(**json.loads(posterior.attrs["constants"]))
+    return params, True, constants

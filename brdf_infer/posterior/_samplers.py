@@ -1,0 +1,330 @@
+"""NUTS (NumPyro) and emcee over the one log-density of a :class:`PosteriorModel`.
+
+Both return :class:`Draws`: every model site (sampled and deterministic) as arrays of shape
+(chain, draw, ...), sampler statistics, and timings. emcee samples NumPyro's potential
+function on the unconstrained space, jitted and vmapped over walkers (``vectorize=True``),
+so the two samplers differ only by how they sample.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import signal
+import sys
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import emcee
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+from jax.flatten_util import ravel_pytree
+from numpyro.infer import MCMC, NUTS, init_to_uniform
+from numpyro.infer.util import initialize_model
+
+from brdf_infer._atomic import atomic_write_bytes
+from brdf_infer.errors import BadInputError
+from brdf_infer.posterior._model import PosteriorModel
+
+
+@dataclass
+class Draws:
+    """Posterior draws of one run.
+
+    Attributes:
+        sites: every sampled and deterministic site, shape (chain, draw, ...).
+        stats: sampler statistics (``diverging``, ``energy``, ``lp``, ...), shape (chain, draw).
+        sampler: ``nuts`` or ``emcee``.
+        settings: the sampler's settings.
+        seconds: {"warmup": …, "sampling": …, "compile": …} [s].
+        extra: sampler-specific results (emcee: autocorrelation times, acceptance).
+    """
+
+    sites: dict[str, np.ndarray]
+    stats: dict[str, np.ndarray]
+    sampler: str
+    settings: dict
+    seconds: dict[str, float]
+    extra: dict = field(default_factory=dict)
+
+
+def _progress_enabled(progress: bool | None) -> bool:
+    return sys.stderr.isatty() if progress is None else progress
+
+
+def run_nuts(
+    model: PosteriorModel,
+    *,
+    chains: int = 4,
+    warmup: int = 1000,
+    draws: int = 1000,
+    seed: int = 0,
+    target_accept: float = 0.8,
+    progress: bool | None = None,
+) -> Draws:
+    """NUTS with a dense mass matrix; chains run one after another (2-core machines)."""
+    kernel = NUTS(model, dense_mass=True, target_accept_prob=target_accept)
+    mcmc = MCMC(
+        kernel,
+        num_warmup=warmup,
+        num_samples=draws,
+        num_chains=chains,
+        chain_method="sequential",
+        progress_bar=_progress_enabled(progress),
+    )
+    fields = ("diverging", "energy", "potential_energy", "accept_prob", "num_steps")
+    key = jax.random.PRNGKey(seed)
+    clock = time.perf_counter()
+    mcmc.warmup(key, extra_fields=fields, collect_warmup=False)
+    warmup_seconds = time.perf_counter() - clock
+    clock = time.perf_counter()
+    mcmc.run(mcmc.post_warmup_state.rng_key, extra_fields=fields)
+    sampling_seconds = time.perf_counter() - clock
+    sites = {k: np.asarray(v) for k, v in mcmc.get_samples(group_by_chain=True).items()}
+    extra = {k: np.asarray(v) for k, v in mcmc.get_extra_fields(group_by_chain=True).items()}
+    stats = {
+        "diverging": extra["diverging"],
+        "energy": extra["energy"],
+        "lp": -extra["potential_energy"],
+        "acceptance_rate": extra["accept_prob"],
+        "n_steps": extra["num_steps"],
+        "tree_depth": np.log2(extra["num_steps"] + 1).astype(int),
+    }
+    return Draws(
+        sites=sites,
+        stats=stats,
+        sampler="nuts",
+        settings={
+            "chains": chains,
+            "warmup": warmup,
+            "draws": draws,
+            "seed": seed,
+            "dense_mass": True,
+            "target_accept": target_accept,
+        },
+        seconds={"warmup": warmup_seconds, "sampling": sampling_seconds},
+    )
+
+
+class _LogDensity:
+    """NumPyro's potential as a flat-vector log density, jitted and vmapped over walkers."""
+
+    def __init__(self, model: PosteriorModel, seed: int):
+        info = initialize_model(jax.random.PRNGKey(seed), model, init_strategy=init_to_uniform())
+        flat, self.unravel = ravel_pytree(info.param_info.z)
+        self.ndim = flat.size
+        self.postprocess = jax.jit(jax.vmap(lambda x: info.postprocess_fn(self.unravel(x))))
+        potential = info.potential_fn
+        self._potential = lambda x: potential(self.unravel(x))
+        self._batched = jax.jit(jax.vmap(lambda x: -self._potential(x)))
+        self._init_key = jax.random.PRNGKey(seed + 1)
+        self._model = model
+
+    def __call__(self, positions: np.ndarray) -> np.ndarray:
+        values = np.asarray(self._batched(jnp.asarray(positions)))
+        return np.where(np.isfinite(values), values, -np.inf)
+
+    def maximum_a_posteriori(self, starts: int = 8) -> np.ndarray:
+        """The MAP on the unconstrained space: BFGS from ``starts`` NUTS-style inits, vmapped."""
+        positions = []
+        for key in jax.random.split(self._init_key, starts):
+            info = initialize_model(key, self._model, init_strategy=init_to_uniform())
+            positions.append(ravel_pytree(info.param_info.z)[0])
+        potential = self._potential
+        solver = optx.BFGS(rtol=1e-9, atol=1e-9)
+
+        def minimise(x0):
+            solution = optx.minimise(
+                lambda x, _: potential(x), solver, x0, max_steps=5000, throw=False
+            )
+            return solution.value, potential(solution.value)
+
+        values, potentials = jax.jit(jax.vmap(minimise))(jnp.stack(positions))
+        potentials = jnp.where(jnp.isfinite(potentials), potentials, jnp.inf)
+        return np.asarray(values[jnp.argmin(potentials)])
+
+    def initial_positions(self, walkers: int, seed: int) -> np.ndarray:
+        """Walkers in a small Gaussian ball (1e-3 in unconstrained units) around the MAP."""
+        centre = self.maximum_a_posteriori()
+        rng = np.random.default_rng(seed)
+        return centre + 1e-3 * rng.standard_normal((walkers, centre.size))
+
+
+@contextlib.contextmanager
+def _deferred_interrupts():
+    """Within the block, SIGINT and SIGTERM only set a flag (read with the yielded function).
+
+    emcee prints a traceback when its log-probability raises, so the interrupt is taken between
+    checkpointed chunks instead. Outside the main thread nothing is changed.
+    """
+    received: list[int] = []
+    if threading.current_thread() is not threading.main_thread():
+        yield lambda: False
+        return
+    previous = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+    for sig in previous:
+        signal.signal(sig, lambda signum, frame: received.append(signum))
+    try:
+        yield lambda: bool(received)
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
+def _save_checkpoint(path: Path, content: dict) -> None:
+    buffer = io.BytesIO()
+    np.savez(buffer, **content)
+    atomic_write_bytes(path, buffer.getvalue())
+
+
+def _random_state_arrays(state) -> dict:
+    name, keys, position, has_gauss, cached = state
+    return {
+        "rng_name": np.array(name),
+        "rng_keys": keys,
+        "rng_pos": np.array(position),
+        "rng_has_gauss": np.array(has_gauss),
+        "rng_cached": np.array(cached),
+    }
+
+
+def _random_state_from(saved) -> tuple:
+    return (
+        str(saved["rng_name"]),
+        saved["rng_keys"],
+        int(saved["rng_pos"]),
+        int(saved["rng_has_gauss"]),
+        float(saved["rng_cached"]),
+    )
+
+
+def run_emcee(
+    model: PosteriorModel,
+    *,
+    walkers: int = 24,
+    steps: int = 20000,
+    burn: int = 4000,
+    seed: int = 0,
+    checkpoint: Path | None = None,
+    resume: bool = False,
+    checkpoint_every: int = 500,
+    progress: bool | None = None,
+) -> Draws:
+    """emcee's affine-invariant ensemble on NumPyro's potential, checkpointed as it goes.
+
+    The walkers start in a small ball around the MAP (found with BFGS on the same potential);
+    the first ``burn`` steps are discarded, and the rest is thinned by ⌈τ_max/2⌉ (τ the
+    integrated autocorrelation time), which keeps nearly all of the effective sample size.
+
+    Every ``checkpoint_every`` steps the chain so far and the full sampler state (walker
+    positions, log densities, random state) are written atomically to ``checkpoint``; with
+    ``resume`` a run continues from it and ends exactly where an uninterrupted run with the
+    same seed ends.
+
+    Raises:
+        BadInputError: too few walkers, ``burn`` ≥ ``steps``, or a checkpoint that does not
+            match the settings.
+    """
+    density = _LogDensity(model, seed)
+    if walkers < 2 * density.ndim:
+        raise BadInputError(
+            f"emcee needs at least {2 * density.ndim} walkers, got {walkers}", field="--walkers"
+        )
+    if not 0 <= burn < steps:
+        raise BadInputError(
+            f"burn-in ({burn}) must be below the number of steps ({steps})", field="--warmup"
+        )
+    settings = {"walkers": walkers, "steps": steps, "burn": burn, "seed": seed}
+    clock = time.perf_counter()
+    start = density.initial_positions(walkers, seed)
+    start_log_prob = density(start)
+    compile_seconds = time.perf_counter() - clock  # MAP search and compilation
+
+    chain_parts, log_prob_parts, accepted, done = [], [], np.zeros(walkers), 0
+    state = emcee.State(
+        start, log_prob=start_log_prob, random_state=np.random.RandomState(seed).get_state()
+    )
+    if resume:
+        if checkpoint is None or not checkpoint.exists():
+            raise BadInputError("no checkpoint to resume from", file=checkpoint)
+        saved = np.load(checkpoint)
+        if {k: int(saved[k]) for k in settings} != settings:
+            raise BadInputError(
+                "checkpoint was written with other settings (walkers, steps, burn, seed)",
+                file=checkpoint,
+            )
+        done = int(saved["done"])
+        chain_parts, log_prob_parts = [saved["chain"]], [saved["log_prob"]]
+        accepted = saved["accepted"]
+        state = emcee.State(
+            saved["coords"],
+            log_prob=saved["state_log_prob"],
+            random_state=_random_state_from(saved),
+        )
+
+    clock = time.perf_counter()
+    bar = None
+    if _progress_enabled(progress):
+        from tqdm import tqdm
+
+        bar = tqdm(total=steps, initial=done, desc="emcee", unit="step", file=sys.stderr)
+    with _deferred_interrupts() as interrupted:
+        while done < steps:
+            if interrupted():
+                raise KeyboardInterrupt
+            chunk = min(checkpoint_every, steps - done)
+            sampler = emcee.EnsembleSampler(walkers, density.ndim, density, vectorize=True)
+            state = sampler.run_mcmc(state, chunk, progress=False)
+            chain_parts.append(sampler.get_chain())
+            log_prob_parts.append(sampler.get_log_prob())
+            accepted = accepted + sampler.backend.accepted
+            done += chunk
+            if bar is not None:
+                bar.update(chunk)
+            if checkpoint is not None:
+                _save_checkpoint(
+                    checkpoint,
+                    {
+                        **{k: np.array(v) for k, v in settings.items()},
+                        "done": np.array(done),
+                        "chain": np.concatenate(chain_parts),
+                        "log_prob": np.concatenate(log_prob_parts),
+                        "accepted": accepted,
+                        "coords": state.coords,
+                        "state_log_prob": state.log_prob,
+                        **_random_state_arrays(state.random_state),
+                    },
+                )
+    if bar is not None:
+        bar.close()
+    sampling_seconds = time.perf_counter() - clock
+
+    chain = np.concatenate(chain_parts)[burn:]  # (steps − burn, walkers, ndim)
+    log_prob = np.concatenate(log_prob_parts)[burn:]
+    tau = emcee.autocorr.integrated_time(chain, quiet=True)
+    thin = max(1, int(np.ceil(np.max(tau) / 2)))  # keeps nearly every effective draw
+    chain, log_prob = chain[::thin], log_prob[::thin]
+    positions = np.swapaxes(chain, 0, 1)  # walkers as chains: (walkers, draws, ndim)
+    flat = positions.reshape(-1, density.ndim)
+    constrained = density.postprocess(jnp.asarray(flat))
+    sites = {
+        k: np.asarray(v).reshape(walkers, chain.shape[0], *np.shape(v)[1:])
+        for k, v in constrained.items()
+    }
+    return Draws(
+        sites=sites,
+        stats={"lp": np.swapaxes(log_prob, 0, 1)},
+        sampler="emcee",
+        settings=settings,
+        seconds={"warmup": 0.0, "sampling": sampling_seconds, "initialise": compile_seconds},
+        extra={
+            "autocorrelation_time": tau,
+            "steps_per_autocorrelation_time": float(steps / np.max(tau)),
+            "acceptance_fraction": float(np.mean(accepted) / steps),
+            "thin": thin,
+        },
+    )

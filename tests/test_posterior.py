@@ -1,0 +1,312 @@
+"""Posterior with NUTS and emcee from one NumPyro model: quality, agreement, files, resume."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import arviz as az
+import numpy as np
+import pytest
+
+from brdf_infer.errors import BadInputError
+from brdf_infer.params import PARAM_NAMES, UV_PAPER
+from brdf_infer.posterior import (
+    CHECKPOINT_FILE,
+    build_posterior_model,
+    draws_params,
+    run_emcee,
+    run_posterior,
+)
+from brdf_infer.posterior._results import write_inference_data
+from brdf_infer.scene import load_scene
+from brdf_infer.synthetic import synthetic_measurements
+from tests.helpers import REPO, run_cli
+
+REDUCED_NUTS = {"chains": 4, "warmup": 300, "draws": 300}
+REDUCED_EMCEE = {"walkers": 24, "steps": 12000, "warmup": 2000}
+
+
+@pytest.fixture(scope="module")
+def lya():
+    scene = load_scene("lya")
+    return scene, scene.load_measurements()
+
+
+@pytest.fixture(scope="module")
+def nuts_run(lya, tmp_path_factory):
+    out = tmp_path_factory.mktemp("nuts")
+    return run_posterior(*lya, sampler="nuts", out=out, progress=False, **REDUCED_NUTS)
+
+
+@pytest.fixture(scope="module")
+def emcee_run(lya, tmp_path_factory):
+    out = tmp_path_factory.mktemp("emcee")
+    return run_posterior(*lya, sampler="emcee", out=out, progress=False, **REDUCED_EMCEE)
+
+
+def assert_quality_bar(diagnostics):
+    assert diagnostics["r_hat_max"] <= 1.01, diagnostics["r_hat_max"]
+    assert diagnostics["ess_bulk_min"] >= 400, diagnostics["ess_bulk_min"]
+    assert diagnostics["ess_tail_min"] >= 400, diagnostics["ess_tail_min"]
+    assert diagnostics["failures"] == []
+
+
+def test_nuts_meets_the_quality_bar_with_reduced_settings(nuts_run):
+    diagnostics = nuts_run.summary["diagnostics"]
+    assert_quality_bar(diagnostics)
+    assert diagnostics["divergences"] == 0
+
+
+def test_emcee_meets_the_quality_bar_with_reduced_settings(emcee_run):
+    diagnostics = emcee_run.summary["diagnostics"]
+    assert_quality_bar(diagnostics)
+    assert diagnostics["steps_per_autocorrelation_time"] >= 50
+
+
+def test_the_two_samplers_agree_within_a_fifth_of_a_posterior_sd(nuts_run, emcee_run):
+    nuts, emcee = nuts_run.idata.posterior, emcee_run.idata.posterior
+    for name in PARAM_NAMES:
+        sd = float(np.std(nuts[name]))
+        difference = abs(float(np.median(nuts[name])) - float(np.median(emcee[name])))
+        assert difference <= 0.2 * sd, (name, difference / sd)
+
+
+def test_reparametrisation_is_used_on_the_bundled_scene(lya):
+    model = build_posterior_model(*lya)
+    np.testing.assert_array_equal(model.anchors, [[18.0, 18.0], [45.0, 60.0], [80.0, 85.0]])
+    fixed = build_posterior_model(load_scene("lya-fixed"), lya[1])
+    assert fixed.anchors is not None
+    assert build_posterior_model(*lya, reparametrise=False).anchors is None
+
+
+def test_posterior_file_holds_every_group_and_the_paper_unit_parameters(nuts_run):
+    idata = az.from_netcdf(nuts_run.out / "posterior.nc")
+    for group in (
+        "posterior",
+        "sample_stats",
+        "log_likelihood",
+        "posterior_predictive",
+        "observed_data",
+        "constant_data",
+    ):
+        assert group in idata.groups(), group
+    for name in PARAM_NAMES:
+        assert idata.posterior[name].shape == (4, 300)
+        assert np.all(np.isfinite(idata.posterior[name]))
+    assert idata.log_likelihood["obs"].shape == (4, 300, 42)
+    attrs = idata.posterior.attrs
+    assert attrs["scene"] == "lya" and attrs["sampler"] == "nuts"
+    assert "jax" in json.loads(attrs["versions"]) and "[series.I]" in attrs["scene_toml"]
+    assert "diverging" in idata.sample_stats and "energy" in idata.sample_stats
+
+
+def test_summary_and_bands_files(nuts_run):
+    summary = json.loads((nuts_run.out / "summary.json").read_text())
+    assert summary["sampler"] == "nuts" and set(summary["median"]) == set(PARAM_NAMES)
+    bands = json.loads((nuts_run.out / "bands.json").read_text())
+    assert len(bands["tis"]["theta_i_deg"]) == 90 and bands["tis"]["theta_i_deg"][-1] == 89.0
+    brdf = bands["brdf_inplane"]
+    assert brdf["theta_i_deg"] == [18.0, 45.0, 60.0, 75.0, 80.0]
+    assert np.array(brdf["median"]).shape == (5, 181)
+    for band in (bands["tis"], brdf, bands["pi_brdf0"]):
+        lo95, lo68, median, hi68, hi95 = (
+            np.array(band[k]) for k in ("lo95", "lo68", "median", "hi68", "hi95")
+        )
+        assert np.all(lo95 <= lo68) and np.all(lo68 <= median) and np.all(median <= hi68)
+        assert np.all(hi68 <= hi95)
+    tis70 = summary["tis_70deg"]
+    assert 0.03 < tis70["lo95"] < tis70["median"] < tis70["hi95"] < 0.12
+
+
+def test_tis_from_run_json_contract(nuts_run, capsys):
+    code, out, err = run_cli(
+        "tis",
+        "--run",
+        str(nuts_run.out),
+        "--theta-i",
+        "5",
+        "30",
+        "50",
+        "70",
+        "--json",
+        capsys=capsys,
+    )
+    assert code == 0, err
+    payload = json.loads(out)
+    assert payload["theta_i_deg"] == [5.0, 30.0, 50.0, 70.0]
+    for key in ("median", "lo68", "hi68", "lo95", "hi95"):
+        assert len(payload[key]) == 4
+    assert payload["lo95"][3] <= payload["median"][3] <= payload["hi95"][3]
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_credible_intervals_cover_the_truth_on_synthetic_data(lya, seed):
+    scene, measurements = lya
+    data = synthetic_measurements(scene, measurements, UV_PAPER, noise_rel=0.065, seed=seed)
+    run = run_posterior(
+        scene, data, sampler="nuts", chains=2, warmup=300, draws=300, seed=seed, progress=False
+    )
+    params = draws_params(run.idata.posterior)
+    # the paper-unit a2, a3 scale as 90^-alpha: compare alpha, theta_s0, brdf0, a1 directly
+    # and a2, a3 through b2 = a2 90^(1+alpha), b3 = a3 90^(2+alpha), their sampled coordinates
+    truth = {
+        "brdf0": UV_PAPER.brdf0,
+        "a1": UV_PAPER.a1,
+        "alpha": UV_PAPER.alpha,
+        "theta_s0": UV_PAPER.theta_s0,
+        "b2": UV_PAPER.a2 * 90 ** (1 + UV_PAPER.alpha),
+        "b3": UV_PAPER.a3 * 90 ** (2 + UV_PAPER.alpha),
+    }
+    values = {
+        "brdf0": params.brdf0,
+        "a1": params.a1,
+        "alpha": params.alpha,
+        "theta_s0": params.theta_s0,
+        "b2": np.asarray(run.idata.posterior["b2"]).ravel(),
+        "b3": np.asarray(run.idata.posterior["b3"]).ravel(),
+    }
+    for name, value in truth.items():
+        low, high = np.quantile(values[name], [0.025, 0.975])
+        assert low <= value <= high, (name, low, value, high)
+
+
+def test_emcee_resume_after_kill_reproduces_the_uninterrupted_run(tmp_path):
+    command = [
+        sys.executable,
+        "-m",
+        "brdf_infer",
+        "posterior",
+        "--sampler",
+        "emcee",
+        "--walkers",
+        "16",
+        "--steps",
+        "3000",
+        "--warmup",
+        "500",
+        "--json",
+    ]
+    reference = subprocess.run(
+        [*command, "--out", str(tmp_path / "whole")],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=REPO,
+    )
+    assert reference.returncode == 0, reference.stderr
+    interrupted = tmp_path / "interrupted"
+    process = subprocess.Popen(
+        [*command, "--out", str(interrupted)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        cwd=REPO,
+    )
+    checkpoint = interrupted / CHECKPOINT_FILE
+    deadline = time.time() + 240
+    while time.time() < deadline and process.poll() is None:
+        if checkpoint.exists() and int(np.load(checkpoint)["done"]) >= 1000:
+            break
+        time.sleep(0.05)
+    assert process.poll() is None, "the run finished before it could be interrupted"
+    os.kill(process.pid, signal.SIGKILL)
+    process.wait()
+    assert not (interrupted / "posterior.nc").exists()
+    done = int(np.load(checkpoint)["done"])
+    assert 0 < done < 3000
+    resumed = subprocess.run(
+        [*command, "--out", str(interrupted), "--resume"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=REPO,
+    )
+    assert resumed.returncode == 0, resumed.stderr
+    whole = az.from_netcdf(tmp_path / "whole" / "posterior.nc").posterior
+    again = az.from_netcdf(interrupted / "posterior.nc").posterior
+    for name in PARAM_NAMES:
+        np.testing.assert_array_equal(np.asarray(whole[name]), np.asarray(again[name]))
+    assert not checkpoint.exists()
+
+
+def test_sigterm_leaves_a_resumable_checkpoint_and_exit_130(tmp_path):
+    command = [
+        sys.executable,
+        "-m",
+        "brdf_infer",
+        "posterior",
+        "--sampler",
+        "emcee",
+        "--walkers",
+        "16",
+        "--steps",
+        "200000",
+        "--warmup",
+        "500",
+        "--out",
+        str(tmp_path),
+    ]
+    process = subprocess.Popen(
+        command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=REPO
+    )
+    deadline = time.time() + 240
+    while time.time() < deadline and not (tmp_path / CHECKPOINT_FILE).exists():
+        time.sleep(0.05)
+    process.send_signal(signal.SIGTERM)
+    _, err = process.communicate(timeout=120)
+    assert process.returncode == 130
+    assert "--resume" in err and "Traceback" not in err
+    assert (tmp_path / CHECKPOINT_FILE).exists() and not (tmp_path / "posterior.nc").exists()
+
+
+def test_interrupted_netcdf_write_keeps_the_previous_file(nuts_run, tmp_path, monkeypatch):
+    target = tmp_path / "posterior.nc"
+    target.write_bytes(b"previous")
+
+    def failing(self, path, *args, **kwargs):
+        with open(path, "wb") as handle:
+            handle.write(b"half")
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(az.InferenceData, "to_netcdf", failing)
+    with pytest.raises(KeyboardInterrupt):
+        write_inference_data(nuts_run.idata, target)
+    assert target.read_bytes() == b"previous"
+    assert [p.name for p in tmp_path.iterdir()] == ["posterior.nc"]
+
+
+def test_angle_error_and_hierarchical_options(lya):
+    scene, measurements = lya
+    plain = build_posterior_model(scene, measurements)
+    with_angles = build_posterior_model(scene, measurements, angle_error=True)
+    _, sigma_plain = plain.mean_and_sigma(UV_PAPER)
+    _, sigma_angles = with_angles.mean_and_sigma(UV_PAPER)
+    assert np.all(np.asarray(sigma_angles) >= np.asarray(sigma_plain))
+    assert np.max(np.asarray(sigma_angles) - np.asarray(sigma_plain)) > 0.01
+    for options in ({"angle_error": True}, {"hierarchical": True}):
+        run = run_posterior(
+            scene, measurements, chains=1, warmup=150, draws=150, progress=False, **options
+        )
+        assert all(np.all(np.isfinite(run.idata.posterior[name])) for name in PARAM_NAMES)
+    assert "sample_offset" in run.idata.posterior
+
+
+def test_fixed_scene_keeps_alpha_and_theta_s0(lya):
+    run = run_posterior(
+        load_scene("lya-fixed"), lya[1], chains=1, warmup=150, draws=150, progress=False
+    )
+    assert np.all(np.asarray(run.idata.posterior["alpha"]) == 4.5)
+    assert np.all(np.asarray(run.idata.posterior["theta_s0"]) == -12.0)
+
+
+def test_bad_sampler_settings_are_clear_errors(lya, capsys):
+    with pytest.raises(BadInputError, match="NUTS runs are not checkpointed"):
+        run_posterior(*lya, sampler="nuts", resume=True)
+    with pytest.raises(BadInputError, match="at least 12 walkers"):
+        run_emcee(build_posterior_model(*lya), walkers=4, steps=10, burn=1)
+    code, out, err = run_cli(
+        "posterior", "--sampler", "emcee", "--resume", "--out", "/tmp/none-here", capsys=capsys
+    )
+    assert code == 2 and "no checkpoint to resume from" in err and out == ""
