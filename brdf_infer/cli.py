@@ -303,6 +303,8 @@ def _command_posterior(args: argparse.Namespace) -> None:
     measurements = scene.load_measurements()
     out = Path(args.out) if args.out else Path("reports") / scene.name / args.sampler
     out.mkdir(parents=True, exist_ok=True)  # fail before any work if it cannot be written
+    if args.warmup is None:
+        args.warmup = 1000 if args.sampler == "nuts" else 4000
     if args.sampler == "nuts":
         what = f"{args.chains} chains x ({args.warmup} warmup + {args.draws} draws)"
     else:
@@ -314,9 +316,7 @@ def _command_posterior(args: argparse.Namespace) -> None:
         sampler=args.sampler,
         chains=args.chains,
         draws=args.draws,
-        warmup=args.warmup
-        if args.warmup is not None
-        else (1000 if args.sampler == "nuts" else 4000),
+        warmup=args.warmup,
         walkers=args.walkers,
         steps=args.steps,
         seed=args.seed,
@@ -429,8 +429,7 @@ def _command_scenes(args: argparse.Namespace) -> None:
 
 def _command_run(args: argparse.Namespace) -> None:
     from brdf_infer._atomic import atomic_write_json
-    from brdf_infer.model import tis_with_error
-    from brdf_infer.params import Params
+    from brdf_infer.posterior import run_posterior
     from brdf_infer.scene import load_scene
 
     start = time.perf_counter()
@@ -438,35 +437,45 @@ def _command_run(args: argparse.Namespace) -> None:
     measurements = scene.load_measurements()
     out = Path(args.out) if args.out else Path("reports") / scene.name
     out.mkdir(parents=True, exist_ok=True)  # fail before any work if it cannot be written
-    _progress(f"[1/2] paper fit of scene '{scene.name}' ({len(measurements)} measurements)")
-    fit = _paper_fit_payload(scene, measurements, None)
-    _progress("[2/2] TIS of the fitted model")
-    params = Params(**fit["params"])
-    theta_i = np.array([0.0, 5.0, 30.0, 50.0, 70.0, 80.0])
-    values, errors = tis_with_error(theta_i, params, constants=scene.model.constants)
-    tis_payload = {
-        "theta_i_deg": theta_i.tolist(),
-        "tis": np.asarray(values).tolist(),
-        "abs_error": np.asarray(errors).tolist(),
-    }
-    atomic_write_json(out / "fit_paper.json", fit)
-    atomic_write_json(out / "tis_paper.json", tis_payload)
-    seconds = time.perf_counter() - start
-    if args.json:
-        _emit_json({"out": str(out), "fit": fit, "tis": tis_payload, "seconds": seconds})
-        return
-    print(
-        f"scene '{scene.name}': paper fit "
-        f"(selection '{fit['selection']}', {fit['n_points']} points)"
+    _progress(f"[1/3] paper fit of scene '{scene.name}' ({len(measurements)} measurements)")
+    paper = _paper_fit_payload(scene, measurements, None)
+    atomic_write_json(out / "fit_paper.json", paper)
+    _progress("[2/3] least-squares fit of all free parameters")
+    lsq_options = argparse.Namespace(starts=16, solver="lm", seed=args.seed, scale_covariance=False)
+    lsq = _lsq_payload(scene, measurements, lsq_options)
+    atomic_write_json(out / "fit_lsq.json", lsq)
+    _progress(f"[3/3] NUTS posterior ({args.chains} chains x {args.draws} draws)")
+    run = run_posterior(
+        scene,
+        measurements,
+        chains=args.chains,
+        draws=args.draws,
+        warmup=args.warmup,
+        seed=args.seed,
+        out=out / "posterior",
     )
-    _print_params_table(fit["params"])
-    print(f"sigma_E = {100 * fit['sigma_e']:.2f} %   sigma_RE = {100 * fit['sigma_re']:.2f} %")
-    rows = [
-        [f"{t:g}", f"{100 * v:.3f}", f"{e:.1e}"]
-        for t, v, e in zip(theta_i, tis_payload["tis"], tis_payload["abs_error"], strict=True)
-    ]
-    print(_table(["theta_i [deg]", "TIS [%]", "quadrature error [-]"], rows))
-    print(f"results written to {out}/ in {seconds:.1f} s")
+    seconds = time.perf_counter() - start
+    result = {
+        "out": str(out),
+        "paper_fit": paper,
+        "lsq": lsq,
+        "posterior": run.summary,
+        "seconds": seconds,
+    }
+    if args.json:
+        _emit_json(result)
+        return
+    print(f"scene '{scene.name}': {len(measurements)} measurements")
+    print(
+        f"paper fit: sigma_E = {100 * paper['sigma_e']:.2f} % on {paper['n_points']} points "
+        f"(selection '{paper['selection']}')"
+    )
+    print(
+        f"least squares: chi2 = {lsq['cost']:.2f} for {lsq['n_points']} points "
+        f"({lsq['starts_converged']}/{lsq['starts']} starts at the optimum)"
+    )
+    _print_posterior_summary(run.summary, out / "posterior")
+    print(f"done in {seconds:.1f} s; results in {out}/")
 
 
 def _command_bench(args: argparse.Namespace) -> None:
@@ -493,8 +502,14 @@ def build_parser() -> argparse.ArgumentParser:
         command.add_argument("--json", action="store_true", help="one JSON object on stdout")
         return command
 
-    run = scene_command("run", "main job: fit the scene and write results to reports/<scene>/")
+    run = scene_command(
+        "run", "main job: paper fit, least squares and NUTS posterior, into reports/<scene>/"
+    )
     run.add_argument("--out", help="output directory (default reports/<scene>)")
+    run.add_argument("--chains", type=int, default=4, help="NUTS chains")
+    run.add_argument("--draws", type=int, default=1000, help="NUTS draws per chain")
+    run.add_argument("--warmup", type=int, default=1000, help="NUTS warmup per chain")
+    run.add_argument("--seed", type=int, default=0)
     run.set_defaults(handler=_command_run)
 
     fit = scene_command(

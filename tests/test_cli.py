@@ -63,13 +63,27 @@ def test_human_tables_show_error_beside_time(capsys):
     assert code == 0 and "sigma_E [%]" in out and "time [s]" in out
 
 
-def test_run_writes_results_atomically(tmp_path, capsys):
-    code, out, err = run_cli("run", "--out", str(tmp_path / "out"), capsys=capsys)
+def test_run_is_the_main_job_and_writes_every_result(tmp_path, capsys):
+    out_dir = tmp_path / "out"
+    code, out, err = run_cli(
+        "run",
+        "--out",
+        str(out_dir),
+        "--chains",
+        "1",
+        "--draws",
+        "100",
+        "--warmup",
+        "100",
+        capsys=capsys,
+    )
     assert code == 0, err
-    fit = json.loads((tmp_path / "out" / "fit_paper.json").read_text())
-    assert fit["n_points"] == 19
-    assert not list((tmp_path / "out").glob("*.tmp"))
-    assert "results written to" in out
+    assert json.loads((out_dir / "fit_paper.json").read_text())["n_points"] == 19
+    assert json.loads((out_dir / "fit_lsq.json").read_text())["starts"] == 16
+    for name in ("posterior.nc", "summary.json", "bands.json"):
+        assert (out_dir / "posterior" / name).is_file()
+    assert not list(out_dir.rglob("*.tmp"))
+    assert "TIS(70 deg)" in out and "done in" in out
 
 
 def test_json_stdout_is_one_object_in_a_real_process():

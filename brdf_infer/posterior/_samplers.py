@@ -27,6 +27,7 @@ from numpyro.infer import MCMC, NUTS, init_to_uniform
 from numpyro.infer.util import initialize_model
 
 from brdf_infer._atomic import atomic_write_bytes
+from brdf_infer._compile_clock import compile_clock
 from brdf_infer.errors import BadInputError
 from brdf_infer.posterior._model import PosteriorModel
 
@@ -40,7 +41,8 @@ class Draws:
         stats: sampler statistics (``diverging``, ``energy``, ``lp``, ...), shape (chain, draw).
         sampler: ``nuts`` or ``emcee``.
         settings: the sampler's settings.
-        seconds: {"warmup": …, "sampling": …, "compile": …} [s].
+        seconds: wall time [s] of "sampling", of the NUTS "warmup" or the emcee MAP search
+            ("initialise"), and the JAX "compile" time, which the others exclude.
         extra: sampler-specific results (emcee: autocorrelation times, acceptance).
     """
 
@@ -78,12 +80,15 @@ def run_nuts(
     )
     fields = ("diverging", "energy", "potential_energy", "accept_prob", "num_steps")
     key = jax.random.PRNGKey(seed)
-    clock = time.perf_counter()
-    mcmc.warmup(key, extra_fields=fields, collect_warmup=False)
-    warmup_seconds = time.perf_counter() - clock
-    clock = time.perf_counter()
-    mcmc.run(mcmc.post_warmup_state.rng_key, extra_fields=fields)
-    sampling_seconds = time.perf_counter() - clock
+    with compile_clock() as warmup_compile:
+        clock = time.perf_counter()
+        mcmc.warmup(key, extra_fields=fields, collect_warmup=False)
+        warmup_seconds = time.perf_counter() - clock
+    with compile_clock() as sampling_compile:
+        clock = time.perf_counter()
+        mcmc.run(mcmc.post_warmup_state.rng_key, extra_fields=fields)
+        sampling_seconds = time.perf_counter() - clock
+    compile_seconds = warmup_compile[0] + sampling_compile[0]
     sites = {k: np.asarray(v) for k, v in mcmc.get_samples(group_by_chain=True).items()}
     extra = {k: np.asarray(v) for k, v in mcmc.get_extra_fields(group_by_chain=True).items()}
     stats = {
@@ -106,7 +111,11 @@ def run_nuts(
             "dense_mass": True,
             "target_accept": target_accept,
         },
-        seconds={"warmup": warmup_seconds, "sampling": sampling_seconds},
+        seconds={
+            "warmup": warmup_seconds - warmup_compile[0],
+            "sampling": sampling_seconds - sampling_compile[0],
+            "compile": compile_seconds,
+        },
     )
 
 
@@ -239,10 +248,11 @@ def run_emcee(
             f"burn-in ({burn}) must be below the number of steps ({steps})", field="--warmup"
         )
     settings = {"walkers": walkers, "steps": steps, "burn": burn, "seed": seed}
-    clock = time.perf_counter()
-    start = density.initial_positions(walkers, seed)
-    start_log_prob = density(start)
-    compile_seconds = time.perf_counter() - clock  # MAP search and compilation
+    with compile_clock() as compile_seconds:
+        clock = time.perf_counter()
+        start = density.initial_positions(walkers, seed)
+        start_log_prob = density(start)
+        initialise_seconds = time.perf_counter() - clock - compile_seconds[0]  # MAP search
 
     chain_parts, log_prob_parts, accepted, done = [], [], np.zeros(walkers), 0
     state = emcee.State(
@@ -320,7 +330,11 @@ def run_emcee(
         stats={"lp": np.swapaxes(log_prob, 0, 1)},
         sampler="emcee",
         settings=settings,
-        seconds={"warmup": 0.0, "sampling": sampling_seconds, "initialise": compile_seconds},
+        seconds={
+            "initialise": initialise_seconds,
+            "sampling": sampling_seconds,
+            "compile": compile_seconds[0],
+        },
         extra={
             "autocorrelation_time": tau,
             "steps_per_autocorrelation_time": float(steps / np.max(tau)),
