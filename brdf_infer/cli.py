@@ -437,14 +437,14 @@ def _command_run(args: argparse.Namespace) -> None:
     measurements = scene.load_measurements()
     out = Path(args.out) if args.out else Path("reports") / scene.name
     out.mkdir(parents=True, exist_ok=True)  # fail before any work if it cannot be written
-    _progress(f"[1/3] paper fit of scene '{scene.name}' ({len(measurements)} measurements)")
+    _progress(f"[1/4] paper fit of scene '{scene.name}' ({len(measurements)} measurements)")
     paper = _paper_fit_payload(scene, measurements, None)
     atomic_write_json(out / "fit_paper.json", paper)
-    _progress("[2/3] least-squares fit of all free parameters")
+    _progress("[2/4] least-squares fit of all free parameters")
     lsq_options = argparse.Namespace(starts=16, solver="lm", seed=args.seed, scale_covariance=False)
     lsq = _lsq_payload(scene, measurements, lsq_options)
     atomic_write_json(out / "fit_lsq.json", lsq)
-    _progress(f"[3/3] NUTS posterior ({args.chains} chains x {args.draws} draws)")
+    _progress(f"[3/4] NUTS posterior ({args.chains} chains x {args.draws} draws)")
     run = run_posterior(
         scene,
         measurements,
@@ -452,11 +452,21 @@ def _command_run(args: argparse.Namespace) -> None:
         draws=args.draws,
         warmup=args.warmup,
         seed=args.seed,
-        out=out / "posterior",
+        out=out,
     )
+    _progress("[4/4] report")
+    from brdf_infer.report import write_report
+
+    report, failures = write_report(out, progress=lambda message: None)
+    if args.example:
+        from brdf_infer.report import write_example
+
+        write_example(out, Path(args.example), failures)
     seconds = time.perf_counter() - start
     result = {
         "out": str(out),
+        "report": str(report),
+        "verdict": failures,
         "paper_fit": paper,
         "lsq": lsq,
         "posterior": run.summary,
@@ -474,8 +484,21 @@ def _command_run(args: argparse.Namespace) -> None:
         f"least squares: chi2 = {lsq['cost']:.2f} for {lsq['n_points']} points "
         f"({lsq['starts_converged']}/{lsq['starts']} starts at the optimum)"
     )
-    _print_posterior_summary(run.summary, out / "posterior")
-    print(f"done in {seconds:.1f} s; results in {out}/")
+    _print_posterior_summary(run.summary, out)
+    print(f"verdict: {'; '.join(failures) or 'every diagnostic passes'}")
+    print(f"report: {report}")
+    print(f"done in {seconds:.1f} s")
+
+
+def _command_report(args: argparse.Namespace) -> None:
+    from brdf_infer.report import write_report
+
+    path, failures = write_report(Path(args.run_dir), progress=_progress)
+    if args.json:
+        _emit_json({"report": str(path), "verdict": failures})
+        return
+    print(f"verdict: {'; '.join(failures) or 'every diagnostic passes'}")
+    print(f"report: {path}")
 
 
 def _command_bench(args: argparse.Namespace) -> None:
@@ -503,9 +526,10 @@ def build_parser() -> argparse.ArgumentParser:
         return command
 
     run = scene_command(
-        "run", "main job: paper fit, least squares and NUTS posterior, into reports/<scene>/"
+        "run", "main job: paper fit, least squares, NUTS posterior and report in reports/<scene>/"
     )
     run.add_argument("--out", help="output directory (default reports/<scene>)")
+    run.add_argument("--example", help="also write the small committed example report here")
     run.add_argument("--chains", type=int, default=4, help="NUTS chains")
     run.add_argument("--draws", type=int, default=1000, help="NUTS draws per chain")
     run.add_argument("--warmup", type=int, default=1000, help="NUTS warmup per chain")
@@ -571,6 +595,11 @@ def build_parser() -> argparse.ArgumentParser:
     brdf.add_argument("--no-fold", action="store_true", help="hemisphere: leave out Eq. (10)")
     brdf.add_argument("--json", action="store_true", help="one JSON object on stdout")
     brdf.set_defaults(handler=_command_brdf)
+
+    report = commands.add_parser("report", help="HTML diagnostic report of a posterior run")
+    report.add_argument("run_dir", help="directory of a posterior run (posterior.nc, ...)")
+    report.add_argument("--json", action="store_true", help="one JSON object on stdout")
+    report.set_defaults(handler=_command_report)
 
     bench = commands.add_parser("bench", help="error-against-run-time benchmarks")
     bench.add_argument("--quick", action="store_true", help="small sizes, under a minute")

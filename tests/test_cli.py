@@ -63,25 +63,17 @@ def test_human_tables_show_error_beside_time(capsys):
     assert code == 0 and "sigma_E [%]" in out and "time [s]" in out
 
 
-def test_run_is_the_main_job_and_writes_every_result(tmp_path, capsys):
+def test_run_is_the_main_job_and_its_verdict_passes(tmp_path, capsys):
+    """The README's main job with its default settings: every diagnostic passes."""
     out_dir = tmp_path / "out"
-    code, out, err = run_cli(
-        "run",
-        "--out",
-        str(out_dir),
-        "--chains",
-        "1",
-        "--draws",
-        "100",
-        "--warmup",
-        "100",
-        capsys=capsys,
-    )
+    code, out, err = run_cli("run", "--out", str(out_dir), capsys=capsys)
     assert code == 0, err
+    assert "verdict: every diagnostic passes" in out
+    assert (out_dir / "report.html").is_file()
     assert json.loads((out_dir / "fit_paper.json").read_text())["n_points"] == 19
     assert json.loads((out_dir / "fit_lsq.json").read_text())["starts"] == 16
     for name in ("posterior.nc", "summary.json", "bands.json"):
-        assert (out_dir / "posterior" / name).is_file()
+        assert (out_dir / name).is_file()
     assert not list(out_dir.rglob("*.tmp"))
     assert "TIS(70 deg)" in out and "done in" in out
 

@@ -17,12 +17,6 @@ from tests.helpers import assert_allclose, run_cli
 
 
 @pytest.fixture(scope="module")
-def lya():
-    scene = load_scene("lya")
-    return scene, scene.load_measurements()
-
-
-@pytest.fixture(scope="module")
 def lya_fit(lya):
     return fit_lsq(*lya)
 

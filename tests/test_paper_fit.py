@@ -7,13 +7,6 @@ from brdf_infer.errors import BadInputError
 from brdf_infer.model import reflectance_to_brdf, tis
 from brdf_infer.paper_fit import SELECTIONS, paper_fit, paper_grid_search, select_points
 from brdf_infer.params import UV_PAPER
-from brdf_infer.scene import load_scene
-
-
-@pytest.fixture(scope="module")
-def lya():
-    scene = load_scene("lya")
-    return scene, scene.load_measurements()
 
 
 def test_paper_selection_reproduces_published_uv_coefficients(lya):

@@ -25,20 +25,7 @@ from brdf_infer.scene import load_scene
 from brdf_infer.synthetic import synthetic_measurements
 from tests.helpers import REPO, run_cli
 
-REDUCED_NUTS = {"chains": 4, "warmup": 300, "draws": 300}
 REDUCED_EMCEE = {"walkers": 24, "steps": 12000, "warmup": 2000}
-
-
-@pytest.fixture(scope="module")
-def lya():
-    scene = load_scene("lya")
-    return scene, scene.load_measurements()
-
-
-@pytest.fixture(scope="module")
-def nuts_run(lya, tmp_path_factory):
-    out = tmp_path_factory.mktemp("nuts")
-    return run_posterior(*lya, sampler="nuts", out=out, progress=False, **REDUCED_NUTS)
 
 
 @pytest.fixture(scope="module")

@@ -134,9 +134,9 @@ def write_report(out: Path, quick: bool, progress=print) -> Path:
         f"Default scene `lya`, all six parameters free. Error: the largest over the six "
         f"parameters of |estimate − reference| in units of the reference posterior sd, for the "
         f"mean and for the 2.5 %/97.5 % quantiles; reference: {reference}. ESS/s divides the "
-        "smallest bulk ESS by the sampling time; setup is the NUTS warmup or the emcee MAP "
-        "search; JAX compile time (summed from JAX's compile events) is excluded from both and "
-        "listed apart.",
+        "smallest bulk ESS by the time of every iteration (NUTS warmup and draws, emcee "
+        "burn-in and steps); setup is the emcee MAP search; JAX compile time (summed from "
+        "JAX's compile events) is excluded from both and listed apart.",
         "",
         _markdown_table(
             [
@@ -145,7 +145,7 @@ def write_report(out: Path, quick: bool, progress=print) -> Path:
                 "error of means [sd]",
                 "error of 95 % quantiles [sd]",
                 "min bulk ESS",
-                "sampling [s]",
+                "iterations [s]",
                 "min ESS/s",
                 "setup [s]",
                 "compile [s]",

@@ -36,17 +36,23 @@ def compute_bands(
 ) -> dict[str, dict]:
     """Every band of a posterior run.
 
+    Args:
+        params: parameter draws.
+        theta_i_deg: incidence angles of the BRDF bands [deg].
+        fold: the scene's in-plane model includes Eq. (10) (the BRDF bands follow it; the TIS
+            always includes the folding, as the paper's Eq. (9) and Table 3 do).
+        constants: out-of-plane and folding constants.
+
     Returns:
         ``{"tis": …, "brdf_inplane": …, "pi_brdf0": …}``; the BRDF band holds arrays of shape
-        (len(theta_i_deg), 181) over θs = −90°…90° [sr⁻¹], evaluated with Eq. (7) (and
-        Eq. (10) on the forward side when ``fold``).
+        (len(theta_i_deg), 181) over θs = −90°…90° [sr⁻¹].
     """
     theta_i = np.asarray(theta_i_deg, float)
     grid_i, grid_s = np.meshgrid(theta_i, BRDF_THETA_S_DEG, indexing="ij")
     batch = Params(*(np.asarray(v)[:, None, None] for v in params))
     brdf = np.asarray(brdf_inplane(grid_i[None], grid_s[None], batch, fold, constants))
     return {
-        "tis": tis_band(params, TIS_THETA_I_DEG, fold, constants),
+        "tis": tis_band(params, TIS_THETA_I_DEG, True, constants),
         "brdf_inplane": {
             "theta_i_deg": theta_i.tolist(),
             "theta_s_deg": BRDF_THETA_S_DEG.tolist(),

@@ -107,8 +107,8 @@ class PosteriorModel:
     sample_index: np.ndarray
     sample_names: tuple[str, ...]
 
-    def __call__(self) -> None:
-        """The NumPyro model (no arguments: data are closed over)."""
+    def __call__(self, predict: bool = False) -> None:
+        """The NumPyro model; data are closed over. ``predict`` leaves ``obs`` unobserved."""
         priors = self.scene.priors
 
         def parameter(name: str, site: str, scale: float = 1.0):
@@ -147,7 +147,8 @@ class PosteriorModel:
             offsets = numpyro.deterministic("sample_offset", scale * standard)
             mean = mean + offsets[self.sample_index]
         with numpyro.plate("rows", self.data.log_reflectance.shape[0]):
-            numpyro.sample("obs", dist.Normal(mean, sigma), obs=self.data.log_reflectance)
+            observed = None if predict else self.data.log_reflectance
+            numpyro.sample("obs", dist.Normal(mean, sigma), obs=observed)
 
     def mean_and_sigma(self, params: Params) -> tuple[jnp.ndarray, jnp.ndarray]:
         """Predicted ln R and its σ (with the angle error propagated when on)."""

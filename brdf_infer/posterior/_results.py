@@ -9,12 +9,12 @@ import time
 from pathlib import Path
 from typing import Any
 
-import arviz as az
 import jax
 import numpy as np
 from numpyro.infer import Predictive, log_likelihood
 
 import brdf_infer
+from brdf_infer._arviz import az
 from brdf_infer._atomic import atomic_write_json, publish
 from brdf_infer.errors import BadInputError
 from brdf_infer.params import PARAM_NAMES
@@ -48,7 +48,8 @@ def inference_data(model: PosteriorModel, draws: Draws, seed: int) -> az.Inferen
     sampled = {k: v for k, v in flat.items() if k not in ("obs",)}
     log_lik = log_likelihood(model, sampled)["obs"].reshape(chains, n_draws, -1)
     predictive = Predictive(model, posterior_samples=sampled, return_sites=["obs"])
-    replicated = predictive(jax.random.PRNGKey(seed + 7))["obs"].reshape(chains, n_draws, -1)
+    replicated = predictive(jax.random.PRNGKey(seed + 7), predict=True)["obs"]
+    replicated = replicated.reshape(chains, n_draws, -1)
     data = model.data
     idata = az.from_dict(
         posterior=dict(draws.sites),

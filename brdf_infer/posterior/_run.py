@@ -7,9 +7,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import arviz as az
 import numpy as np
 
+from brdf_infer._arviz import az
 from brdf_infer.errors import BadInputError
 from brdf_infer.measurements import Measurements
 from brdf_infer.params import PARAM_NAMES
@@ -102,7 +102,7 @@ def run_posterior(
         )
     idata = inference_data(model, result, seed)
     params = draws_params(result.sites)
-    bands = compute_bands(params, scene.output_theta_i_deg, True, scene.model.constants)
+    bands = compute_bands(params, scene.output_theta_i_deg, scene.model.fold, scene.model.constants)
     checks = diagnostics(idata, result)
     tis_70 = {key: bands["tis"][key][70] for key in ("median", "lo68", "hi68", "lo95", "hi95")}
     summary = {

@@ -1,0 +1,19 @@
+"""The HTML diagnostic report of a posterior run, and its figures (imports matplotlib)."""
+
+from brdf_infer.report._build import FIGURE_DIR, REPORT_FILE, verdict, write_example, write_report
+from brdf_infer.report._figures import brdf_bands as plot_brdf_bands
+from brdf_infer.report._figures import hemisphere_maps as plot_hemisphere_maps
+from brdf_infer.report._figures import posterior_predictive as plot_posterior_predictive
+from brdf_infer.report._figures import tis_band as plot_tis_band
+
+__all__ = [
+    "FIGURE_DIR",
+    "REPORT_FILE",
+    "plot_brdf_bands",
+    "plot_hemisphere_maps",
+    "plot_posterior_predictive",
+    "plot_tis_band",
+    "verdict",
+    "write_example",
+    "write_report",
+]

@@ -1,0 +1,288 @@
+"""``brdf-infer report RUN_DIR``: diagnostics first, then fit against data, then products."""
+
+from __future__ import annotations
+
+import io
+import json
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from brdf_infer._arviz import az
+from brdf_infer._atomic import atomic_write_bytes
+from brdf_infer.errors import BadInputError
+from brdf_infer.params import PARAM_NAMES
+from brdf_infer.posterior import BANDS_FILE, POSTERIOR_FILE, SUMMARY_FILE, THRESHOLDS, draws_params
+from brdf_infer.report import _figures, _html
+from brdf_infer.scene import load_scene
+
+REPORT_FILE = "report.html"
+FIGURE_DIR = "figures"
+PARETO_K_LIMIT = 0.7
+
+
+def _png(figure) -> bytes:
+    import matplotlib.pyplot as plt
+
+    buffer = io.BytesIO()
+    figure.savefig(buffer, format="png", dpi=90)
+    plt.close(figure)
+    return buffer.getvalue()
+
+
+def _load(run: Path):
+    for name in (POSTERIOR_FILE, SUMMARY_FILE, BANDS_FILE):
+        if not (run / name).is_file():
+            raise BadInputError(
+                f"no {name} here (run 'brdf-infer posterior --out DIR' first)", file=run
+            )
+    try:
+        idata = az.from_netcdf(run / POSTERIOR_FILE)
+        summary = json.loads((run / SUMMARY_FILE).read_text())
+        bands = json.loads((run / BANDS_FILE).read_text())
+    except (OSError, ValueError) as error:
+        raise BadInputError(f"cannot read the run: {error}", file=run) from None
+    return idata, summary, bands
+
+
+def verdict(summary: dict, loo) -> list[str]:
+    """Every diagnostic that failed its threshold, in words (empty when all pass)."""
+    failures = list(summary["diagnostics"]["failures"])
+    bad = int(np.sum(np.asarray(loo.pareto_k) > PARETO_K_LIMIT))
+    if bad:
+        failures.append(
+            f"{bad} measurement(s) with Pareto k > {PARETO_K_LIMIT} (PSIS-LOO unreliable there)"
+        )
+    return failures
+
+
+def write_report(run: Path, progress=print) -> tuple[Path, list[str]]:
+    """Write ``run/report.html`` and ``run/figures/*.png``; returns the path and the failures."""
+    started = time.perf_counter()
+    idata, summary, bands = _load(run)
+    attrs = idata.posterior.attrs
+    scene = load_scene(attrs["scene_file"])
+    rows = scene.load_measurements()
+    with warnings.catch_warnings():  # high Pareto k are reported in the verdict instead
+        warnings.simplefilter("ignore", UserWarning)
+        loo = az.loo(idata, pointwise=True)
+    failures = verdict(summary, loo)
+    figures: list[tuple[str, str, object]] = []
+
+    def add(name: str, caption: str, make) -> None:
+        progress(f"  figure: {name}")
+        figures.append((name, caption, _png(make())))
+
+    add("trace", "Trace plots of the six parameters (paper units).", lambda: _figures.trace(idata))
+    add("rank", "Rank plots: chains that mix give flat histograms.", lambda: _figures.rank(idata))
+    add("pair", "Pair plot; divergent transitions marked.", lambda: _figures.pair(idata))
+    if "energy" in idata.sample_stats:
+        add("energy", "NUTS energy plot.", lambda: _figures.energy(idata))
+    add(
+        "predictive",
+        "Posterior predictive against the measured raw reflectance, per series (cf. Figs. 4, 6).",
+        lambda: _figures.posterior_predictive(idata, rows.series),
+    )
+    add("loo_pit", "LOO-PIT calibration of the predictive.", lambda: _figures.loo_pit(idata))
+    add("pareto_k", "PSIS-LOO Pareto k per measurement.", lambda: _figures.pareto_k(loo))
+    add(
+        "brdf_bands",
+        "In-plane BRDF: posterior median, 68 % and 95 % bands, data and the paper's curve "
+        "(cf. Fig. 11).",
+        lambda: _figures.brdf_bands(bands, scene, rows),
+    )
+    add(
+        "tis_band",
+        "TIS(θi) band with the paper's values of Sec. 7.",
+        lambda: _figures.tis_band(bands),
+    )
+    add(
+        "hemisphere",
+        "Hemisphere maps (cf. Fig. 9): posterior median (top) and relative width of the 95 % "
+        "band (bottom).",
+        lambda: _figures.hemisphere_maps(draws_params(idata.posterior), scene.model.constants),
+    )
+    for name, _, png in figures:
+        atomic_write_bytes(run / FIGURE_DIR / f"{name}.png", png)
+
+    table = az.summary(
+        idata,
+        var_names=[n for n in PARAM_NAMES if n not in summary["diagnostics"].get("fixed", [])],
+        round_to="none",
+    )
+    sections = [
+        _html.verdict_box(failures),
+        "<p>Thresholds: "
+        + _html.escape(
+            f"R-hat ≤ {THRESHOLDS['r_hat']}, bulk and tail ESS ≥ {THRESHOLDS['ess']}, "
+            f"no divergences, BFMI ≥ {THRESHOLDS['bfmi']}, Pareto k ≤ {PARETO_K_LIMIT}, "
+            f"emcee ≥ {THRESHOLDS['tau_multiple']} autocorrelation times."
+        )
+        + "</p>",
+        "<h2>The run</h2>",
+        _html.table(
+            ["item", "value"],
+            [
+                ["scene", f"{scene.name}: {scene.description}"],
+                ["scene file", attrs["scene_file"]],
+                ["measurements", f"{scene.measurements_path} ({len(rows)} rows)"],
+                ["sampler", f"{attrs['sampler']} {attrs['settings']}"],
+                ["seed", attrs["seed"]],
+                ["options", json.dumps(summary.get("options", {}))],
+                ["versions", attrs["versions"]],
+                [
+                    "wall time",
+                    f"{summary['seconds']['total']:.1f} s "
+                    f"(sampling {summary['seconds']['sampling']:.1f} s)",
+                ],
+                ["created", attrs.get("created", "")],
+            ],
+        ),
+        "<h3>Priors (each on its well-conditioned coordinate)</h3>",
+        _html.table(
+            ["parameter", "kind", "loc", "scale", "lower", "upper", "value"],
+            [
+                [name, p.kind, p.loc, p.scale, p.lower, p.upper, p.value]
+                for name, p in scene.priors.items()
+            ],
+        ),
+        "<h3>Data</h3>",
+        _html.table(
+            ["series", "sample", "θi [deg]", "θs [deg]", "R [-]", "σ_R [-]"],
+            [
+                [s, m, f"{i:g}", f"{t:g}", f"{r:.3e}", f"{e:.2e}"]
+                for s, m, i, t, r, e in zip(
+                    rows.series,
+                    rows.sample,
+                    rows.theta_i_deg,
+                    rows.theta_s_deg,
+                    rows.reflectance,
+                    rows.reflectance_err,
+                    strict=True,
+                )
+            ],
+        ),
+        "<h2>ArviZ summary (paper units)</h2>",
+        _html.table(
+            ["parameter", *table.columns],
+            [[name, *(f"{v:.4g}" for v in table.loc[name])] for name in table.index],
+        ),
+        "<h2>Diagnostics</h2>",
+        *(
+            _html.figure(png, caption)
+            for name, caption, png in figures
+            if name in ("trace", "rank", "pair", "energy")
+        ),
+        "<h2>Fit against the data</h2>",
+        *(
+            _html.figure(png, caption)
+            for name, caption, png in figures
+            if name in ("predictive", "loo_pit", "pareto_k")
+        ),
+        _html.table(
+            ["PSIS-LOO", "value"],
+            [
+                ["elpd_loo", f"{loo.elpd_loo:.2f} ± {loo.se:.2f}"],
+                ["p_loo", f"{loo.p_loo:.2f}"],
+                [
+                    f"points with k > {PARETO_K_LIMIT}",
+                    int(np.sum(np.asarray(loo.pareto_k) > PARETO_K_LIMIT)),
+                ],
+            ],
+        ),
+        _comparison(run, idata),
+        "<h2>Products</h2>",
+        *(
+            _html.figure(png, caption)
+            for name, caption, png in figures
+            if name in ("brdf_bands", "tis_band", "hemisphere")
+        ),
+        _tis_table(bands),
+    ]
+    title = f"brdf_infer report: {scene.name} ({attrs['sampler']})"
+    document = _html.page(title, sections)
+    path = atomic_write_bytes(run / REPORT_FILE, document.encode())
+    progress(f"report written in {time.perf_counter() - started:.1f} s")
+    return path, failures
+
+
+def _tis_table(bands: dict) -> str:
+    band = bands["tis"]
+    chosen = [0, 5, 30, 50, 70, 80]
+    rows = [
+        [
+            f"{band['theta_i_deg'][i]:g}",
+            *(f"{100 * band[k][i]:.3f}" for k in ("median", "lo68", "hi68", "lo95", "hi95")),
+        ]
+        for i in chosen
+    ]
+    return "<h3>TIS [%]</h3>" + _html.table(
+        ["θi [deg]", "median", "16 %", "84 %", "2.5 %", "97.5 %"], rows
+    )
+
+
+def _comparison(run: Path, idata) -> str:
+    """LOO comparison with model variants stored under ``run/variants/NAME``."""
+    variants = {"this run": idata}
+    for folder in sorted((run / "variants").glob("*/")) if (run / "variants").is_dir() else []:
+        if (folder / POSTERIOR_FILE).is_file():
+            variants[folder.name] = az.from_netcdf(folder / POSTERIOR_FILE)
+    if len(variants) < 2:
+        return "<p>No model variants in this run to compare (variants/NAME/posterior.nc).</p>"
+    compared = az.compare(variants)
+    return "<h3>Model variants (PSIS-LOO)</h3>" + _html.table(
+        ["variant", "rank", "elpd_loo", "p_loo", "elpd_diff", "weight", "se", "dse"],
+        [
+            [
+                name,
+                int(r["rank"]),
+                f"{r['elpd_loo']:.2f}",
+                f"{r['p_loo']:.2f}",
+                f"{r['elpd_diff']:.2f}",
+                f"{r['weight']:.2f}",
+                f"{r['se']:.2f}",
+                f"{r['dse']:.2f}",
+            ]
+            for name, r in compared.iterrows()
+        ],
+    )
+
+
+EXAMPLE_FIGURES = ("brdf_bands", "tis_band", "hemisphere", "predictive")
+
+
+def write_example(run: Path, example: Path, failures: list[str]) -> Path:
+    """A small committed example: the key PNGs of ``run`` and a README with the verdict."""
+    summary = json.loads((run / SUMMARY_FILE).read_text())
+    bands = json.loads((run / BANDS_FILE).read_text())
+    for name in EXAMPLE_FIGURES:
+        atomic_write_bytes(example / f"{name}.png", (run / FIGURE_DIR / f"{name}.png").read_bytes())
+    diagnostics = summary["diagnostics"]
+    band = bands["tis"]
+    lines = [
+        f"# Example report: scene `{summary['scene']}` ({summary['sampler']})",
+        "",
+        "Regenerate with `./dev run --example reports/example` (the full HTML report is written to",
+        "`reports/lya/report.html`, which is not committed).",
+        "",
+        "**Verdict:** "
+        + ("; ".join(failures) if failures else "every diagnostic passes its threshold")
+        + f" (max R-hat {diagnostics['r_hat_max']:.3f}, min bulk/tail ESS "
+        f"{diagnostics['ess_bulk_min']:.0f}/{diagnostics['ess_tail_min']:.0f}, "
+        f"{diagnostics.get('divergences', 0)} divergences).",
+        "",
+        "| θi [deg] | TIS median [%] | 68 % [%] | 95 % [%] |",
+        "|---|---|---|---|",
+        *(
+            f"| {band['theta_i_deg'][i]:g} | {100 * band['median'][i]:.2f} | "
+            f"{100 * band['lo68'][i]:.2f}–{100 * band['hi68'][i]:.2f} | "
+            f"{100 * band['lo95'][i]:.2f}–{100 * band['hi95'][i]:.2f} |"
+            for i in (0, 30, 50, 70, 80)
+        ),
+        "",
+        *(f"![{name}]({name}.png)" for name in EXAMPLE_FIGURES),
+        "",
+    ]
+    return atomic_write_bytes(example / "README.md", "\n".join(lines).encode())

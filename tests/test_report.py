@@ -1,0 +1,111 @@
+"""The HTML report: self-contained, every image decodes, and a verdict that tells the truth."""
+
+import base64
+import html
+import io
+import json
+from html.parser import HTMLParser
+
+import matplotlib.image
+import pytest
+
+from brdf_infer.posterior import run_posterior
+from brdf_infer.report import write_report
+from tests.helpers import run_cli
+
+
+class _Collector(HTMLParser):
+    def __init__(self):
+        super().__init__()
+        self.images, self.links, self.classes, self.headings, self._heading = [], [], [], [], False
+
+    def handle_starttag(self, tag, attrs):
+        attributes = dict(attrs)
+        if tag == "img":
+            self.images.append(attributes.get("src", ""))
+        for key in ("href", "src"):
+            if key in attributes and tag != "img":
+                self.links.append(attributes[key])
+        if "class" in attributes:
+            self.classes.append(attributes["class"])
+        self._heading = tag in ("h1", "h2", "h3")
+
+    def handle_data(self, data):
+        if self._heading:
+            self.headings.append(data)
+            self._heading = False
+
+
+def parse(path):
+    collector = _Collector()
+    collector.feed(path.read_text())
+    return collector
+
+
+@pytest.fixture(scope="module")
+def good_report(nuts_run):
+    return write_report(nuts_run.out, progress=lambda message: None)
+
+
+def test_report_is_self_contained_and_every_image_decodes(good_report, nuts_run):
+    path, _ = good_report
+    page = parse(path)
+    assert len(page.images) >= 9
+    for source in page.images:
+        assert source.startswith("data:image/png;base64,"), source[:40]
+        pixels = matplotlib.image.imread(
+            io.BytesIO(base64.b64decode(source.split(",", 1)[1])), format="png"
+        )
+        assert pixels.shape[0] > 100 and pixels.shape[1] > 100
+    assert page.links == []  # nothing to fetch
+    for png in (
+        "trace",
+        "rank",
+        "pair",
+        "energy",
+        "predictive",
+        "loo_pit",
+        "pareto_k",
+        "brdf_bands",
+        "tis_band",
+        "hemisphere",
+    ):
+        assert (nuts_run.out / "figures" / f"{png}.png").stat().st_size > 5000, png
+
+
+def test_report_opens_with_the_verdict_then_the_sections(good_report):
+    path, failures = good_report
+    page = parse(path)
+    assert page.classes[0] == ("verdict fail" if failures else "verdict pass")
+    for failure in failures:  # reduced settings: a Pareto k may cross 0.7 (row 45°/60°)
+        assert html.escape(failure) in path.read_text()
+    text = path.read_text()
+    order = [
+        text.index(h)
+        for h in (
+            "Verdict",
+            "The run",
+            "ArviZ summary",
+            "Diagnostics",
+            "Fit against the data",
+            "Products",
+        )
+    ]
+    assert order == sorted(order)
+    assert "R-hat ≤ 1.01" in text and "Pareto k" in text and "TIS [%]" in text
+
+
+def test_deliberately_bad_run_lists_its_failures(lya, tmp_path, capsys):
+    run_posterior(*lya, chains=1, warmup=20, draws=20, out=tmp_path, progress=False)
+    code, out, err = run_cli("report", str(tmp_path), "--json", capsys=capsys)
+    assert code == 0, err
+    verdict = json.loads(out)["verdict"]
+    assert any("ESS" in failure for failure in verdict), verdict
+    page = parse(tmp_path / "report.html")
+    assert page.classes[0] == "verdict fail"
+    assert "do not trust" in (tmp_path / "report.html").read_text()
+
+
+def test_report_of_a_folder_without_a_run_is_a_clear_error(tmp_path, capsys):
+    code, out, err = run_cli("report", str(tmp_path), capsys=capsys)
+    assert code == 2 and out == "" and "no posterior.nc here" in err
