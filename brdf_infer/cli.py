@@ -252,6 +252,9 @@ def _command_tis(args: argparse.Namespace) -> None:
     params = resolve_params(args.params)
     (values, errors), first, second = _timed(tis_with_error, theta_i, params, fold=not args.no_fold)
     values, errors = np.asarray(values), np.asarray(errors)
+    warnings = _tis_warnings(theta_i, values)
+    for warning in warnings:
+        _progress(f"warning: {warning}")
     if args.json:
         _emit_json(
             {
@@ -259,6 +262,7 @@ def _command_tis(args: argparse.Namespace) -> None:
                 "tis": values.tolist(),
                 "abs_error": errors.tolist(),
                 "fold": not args.no_fold,
+                "warnings": warnings,
                 "seconds": second,
                 "compile_seconds": first - second,
             }
@@ -273,6 +277,15 @@ def _command_tis(args: argparse.Namespace) -> None:
     print(
         f"time: {1e3 * second:.2f} ms for {theta_i.size} angles (+{first - second:.2f} s compile)"
     )
+
+
+def _tis_warnings(theta_i: np.ndarray, values: np.ndarray) -> list[str]:
+    """TIS above 1 means more power scattered than incident: the parameters are unphysical."""
+    unphysical = theta_i[np.asarray(values) > 1.0]
+    if unphysical.size == 0:
+        return []
+    angles = ", ".join(f"{t:g}" for t in unphysical)
+    return [f"TIS > 1 at theta_i = {angles} deg: these parameters are not physical"]
 
 
 def _tis_from_run(args: argparse.Namespace, theta_i: np.ndarray) -> None:
@@ -348,10 +361,11 @@ def _print_posterior_summary(summary: dict[str, Any], out: Path) -> None:
     print(f"posterior of scene '{summary['scene']}' ({summary['sampler']})")
     print(_table(["parameter", "mean", "sd", "R-hat", "ESS bulk", "ESS tail"], rows))
     tis70 = summary["tis_70deg"]
-    print(
-        f"TIS(70 deg) = {100 * tis70['median']:.2f} % "
-        f"(95 %: {100 * tis70['lo95']:.2f}-{100 * tis70['hi95']:.2f} %; paper ~5.8 %)"
-    )
+    if tis70 is not None:
+        print(
+            f"TIS(70 deg) = {100 * tis70['median']:.2f} % "
+            f"(95 %: {100 * tis70['lo95']:.2f}-{100 * tis70['hi95']:.2f} %)"
+        )
     verdict = "; ".join(diagnostics["failures"]) or "all diagnostics pass"
     seconds = summary["seconds"]
     print(f"diagnostics: {verdict}")

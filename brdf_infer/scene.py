@@ -15,6 +15,7 @@ Schema (keys other than these are errors; defaults in brackets)::
     angle_deg = 1.0                          # [1.0] 1σ of θi and θs [deg]
     [model]
     fold = false                             # [false] Eq. (10) in in-plane predictions
+    out_of_plane = true                      # [true] Eq. (8): hemisphere products (TIS, maps)
     c1 = -0.95                               # [paper] Eq. (8) Δφ slope
     c2_deg = 90.5                            # [paper] Eq. (8) Δφ offset [deg]
     fold_a_per_deg = 0.35                    # [paper] Eq. (10) a [deg⁻¹]
@@ -24,7 +25,11 @@ Schema (keys other than these are errors; defaults in brackets)::
     theta_s0_deg = -12.0                     # [-12.0] fixed θs0 [deg]
     selection = "paper"                      # ["paper"] see brdf_infer.paper_fit.SELECTIONS
     [outputs]
-    theta_i_deg = [18, 45, 60, 75, 80]       # [these] incidence angles of BRDF products [deg]
+    theta_i_deg = [18, 45, 60, 75, 80]       # [these] incidence angles of BRDF bands [deg]
+    tis = true                               # [true] TIS band (needs out_of_plane)
+    maps = true                              # [true] hemisphere maps (needs out_of_plane)
+    tis_reference = "reference.csv"          # [none] theta_i_deg,tis,label points to compare
+    reference_params = "uv-paper"            # [none] parameter set drawn beside the bands
     [priors.NAME]                            # NAME in brdf0, a1, a2, a3, alpha, theta_s0
     kind = "normal"                          # [brdf_infer.priors.DEFAULT_PRIORS] see priors.py
     loc = 0.0
@@ -33,6 +38,7 @@ Schema (keys other than these are errors; defaults in brackets)::
 
 from __future__ import annotations
 
+import csv
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -43,10 +49,10 @@ import numpy as np
 from brdf_infer._resources import data_path
 from brdf_infer.errors import BadInputError
 from brdf_infer.measurements import Measurements, load_measurements
-from brdf_infer.params import PAPER_CONSTANTS, PARAM_NAMES, HemisphereConstants
+from brdf_infer.params import PAPER_CONSTANTS, PARAM_NAMES, PARAMETER_SETS, HemisphereConstants
 from brdf_infer.priors import DEFAULT_PRIORS, Prior, parse_prior
 
-BUILTIN_SCENES: tuple[str, ...] = ("lya", "lya-fixed")
+BUILTIN_SCENES: tuple[str, ...] = ("lya", "lya-fixed", "vis-532")
 DEFAULT_SCENE = "lya"
 _SCENE_SUFFIX = ".scene.toml"
 
@@ -83,11 +89,33 @@ class ModelSettings:
 
     Attributes:
         fold: apply the folding term of Eq. (10) to in-plane predictions.
+        out_of_plane: the full-hemisphere extension of Eq. (8) is on; without it no
+            hemisphere product (TIS, maps) is built.
         constants: out-of-plane and folding constants.
     """
 
     fold: bool = False
+    out_of_plane: bool = True
     constants: HemisphereConstants = PAPER_CONSTANTS
+
+
+@dataclass(frozen=True)
+class OutputSettings:
+    """Which products a run makes.
+
+    Attributes:
+        theta_i_deg: incidence angles of the in-plane BRDF bands [deg].
+        tis: make the TIS band (only with the out-of-plane extension).
+        maps: make the hemisphere maps (only with the out-of-plane extension).
+        tis_reference: CSV of reference TIS points (theta_i_deg, tis, label), or None.
+        reference_params: a named parameter set drawn beside the BRDF bands, or None.
+    """
+
+    theta_i_deg: tuple[float, ...] = (18.0, 45.0, 60.0, 75.0, 80.0)
+    tis: bool = True
+    maps: bool = True
+    tis_reference: Path | None = None
+    reference_params: str | None = None
 
 
 @dataclass(frozen=True)
@@ -118,13 +146,37 @@ class Scene:
     errors: ErrorModel = field(default_factory=ErrorModel)
     model: ModelSettings = field(default_factory=ModelSettings)
     paper_fit: PaperFitSettings = field(default_factory=PaperFitSettings)
-    output_theta_i_deg: tuple[float, ...] = (18.0, 45.0, 60.0, 75.0, 80.0)
+    outputs: OutputSettings = field(default_factory=OutputSettings)
     priors: dict[str, Prior] = field(default_factory=lambda: dict(DEFAULT_PRIORS))
 
     @property
     def free_parameters(self) -> tuple[str, ...]:
         """Names of the parameters that are not fixed, in ``Params`` order."""
         return tuple(name for name in PARAM_NAMES if not self.priors[name].fixed)
+
+    @property
+    def output_theta_i_deg(self) -> tuple[float, ...]:
+        return self.outputs.theta_i_deg
+
+    @property
+    def makes_tis(self) -> bool:
+        return self.model.out_of_plane and self.outputs.tis
+
+    @property
+    def makes_maps(self) -> bool:
+        return self.model.out_of_plane and self.outputs.maps
+
+    def load_tis_reference(self) -> list[tuple[float, float, str]]:
+        """Reference TIS points (θi [deg], TIS [-], label) of the scene, possibly none."""
+        if self.outputs.tis_reference is None:
+            return []
+        path = self.outputs.tis_reference
+        try:
+            with path.open() as handle:
+                rows = list(csv.DictReader(handle))
+            return [(float(r["theta_i_deg"]), float(r["tis"]), r["label"]) for r in rows]
+        except (OSError, KeyError, ValueError, TypeError) as error:
+            raise BadInputError(f"cannot read theta_i_deg,tis,label: {error}", file=path) from None
 
     def load_measurements(self) -> Measurements:
         """The scene's measurement table, validated against its series."""
@@ -161,6 +213,13 @@ def _table(document: dict, key: str, path: Path, allowed: set[str], parent: str 
                 field=f"{label}.{name}",
             )
     return table
+
+
+def _boolean(table: dict, key: str, path: Path, prefix: str, default: bool) -> bool:
+    value = table.get(key, default)
+    if not isinstance(value, bool):
+        raise BadInputError(f"expected true or false, got {value!r}", file=path, field=prefix + key)
+    return value
 
 
 def _string(document: dict, key: str, path: Path, default: str | None = None) -> str:
@@ -212,19 +271,30 @@ def parse_scene(document: dict, path: Path) -> Scene:
         except BadInputError as error:
             raise BadInputError(error.problem, file=path, field=prefix + str(error.field)) from None
     errors = _table(document, "errors", path, {"reflectance_rel", "angle_deg"})
-    model = _table(document, "model", path, {"fold", *HemisphereConstants._fields})
+    model = _table(document, "model", path, {"fold", "out_of_plane", *HemisphereConstants._fields})
     paper = _table(document, "paper_fit", path, {"alpha", "theta_s0_deg", "selection"})
-    outputs = _table(document, "outputs", path, {"theta_i_deg"})
-    fold = model.get("fold", False)
-    if not isinstance(fold, bool):
-        raise BadInputError(f"expected true or false, got {fold!r}", file=path, field="model.fold")
+    outputs = _table(
+        document,
+        "outputs",
+        path,
+        {"theta_i_deg", "tis", "maps", "tis_reference", "reference_params"},
+    )
+    reference_params = outputs.get("reference_params")
+    if reference_params is not None and reference_params not in PARAMETER_SETS:
+        raise BadInputError(
+            f"unknown parameter set {reference_params!r} (known: {', '.join(PARAMETER_SETS)})",
+            file=path,
+            field="outputs.reference_params",
+        )
+    fold = _boolean(model, "fold", path, "model.", False)
+    out_of_plane = _boolean(model, "out_of_plane", path, "model.", True)
     constants = HemisphereConstants(
         *(
             _number(model, name, path, default=getattr(PAPER_CONSTANTS, name))
             for name in HemisphereConstants._fields
         )
     )
-    theta_i_out = outputs.get("theta_i_deg", list(Scene.output_theta_i_deg))
+    theta_i_out = outputs.get("theta_i_deg", list(OutputSettings.theta_i_deg))
     if not isinstance(theta_i_out, list) or not all(
         isinstance(v, int | float) and not isinstance(v, bool) and 0 <= v < 90 for v in theta_i_out
     ):
@@ -247,13 +317,23 @@ def parse_scene(document: dict, path: Path) -> Scene:
             reflectance_rel=_number(errors, "reflectance_rel", path, default=0.065),
             angle_deg=_number(errors, "angle_deg", path, default=1.0),
         ),
-        model=ModelSettings(fold=fold, constants=constants),
+        model=ModelSettings(fold=fold, out_of_plane=out_of_plane, constants=constants),
         paper_fit=PaperFitSettings(
             alpha=_number(paper, "alpha", path, default=4.5, positive=True),
             theta_s0_deg=_number(paper, "theta_s0_deg", path, default=-12.0),
             selection=_string(paper, "selection", path, default="paper"),
         ),
-        output_theta_i_deg=tuple(float(v) for v in theta_i_out),
+        outputs=OutputSettings(
+            theta_i_deg=tuple(float(v) for v in theta_i_out),
+            tis=_boolean(outputs, "tis", path, "outputs.", True),
+            maps=_boolean(outputs, "maps", path, "outputs.", True),
+            tis_reference=(
+                None
+                if "tis_reference" not in outputs
+                else path.parent / _string(outputs, "tis_reference", path)
+            ),
+            reference_params=reference_params,
+        ),
         priors=priors,
     )
 

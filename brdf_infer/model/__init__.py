@@ -17,7 +17,7 @@ from brdf_infer.model._hemisphere import (
     log_brdf_hemisphere,
 )
 from brdf_infer.model._inplane import brdf_inplane, log_brdf_inplane, log_fold, positive_power
-from brdf_infer.model._tis import DEFAULT_NODES, tis, tis_with_error
+from brdf_infer.model._tis import DEFAULT_NODES, log_tis, tis, tis_with_error
 
 __all__ = [
     "DEFAULT_NODES",
@@ -31,6 +31,7 @@ __all__ = [
     "log_brdf_hemisphere",
     "log_brdf_inplane",
     "log_fold",
+    "log_tis",
     "positive_power",
     "reflectance_to_brdf",
     "solid_angle",

@@ -32,7 +32,11 @@ def tis_band(
 
 
 def compute_bands(
-    params: Params, theta_i_deg, fold: bool, constants: HemisphereConstants
+    params: Params,
+    theta_i_deg,
+    fold: bool,
+    constants: HemisphereConstants,
+    with_tis: bool = True,
 ) -> dict[str, dict]:
     """Every band of a posterior run.
 
@@ -42,17 +46,17 @@ def compute_bands(
         fold: the scene's in-plane model includes Eq. (10) (the BRDF bands follow it; the TIS
             always includes the folding, as the paper's Eq. (9) and Table 3 do).
         constants: out-of-plane and folding constants.
+        with_tis: compute the TIS band (not when the scene has no out-of-plane model).
 
     Returns:
-        ``{"tis": …, "brdf_inplane": …, "pi_brdf0": …}``; the BRDF band holds arrays of shape
-        (len(theta_i_deg), 181) over θs = −90°…90° [sr⁻¹].
+        ``{"tis": …, "brdf_inplane": …, "pi_brdf0": …}`` (no ``"tis"`` without ``with_tis``);
+        the BRDF band holds arrays of shape (len(theta_i_deg), 181) over θs = −90°…90° [sr⁻¹].
     """
     theta_i = np.asarray(theta_i_deg, float)
     grid_i, grid_s = np.meshgrid(theta_i, BRDF_THETA_S_DEG, indexing="ij")
     batch = Params(*(np.asarray(v)[:, None, None] for v in params))
     brdf = np.asarray(brdf_inplane(grid_i[None], grid_s[None], batch, fold, constants))
-    return {
-        "tis": tis_band(params, TIS_THETA_I_DEG, True, constants),
+    bands = {
         "brdf_inplane": {
             "theta_i_deg": theta_i.tolist(),
             "theta_s_deg": BRDF_THETA_S_DEG.tolist(),
@@ -60,3 +64,6 @@ def compute_bands(
         },
         "pi_brdf0": quantile_band(np.pi * np.asarray(params.brdf0)),
     }
+    if with_tis:
+        bands["tis"] = tis_band(params, TIS_THETA_I_DEG, True, constants)
+    return bands

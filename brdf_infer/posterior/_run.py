@@ -102,9 +102,15 @@ def run_posterior(
         )
     idata = inference_data(model, result, seed)
     params = draws_params(result.sites)
-    bands = compute_bands(params, scene.output_theta_i_deg, scene.model.fold, scene.model.constants)
+    bands = compute_bands(
+        params, scene.output_theta_i_deg, scene.model.fold, scene.model.constants, scene.makes_tis
+    )
     checks = diagnostics(idata, result)
-    tis_70 = {key: bands["tis"][key][70] for key in ("median", "lo68", "hi68", "lo95", "hi95")}
+    tis_70 = (
+        {key: bands["tis"][key][70] for key in ("median", "lo68", "hi68", "lo95", "hi95")}
+        if "tis" in bands
+        else None
+    )
     summary = {
         "scene": scene.name,
         "sampler": result.sampler,

@@ -93,17 +93,19 @@ def write_report(run: Path, progress=print) -> tuple[Path, list[str]]:
         "(cf. Fig. 11).",
         lambda: _figures.brdf_bands(bands, scene, rows),
     )
-    add(
-        "tis_band",
-        "TIS(θi) band with the paper's values of Sec. 7.",
-        lambda: _figures.tis_band(bands),
-    )
-    add(
-        "hemisphere",
-        "Hemisphere maps (cf. Fig. 9): posterior median (top) and relative width of the 95 % "
-        "band (bottom).",
-        lambda: _figures.hemisphere_maps(draws_params(idata.posterior), scene.model.constants),
-    )
+    if "tis" in bands:
+        add(
+            "tis_band",
+            "TIS(θi) band with the scene's reference points.",
+            lambda: _figures.tis_band(bands, scene.load_tis_reference()),
+        )
+    if scene.makes_maps:
+        add(
+            "hemisphere",
+            "Hemisphere maps (cf. Fig. 9): posterior median (top) and relative width of the 95 % "
+            "band (bottom).",
+            lambda: _figures.hemisphere_maps(draws_params(idata.posterior), scene.model.constants),
+        )
     for name, _, png in figures:
         atomic_write_bytes(run / FIGURE_DIR / f"{name}.png", png)
 
@@ -199,7 +201,7 @@ def write_report(run: Path, progress=print) -> tuple[Path, list[str]]:
             for name, caption, png in figures
             if name in ("brdf_bands", "tis_band", "hemisphere")
         ),
-        _tis_table(bands),
+        _tis_table(bands) if "tis" in bands else "",
     ]
     title = f"brdf_infer report: {scene.name} ({attrs['sampler']})"
     document = _html.page(title, sections)
@@ -257,10 +259,11 @@ def write_example(run: Path, example: Path, failures: list[str]) -> Path:
     """A small committed example: the key PNGs of ``run`` and a README with the verdict."""
     summary = json.loads((run / SUMMARY_FILE).read_text())
     bands = json.loads((run / BANDS_FILE).read_text())
-    for name in EXAMPLE_FIGURES:
+    names = [name for name in EXAMPLE_FIGURES if (run / FIGURE_DIR / f"{name}.png").is_file()]
+    for name in names:
         atomic_write_bytes(example / f"{name}.png", (run / FIGURE_DIR / f"{name}.png").read_bytes())
     diagnostics = summary["diagnostics"]
-    band = bands["tis"]
+    band = bands.get("tis")
     lines = [
         f"# Example report: scene `{summary['scene']}` ({summary['sampler']})",
         "",
@@ -273,16 +276,22 @@ def write_example(run: Path, example: Path, failures: list[str]) -> Path:
         f"{diagnostics['ess_bulk_min']:.0f}/{diagnostics['ess_tail_min']:.0f}, "
         f"{diagnostics.get('divergences', 0)} divergences).",
         "",
-        "| θi [deg] | TIS median [%] | 68 % [%] | 95 % [%] |",
-        "|---|---|---|---|",
         *(
-            f"| {band['theta_i_deg'][i]:g} | {100 * band['median'][i]:.2f} | "
-            f"{100 * band['lo68'][i]:.2f}–{100 * band['hi68'][i]:.2f} | "
-            f"{100 * band['lo95'][i]:.2f}–{100 * band['hi95'][i]:.2f} |"
-            for i in (0, 30, 50, 70, 80)
+            [
+                "| θi [deg] | TIS median [%] | 68 % [%] | 95 % [%] |",
+                "|---|---|---|---|",
+                *(
+                    f"| {band['theta_i_deg'][i]:g} | {100 * band['median'][i]:.2f} | "
+                    f"{100 * band['lo68'][i]:.2f}–{100 * band['hi68'][i]:.2f} | "
+                    f"{100 * band['lo95'][i]:.2f}–{100 * band['hi95'][i]:.2f} |"
+                    for i in (0, 30, 50, 70, 80)
+                ),
+            ]
+            if band
+            else []
         ),
         "",
-        *(f"![{name}]({name}.png)" for name in EXAMPLE_FIGURES),
+        *(f"![{name}]({name}.png)" for name in names),
         "",
     ]
     return atomic_write_bytes(example / "README.md", "\n".join(lines).encode())

@@ -11,11 +11,10 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from brdf_infer.model import brdf_hemisphere, brdf_inplane, reflectance_to_brdf
-from brdf_infer.params import PARAM_NAMES, UV_PAPER, HemisphereConstants, Params
+from brdf_infer.params import PARAM_NAMES, PARAMETER_SETS, HemisphereConstants, Params
 from brdf_infer.scene import Scene
 
 MAP_THETA_I_DEG = (5.0, 30.0, 50.0, 70.0)
-PAPER_TIS = {0.0: 0.036, 70.0: 0.058}  # Sec. 7: pi*BRDF0 ~3.6 %, TIS(70 deg) ~5.8 %
 
 
 def _sampled(idata: az.InferenceData) -> list[str]:
@@ -171,13 +170,10 @@ def brdf_bands(bands: dict, scene: Scene, rows) -> plt.Figure:
             label="68 %",
         )
         axis.plot(theta_s, band["median"][index], color="tab:blue", label="posterior median")
-        axis.plot(
-            theta_s,
-            np.asarray(brdf_inplane(angle, theta_s, UV_PAPER, scene.model.fold)),
-            "k--",
-            lw=1,
-            label="paper (uv-paper)",
-        )
+        reference = scene.outputs.reference_params
+        if reference is not None:
+            curve = brdf_inplane(angle, theta_s, PARAMETER_SETS[reference], scene.model.fold)
+            axis.plot(theta_s, np.asarray(curve), "k--", lw=1, label=f"paper ({reference})")
         here = rows.theta_i_deg == angle
         if here.any():
             axis.plot(
@@ -199,7 +195,8 @@ def brdf_bands(bands: dict, scene: Scene, rows) -> plt.Figure:
     return figure
 
 
-def tis_band(bands: dict) -> plt.Figure:
+def tis_band(bands: dict, reference: list[tuple[float, float, str]] = ()) -> plt.Figure:
+    """TIS median and bands against θi, with the scene's reference points (e.g. Table 3)."""
     band = bands["tis"]
     theta = np.asarray(band["theta_i_deg"])
     figure, axis = plt.subplots(figsize=(7, 4.2))
@@ -220,9 +217,12 @@ def tis_band(bands: dict) -> plt.Figure:
         label="68 %",
     )
     axis.plot(theta, 100 * np.asarray(band["median"]), color="tab:blue", label="posterior median")
-    for angle, value in PAPER_TIS.items():
-        axis.plot(angle, 100 * value, "k*", ms=11)
-    axis.plot([], [], "k*", label="paper, Sec. 7 (π·BRDF0 ~3.6 %, TIS(70°) ~5.8 %)")
+    markers = iter("*sD^v")
+    for label in dict.fromkeys(label for _, _, label in reference):
+        points = np.array([(a, v) for a, v, name in reference if name == label])
+        axis.plot(
+            points[:, 0], 100 * points[:, 1], next(markers), color="k", ms=9, ls="", label=label
+        )
     axis.set_xlabel("incidence angle θi [deg]")
     axis.set_ylabel("TIS [%]")
     axis.set_title("Total integrated scatter, Eq. (9)")

@@ -1,0 +1,161 @@
+"""Scenes build only what they need; every built-in scene and a minimal user scene run."""
+
+import json
+import subprocess
+import sys
+
+import jax
+import numpy as np
+import pytest
+
+from brdf_infer.errors import BadInputError
+from brdf_infer.model import tis
+from brdf_infer.observations import build_observation_model
+from brdf_infer.params import UV_PAPER, VIS_PAPER
+from brdf_infer.posterior import run_posterior
+from brdf_infer.scene import BUILTIN_SCENES, load_scene
+from tests.helpers import REPO, run_cli
+from tests.test_bad_input import GOOD_ROWS, HEADER, SCENE, write_scene
+
+MINIMAL_ROWS = [
+    *GOOD_ROWS,
+    "I,1,30,30,6.5e-05,4e-06",
+    "I,1,60,60,2.8e-04,2e-05",
+    "I,1,70,70,5.0e-04,3e-05",
+]
+
+
+@pytest.fixture(scope="module")
+def minimal_scene(tmp_path_factory):
+    directory = tmp_path_factory.mktemp("minimal")
+    return write_scene(directory, "\n".join([HEADER, *MINIMAL_ROWS]) + "\n", SCENE)
+
+
+def json_of(capsys, *argv):
+    code, out, err = run_cli(*argv, "--json", capsys=capsys)
+    assert code == 0, err
+    return json.loads(out)
+
+
+@pytest.mark.parametrize("scene", [*BUILTIN_SCENES, "minimal"])
+def test_every_scene_runs_through_fit_posterior_and_tis(scene, minimal_scene, tmp_path, capsys):
+    name = str(minimal_scene) if scene == "minimal" else scene
+    paper = json_of(capsys, "fit", name, "--method", "paper", "--selection", "samples")
+    assert np.isfinite(paper["sigma_e"])
+    lsq = json_of(capsys, "fit", name, "--method", "lsq", "--starts", "4")
+    assert np.isfinite(lsq["cost"]) and lsq["starts"] == 4
+    out = tmp_path / "run"
+    posterior = json_of(
+        capsys,
+        "posterior",
+        name,
+        "--sampler",
+        "emcee",
+        "--walkers",
+        "16",
+        "--steps",
+        "600",
+        "--warmup",
+        "200",
+        "--out",
+        str(out),
+    )
+    assert set(posterior["median"]) == set(paper["params"])
+    band = json_of(capsys, "tis", "--run", str(out), "--theta-i", "5", "70")
+    assert all(0 < v < 1 for v in band["median"])
+
+
+def test_vis_scene_recovers_the_published_model_and_table_three(capsys):
+    lsq = json_of(capsys, "fit", "vis-532", "--method", "lsq", "--starts", "4")
+    assert lsq["cost"] < 1e-10
+    np.testing.assert_allclose(list(lsq["params"].values()), list(VIS_PAPER), rtol=1e-4)
+    scene = load_scene("vis-532")
+    reference = [(a, v) for a, v, label in scene.load_tis_reference() if label == "Table 3 model"]
+    angles, published = np.array(reference).T
+    np.testing.assert_allclose(np.asarray(tis(angles, VIS_PAPER)), published, atol=6e-4)
+
+
+def test_specular_plane_likelihood_contains_no_erf(lya):
+    jaxpr = str(jax.make_jaxpr(build_observation_model(*lya).chi2)(UV_PAPER))
+    assert "erf" not in jaxpr and "ndtr" not in jaxpr
+
+
+def test_folding_is_compiled_in_only_when_the_scene_turns_it_on(lya, tmp_path):
+    scene, measurements = lya
+    text = scene.path.read_text().replace(
+        'measurements = "lya_measurements.csv"', f'measurements = "{scene.measurements_path}"'
+    )
+    path = tmp_path / "folded.toml"
+    path.write_text(text + "\n[model]\nfold = true\n")
+    folded = load_scene(path)
+    jaxpr = str(jax.make_jaxpr(build_observation_model(folded, measurements).chi2)(UV_PAPER))
+    assert "erf" in jaxpr
+
+
+def test_fit_and_tis_import_neither_matplotlib_nor_arviz():
+    code = (
+        "import sys, io, contextlib\n"
+        "from brdf_infer.cli import main\n"
+        "with contextlib.redirect_stdout(io.StringIO()):\n"
+        "    main(['fit', '--method', 'lsq', '--starts', '2'])\n"
+        "    main(['tis', '--theta-i', '5'])\n"
+        "heavy = ('matplotlib', 'arviz', 'numpyro', 'emcee')\n"
+        "print(sorted(m for m in heavy if m in sys.modules))\n"
+    )
+    result = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, timeout=300
+    )
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.strip() == "[]"
+
+
+def test_scene_without_out_of_plane_builds_no_hemisphere_product(lya, tmp_path):
+    scene, measurements = lya
+    text = scene.path.read_text().replace(
+        'measurements = "lya_measurements.csv"', f'measurements = "{scene.measurements_path}"'
+    )
+    text = text.replace(
+        'tis_reference = "lya_tis_reference.csv"',
+        f'tis_reference = "{scene.path.parent / "lya_tis_reference.csv"}"',
+    )
+    path = tmp_path / "in_plane.toml"
+    path.write_text(text + "\n[model]\nout_of_plane = false\n")
+    in_plane = load_scene(path)
+    assert not in_plane.makes_tis and not in_plane.makes_maps
+    run = run_posterior(
+        in_plane, measurements, sampler="emcee", walkers=16, steps=400, warmup=100, progress=False
+    )
+    assert "tis" not in run.bands and run.summary["tis_70deg"] is None
+    assert "brdf_inplane" in run.bands
+
+
+@pytest.mark.parametrize(
+    ("addition", "match"),
+    [
+        ("[model]\nout_of_plane = 1\n", "field 'model.out_of_plane': expected true or false"),
+        ("[outputs]\nmaps = 'yes'\n", "field 'outputs.maps': expected true or false"),
+        ("[outputs]\nreference_params = 'ir-paper'\n", "field 'outputs.reference_params'"),
+        ("[outputs]\ntheta_i_deg = [10, 95]\n", "field 'outputs.theta_i_deg'"),
+        ("[priors.alpha]\nkind = 'gamma'\n", "field 'priors.alpha.kind'"),
+        ("[priors.alpha]\nkind = 'normal'\nloc = 4.5\n", "field 'priors.alpha.scale': missing"),
+        ("[priors.alpha]\nkind = 'normal'\nloc = 4.5\nscale = -1\n", "field 'priors.alpha.scale'"),
+        ("[priors.gamma]\nkind = 'fixed'\nvalue = 1\n", "field 'priors.gamma'"),
+        ("[priors.alpha]\nkind = 'uniform'\nlower = 5\nupper = 2\n", "lower must be < upper"),
+    ],
+)
+def test_unknown_keys_and_wrong_types_name_the_key(tmp_path, addition, match):
+    path = write_scene(tmp_path, "\n".join([HEADER, *GOOD_ROWS]) + "\n", SCENE + addition)
+    with pytest.raises(BadInputError, match=match.replace("(", r"\(").replace(")", r"\)")):
+        load_scene(path)
+
+
+def test_unphysical_tis_is_reported(tmp_path, capsys):
+    path = tmp_path / "bright.json"
+    path.write_text(
+        json.dumps({"brdf0": 0.5, "a1": 0.0, "a2": 0.0, "a3": 0.0, "alpha": 4.5, "theta_s0": -12.0})
+    )
+    code, out, err = run_cli(
+        "tis", "--params", str(path), "--theta-i", "10", "--json", capsys=capsys
+    )
+    assert code == 0
+    assert json.loads(out)["tis"][0] > 1 and "not physical" in err
