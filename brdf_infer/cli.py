@@ -321,7 +321,8 @@ def _command_posterior(args: argparse.Namespace) -> None:
     if args.sampler == "nuts":
         what = f"{args.chains} chains x ({args.warmup} warmup + {args.draws} draws)"
     else:
-        what = f"{args.walkers} walkers x {args.steps} steps ({args.warmup} burn-in)"
+        walkers = args.walkers or "max(24, 2 x dim)"
+        what = f"{walkers} walkers x {args.steps} steps ({args.warmup} burn-in)"
     _progress(f"posterior of scene '{scene.name}' with {args.sampler}: {what} ...")
     run = run_posterior(
         scene,
@@ -571,7 +572,9 @@ def build_parser() -> argparse.ArgumentParser:
     posterior.add_argument(
         "--warmup", type=int, help="NUTS warmup per chain (1000) or emcee burn-in steps (4000)"
     )
-    posterior.add_argument("--walkers", type=int, default=24, help="emcee walkers")
+    posterior.add_argument(
+        "--walkers", type=int, help="emcee walkers (default max(24, 2 x dimension))"
+    )
     posterior.add_argument("--steps", type=int, default=20000, help="emcee steps")
     posterior.add_argument("--seed", type=int, default=0)
     posterior.add_argument("--out", help="output directory (default reports/<scene>/<sampler>)")

@@ -13,6 +13,8 @@ Schema (keys other than these are errors; defaults in brackets)::
     [errors]
     reflectance_rel = 0.065                  # [0.065] relative 1σ of the raw reflectance
     angle_deg = 1.0                          # [1.0] 1σ of θi and θs [deg]
+    propagate_angles = false                 # [false] add angle_deg to the likelihood (jax.grad)
+    hierarchical = false                     # [false] per-sample offsets replace the spread
     [model]
     fold = false                             # [false] Eq. (10) in in-plane predictions
     out_of_plane = true                      # [true] Eq. (8): hemisphere products (TIS, maps)
@@ -77,10 +79,16 @@ class ErrorModel:
     Attributes:
         reflectance_rel: relative 1σ of the raw reflectance [-].
         angle_deg: 1σ of the angles θi, θs [deg].
+        propagate_angles: the posterior adds the angle uncertainty to σ by first-order
+            propagation.
+        hierarchical: the posterior uses per-sample offsets with a learned scale instead of
+            the inter-sample spread.
     """
 
     reflectance_rel: float = 0.065
     angle_deg: float = 1.0
+    propagate_angles: bool = False
+    hierarchical: bool = False
 
 
 @dataclass(frozen=True)
@@ -270,7 +278,12 @@ def parse_scene(document: dict, path: Path) -> Scene:
             )
         except BadInputError as error:
             raise BadInputError(error.problem, file=path, field=prefix + str(error.field)) from None
-    errors = _table(document, "errors", path, {"reflectance_rel", "angle_deg"})
+    errors = _table(
+        document,
+        "errors",
+        path,
+        {"reflectance_rel", "angle_deg", "propagate_angles", "hierarchical"},
+    )
     model = _table(document, "model", path, {"fold", "out_of_plane", *HemisphereConstants._fields})
     paper = _table(document, "paper_fit", path, {"alpha", "theta_s0_deg", "selection"})
     outputs = _table(
@@ -316,6 +329,8 @@ def parse_scene(document: dict, path: Path) -> Scene:
         errors=ErrorModel(
             reflectance_rel=_number(errors, "reflectance_rel", path, default=0.065),
             angle_deg=_number(errors, "angle_deg", path, default=1.0),
+            propagate_angles=_boolean(errors, "propagate_angles", path, "errors.", False),
+            hierarchical=_boolean(errors, "hierarchical", path, "errors.", False),
         ),
         model=ModelSettings(fold=fold, out_of_plane=out_of_plane, constants=constants),
         paper_fit=PaperFitSettings(

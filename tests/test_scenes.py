@@ -159,3 +159,23 @@ def test_unphysical_tis_is_reported(tmp_path, capsys):
     )
     assert code == 0
     assert json.loads(out)["tis"][0] > 1 and "not physical" in err
+
+
+def test_scene_switches_on_angle_error_and_hierarchical(lya, tmp_path):
+    scene, measurements = lya
+    text = scene.path.read_text().replace(
+        'measurements = "lya_measurements.csv"', f'measurements = "{scene.measurements_path}"'
+    )
+    text = text.replace(
+        "angle_deg = 1.0", "angle_deg = 1.0\npropagate_angles = true\nhierarchical = true"
+    )
+    text = text.replace('tis_reference = "lya_tis_reference.csv"', "")
+    path = tmp_path / "options.toml"
+    path.write_text(text)
+    options = load_scene(path)
+    assert options.errors.propagate_angles and options.errors.hierarchical
+    run = run_posterior(
+        options, measurements, sampler="emcee", steps=300, warmup=100, progress=False
+    )
+    assert run.summary["options"]["angle_error"] and run.summary["options"]["hierarchical"]
+    assert "sample_offset" in run.idata.posterior

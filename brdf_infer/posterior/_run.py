@@ -40,7 +40,7 @@ def run_posterior(
     chains: int = 4,
     draws: int = 1000,
     warmup: int = 1000,
-    walkers: int = 24,
+    walkers: int | None = None,
     steps: int = 20000,
     seed: int = 0,
     out: Path | None = None,
@@ -54,12 +54,14 @@ def run_posterior(
     Args:
         sampler: ``nuts`` or ``emcee``.
         chains, draws, warmup: NUTS settings (emcee: ``warmup`` is the burn-in in steps).
-        walkers, steps: emcee settings.
+        walkers, steps: emcee settings (walkers default: max(24, 2 × dimension)).
         seed: random seed of the sampler.
         out: output directory (nothing written when None; emcee then keeps no checkpoint).
         resume: continue an interrupted emcee run from ``out``'s checkpoint.
-        angle_error: propagate the scene's angle uncertainty.
-        hierarchical: per-sample offsets instead of the spread term.
+        angle_error: propagate the scene's angle uncertainty (also on when the scene's
+            ``errors.propagate_angles`` is).
+        hierarchical: per-sample offsets instead of the spread term (also on when the scene's
+            ``errors.hierarchical`` is).
         progress: progress bar on stderr (default: when stderr is a terminal).
     """
     if sampler not in ("nuts", "emcee"):
@@ -70,7 +72,7 @@ def run_posterior(
         ("walkers", walkers),
         ("steps", steps),
     ):
-        if value < 1:
+        if value is not None and value < 1:
             raise BadInputError(f"must be at least 1, got {value}", field=f"--{name}")
     if warmup < 0:
         raise BadInputError(f"must be >= 0, got {warmup}", field="--warmup")
@@ -79,6 +81,8 @@ def run_posterior(
             "--resume continues an emcee run; NUTS runs are not checkpointed", field="--resume"
         )
     started = time.perf_counter()
+    angle_error = angle_error or scene.errors.propagate_angles
+    hierarchical = hierarchical or scene.errors.hierarchical
     model = build_posterior_model(
         scene, measurements, angle_error=angle_error, hierarchical=hierarchical
     )

@@ -209,7 +209,7 @@ def _random_state_from(saved) -> tuple:
 def run_emcee(
     model: PosteriorModel,
     *,
-    walkers: int = 24,
+    walkers: int | None = None,
     steps: int = 20000,
     burn: int = 4000,
     seed: int = 0,
@@ -220,9 +220,10 @@ def run_emcee(
 ) -> Draws:
     """emcee's affine-invariant ensemble on NumPyro's potential, checkpointed as it goes.
 
-    The walkers start in a small ball around the MAP (found with BFGS on the same potential);
-    the first ``burn`` steps are discarded, and the rest is thinned by ⌈τ_max/2⌉ (τ the
-    integrated autocorrelation time), which keeps nearly all of the effective sample size.
+    ``walkers`` defaults to max(24, 2 × dimension). The walkers start in a small ball around
+    the MAP (found with BFGS on the same potential); the first ``burn`` steps are discarded,
+    and the rest is thinned by ⌈τ_max/2⌉ (τ the integrated autocorrelation time), which keeps
+    nearly all of the effective sample size.
 
     Every ``checkpoint_every`` steps the chain so far and the full sampler state (walker
     positions, log densities, random state) are written atomically to ``checkpoint``; with
@@ -234,6 +235,7 @@ def run_emcee(
             match the settings.
     """
     density = _LogDensity(model, seed)
+    walkers = max(24, 2 * density.ndim) if walkers is None else walkers
     if walkers < 2 * density.ndim:
         raise BadInputError(
             f"emcee needs at least {2 * density.ndim} walkers, got {walkers}", field="--walkers"
