@@ -160,8 +160,9 @@ def test_credible_intervals_cover_the_truth_on_synthetic_data(lya, seed):
         assert low <= value <= high, (name, low, value, high)
 
 
-def test_emcee_resume_after_kill_reproduces_the_uninterrupted_run(tmp_path):
-    command = [
+def emcee_command(steps: int, *extra: str) -> list[str]:
+    """A small emcee posterior run of the default scene as a separate process."""
+    return [
         sys.executable,
         "-m",
         "brdf_infer",
@@ -171,11 +172,15 @@ def test_emcee_resume_after_kill_reproduces_the_uninterrupted_run(tmp_path):
         "--walkers",
         "16",
         "--steps",
-        "3000",
+        str(steps),
         "--warmup",
         "500",
-        "--json",
+        *extra,
     ]
+
+
+def test_emcee_resume_after_kill_reproduces_the_uninterrupted_run(tmp_path):
+    command = emcee_command(3000, "--json")
     reference = subprocess.run(
         [*command, "--out", str(tmp_path / "whole")],
         capture_output=True,
@@ -219,22 +224,7 @@ def test_emcee_resume_after_kill_reproduces_the_uninterrupted_run(tmp_path):
 
 
 def test_sigterm_leaves_a_resumable_checkpoint_and_exit_130(tmp_path):
-    command = [
-        sys.executable,
-        "-m",
-        "brdf_infer",
-        "posterior",
-        "--sampler",
-        "emcee",
-        "--walkers",
-        "16",
-        "--steps",
-        "200000",
-        "--warmup",
-        "500",
-        "--out",
-        str(tmp_path),
-    ]
+    command = emcee_command(200000, "--out", str(tmp_path))
     process = subprocess.Popen(
         command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=REPO
     )
