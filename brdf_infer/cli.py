@@ -452,14 +452,15 @@ def _command_run(args: argparse.Namespace) -> None:
     measurements = scene.load_measurements()
     out = Path(args.out) if args.out else Path("reports") / scene.name
     out.mkdir(parents=True, exist_ok=True)  # fail before any work if it cannot be written
-    _progress(f"[1/4] paper fit of scene '{scene.name}' ({len(measurements)} measurements)")
+    steps = 4 + (scene.raytrace is not None)
+    _progress(f"[1/{steps}] paper fit of scene '{scene.name}' ({len(measurements)} measurements)")
     paper = _paper_fit_payload(scene, measurements, None)
     atomic_write_json(out / "fit_paper.json", paper)
-    _progress("[2/4] least-squares fit of all free parameters")
+    _progress(f"[2/{steps}] least-squares fit of all free parameters")
     lsq_options = argparse.Namespace(starts=16, solver="lm", seed=args.seed, scale_covariance=False)
     lsq = _lsq_payload(scene, measurements, lsq_options)
     atomic_write_json(out / "fit_lsq.json", lsq)
-    _progress(f"[3/4] NUTS posterior ({args.chains} chains x {args.draws} draws)")
+    _progress(f"[3/{steps}] NUTS posterior ({args.chains} chains x {args.draws} draws)")
     run = run_posterior(
         scene,
         measurements,
@@ -469,7 +470,10 @@ def _command_run(args: argparse.Namespace) -> None:
         seed=args.seed,
         out=out,
     )
-    _progress("[4/4] report")
+    if scene.raytrace is not None:
+        _progress(f"[4/{steps}] ray tracing series {scene.raytrace.series} (Sec. 6)")
+        atomic_write_json(out / "raytrace.json", {"traces": _run_traces(scene, measurements, run)})
+    _progress(f"[{steps}/{steps}] report")
     from brdf_infer.report import write_report
 
     report, failures = write_report(out, progress=lambda message: None)
@@ -503,6 +507,144 @@ def _command_run(args: argparse.Namespace) -> None:
     print(f"verdict: {'; '.join(failures) or 'every diagnostic passes'}")
     print(f"report: {report}")
     print(f"done in {seconds:.1f} s")
+
+
+def _require_raytrace(scene) -> None:
+    if scene.raytrace is None:
+        raise BadInputError(
+            "this scene has no [raytrace] table (the measurement setup of Sec. 6)",
+            file=scene.path,
+            field="raytrace",
+        )
+
+
+def _command_raytrace(args: argparse.Namespace) -> None:
+    from brdf_infer.raytrace import raytrace_payload, raytrace_posterior_payload, thin_draws
+    from brdf_infer.scene import load_scene
+
+    scene = load_scene(args.scene)
+    _require_raytrace(scene)
+    for option, value, low in (("--rays", args.rays, 1), ("--draws", args.draws, 2)):
+        if value is not None and value < low:
+            raise BadInputError(f"{option} must be at least {low}, got {value}")
+    measurements = scene.load_measurements()
+    progress = None if args.json else _progress
+    if args.run is not None:
+        from brdf_infer.posterior import load_run_draws
+
+        all_draws, _, _ = load_run_draws(Path(args.run))
+        payload = raytrace_posterior_payload(
+            scene,
+            measurements,
+            thin_draws(all_draws, args.draws),
+            f"posterior of {args.run}",
+            rays=args.rays or RUN_TRACE_BAND_RAYS,
+            seed=args.seed,
+            progress=progress,
+        )
+    else:
+        from brdf_infer.params import resolve_params
+
+        name = args.params or scene.outputs.reference_params or "uv-paper"
+        payload = raytrace_payload(
+            scene,
+            measurements,
+            resolve_params(name),
+            name,
+            rays=args.rays,
+            seed=args.seed,
+            estimator=args.estimator,
+            progress=progress,
+        )
+    for warning in payload["warnings"]:
+        _progress(f"warning: {warning}")
+    if args.out:
+        _write_raytrace(Path(args.out), scene, measurements, payload)
+    if args.json:
+        _emit_json(payload)
+        return
+    _print_raytrace(payload)
+
+
+def _write_raytrace(out: Path, scene, measurements, payload: dict) -> None:
+    from brdf_infer._atomic import atomic_write_bytes, atomic_write_json
+    from brdf_infer.params import Params
+    from brdf_infer.raytrace import simulate_images
+    from brdf_infer.report._raytrace import figure_png, plot_detector_images, plot_raytrace
+
+    out.mkdir(parents=True, exist_ok=True)
+    atomic_write_json(out / "raytrace.json", {"traces": [payload]})
+    atomic_write_bytes(out / "raytrace.png", figure_png(plot_raytrace([payload])))
+    params = Params(**payload["params"])
+    images = simulate_images(scene, measurements, params, seed=payload["seed"])
+    atomic_write_bytes(out / "detector_images.png", figure_png(plot_detector_images(images)))
+    _progress(f"wrote raytrace.json, raytrace.png and detector_images.png in {out}")
+
+
+def _print_raytrace(payload: dict) -> None:
+    print(
+        f"series {payload['series']} ray traced with '{payload['params_source']}': "
+        f"{payload['rays']} rays per configuration, {payload['estimator']} estimator"
+    )
+    headers = [
+        "theta_i [deg]",
+        "delta [deg]",
+        "measured",
+        "simulated",
+        "MC error",
+        "point Eq. (6)",
+        "sim/meas",
+        "image ratio",
+    ]
+    if payload["draws"]:
+        headers.insert(5, "95 % band")
+    rows = []
+    for row in payload["rows"]:
+        cells = [
+            f"{row['theta_i_deg']:g}",
+            f"{row['delta_deg']:+g}",
+            f"{row['measured']:.3e}",
+            f"{row['simulated']:.3e}",
+            f"{100 * row['mc_se'] / row['simulated']:.2f} %" if row["simulated"] else "-",
+            f"{row['point_estimate']:.3e}",
+            f"{row['simulated'] / row['measured']:.3f}",
+            f"{row['image_ratio']:.3e}",
+        ]
+        if payload["draws"]:
+            cells.insert(5, f"{row['band']['lo95']:.2e}-{row['band']['hi95']:.2e}")
+        rows.append(cells)
+    print(_table(headers, rows))
+    print(
+        "simulated = dPs/Pi through the detector aperture; image ratio = the paper's Eq. (2) "
+        "over the signal rectangle"
+    )
+    print(f"time: {payload['seconds']:.2f} s (+{payload['compile_seconds']:.2f} s compile)")
+
+
+RUN_TRACE_RAYS = 2**18  # ~0.05 % MC error per configuration (NEE)
+RUN_TRACE_DRAWS = 64
+RUN_TRACE_BAND_RAYS = 16_384  # per draw and configuration
+
+
+def _run_traces(scene, measurements, run) -> list[dict]:
+    """The main job's ray traces: the posterior (band over draws), and the scene's reference
+    parameter set (e.g. ``uv-paper``) where it names one."""
+    from brdf_infer.params import PARAMETER_SETS
+    from brdf_infer.posterior import draws_params
+    from brdf_infer.raytrace import raytrace_payload, raytrace_posterior_payload, thin_draws
+
+    draws = thin_draws(draws_params(run.idata.posterior), RUN_TRACE_DRAWS)
+    traces = [
+        raytrace_posterior_payload(
+            scene, measurements, draws, "posterior", rays=RUN_TRACE_BAND_RAYS
+        )
+    ]
+    name = scene.outputs.reference_params
+    if name is not None:
+        traces.append(
+            raytrace_payload(scene, measurements, PARAMETER_SETS[name], name, rays=RUN_TRACE_RAYS)
+        )
+    return traces
 
 
 def _command_report(args: argparse.Namespace) -> None:
@@ -612,6 +754,30 @@ def build_parser() -> argparse.ArgumentParser:
     brdf.add_argument("--no-fold", action="store_true", help="hemisphere: leave out Eq. (10)")
     brdf.add_argument("--json", action="store_true", help="one JSON object on stdout")
     brdf.set_defaults(handler=_command_brdf)
+
+    raytrace = scene_command(
+        "raytrace", "ray-trace the series II setup (Sec. 6) and compare with the measurements"
+    )
+    source = raytrace.add_mutually_exclusive_group()
+    source.add_argument(
+        "--params", help="parameter set name or JSON file (default: the scene's reference set)"
+    )
+    source.add_argument(
+        "--run", help="posterior run directory: medians and 95 %% band over its draws"
+    )
+    raytrace.add_argument(
+        "--rays", type=int, help="rays per configuration (and per draw with --run)"
+    )
+    raytrace.add_argument("--seed", type=int, default=0)
+    raytrace.add_argument(
+        "--estimator",
+        choices=["nee", "naive"],
+        default="nee",
+        help="next-event estimation (default) or the naive forward ray trace",
+    )
+    raytrace.add_argument("--draws", type=int, default=64, help="--run: draws in the band")
+    raytrace.add_argument("--out", help="also write raytrace.json and figures here")
+    raytrace.set_defaults(handler=_command_raytrace)
 
     report = commands.add_parser("report", help="HTML diagnostic report of a posterior run")
     report.add_argument("run_dir", help="directory of a posterior run (posterior.nc, ...)")

@@ -36,6 +36,19 @@ Schema (keys other than these are errors; defaults in brackets)::
     kind = "normal"                          # [brdf_infer.priors.DEFAULT_PRIORS] see priors.py
     loc = 0.0
     scale = 10.0
+    [raytrace]                               # [absent: no ray tracing] setup of Sec. 6 [mm]
+    series = "II"                            # ["II"] series simulated; its AD d and r are used
+    source_diameter_mm = 0.5                 # [0.5] source disk
+    source_distance_mm = 360.0               # [360] source – sample centre
+    beam_apertures_mm = [[4.8, 32.0], [16.0, 93.0], [4.63, 211.0]]  # [these] [diameter,
+                                             #   distance from the source] of A1, A2, A3
+    sample_size_mm = [40.0, 40.0]            # [40 × 40] in-plane × across
+    detector_size_mm = [25.6, 6.375]         # [25.6 × 6.375] detector plane, in-plane × across
+    detector_behind_aperture_mm = 30.0       # [30] detector plane behind AD
+    signal_region_mm = [2.6, 2.6]            # [2.6 × 2.6] centred rectangle of the image ratio
+                                             #   (100 × 100 pixels of 26 µm, Sec. 3.1)
+    rays = 1000000                           # [1e6] rays per configuration
+    image_theta_i_deg = 80.0                 # [80] θi of the simulated images (Fig. 13)
 """
 
 from __future__ import annotations
@@ -142,6 +155,38 @@ class PaperFitSettings:
 
 
 @dataclass(frozen=True)
+class RaytraceSettings:
+    """The measurement setup of Sec. 6 (Fig. 12) for the ray-tracing validation [mm].
+
+    The detector aperture AD (diameter and distance from the sample) is the scene's geometry
+    of ``series``.
+
+    Attributes:
+        series: the measurement series simulated.
+        source_diameter_mm: diameter of the source disk.
+        source_distance_mm: source – sample-centre distance.
+        beam_apertures_mm: (diameter, distance from the source) of each beam aperture.
+        sample_size_mm: sample side lengths (in the plane of incidence, across).
+        detector_size_mm: detector plane (in the plane of incidence, across).
+        detector_behind_aperture_mm: detector plane distance behind AD.
+        signal_region_mm: centred rectangle of the image ratio (Eq. 2 applied to images).
+        rays: default number of rays per configuration.
+        image_theta_i_deg: incidence angle of the simulated detector images (Fig. 13) [deg].
+    """
+
+    series: str = "II"
+    source_diameter_mm: float = 0.5
+    source_distance_mm: float = 360.0
+    beam_apertures_mm: tuple[tuple[float, float], ...] = ((4.8, 32.0), (16.0, 93.0), (4.63, 211.0))
+    sample_size_mm: tuple[float, float] = (40.0, 40.0)
+    detector_size_mm: tuple[float, float] = (25.6, 6.375)
+    detector_behind_aperture_mm: float = 30.0
+    signal_region_mm: tuple[float, float] = (2.6, 2.6)
+    rays: int = 1_000_000
+    image_theta_i_deg: float = 80.0
+
+
+@dataclass(frozen=True)
 class Scene:
     """A validated scene."""
 
@@ -156,6 +201,7 @@ class Scene:
     paper_fit: PaperFitSettings = field(default_factory=PaperFitSettings)
     outputs: OutputSettings = field(default_factory=OutputSettings)
     priors: dict[str, Prior] = field(default_factory=lambda: dict(DEFAULT_PRIORS))
+    raytrace: RaytraceSettings | None = None
 
     @property
     def free_parameters(self) -> tuple[str, ...]:
@@ -250,7 +296,91 @@ _TOP_KEYS = {
     "paper_fit",
     "outputs",
     "priors",
+    "raytrace",
 }
+
+
+def _pair(table: dict, key: str, path: Path, default: tuple[float, float]) -> tuple[float, float]:
+    value = table.get(key, list(default))
+    if not (
+        isinstance(value, list)
+        and len(value) == 2
+        and all(isinstance(v, int | float) and not isinstance(v, bool) and v > 0 for v in value)
+    ):
+        raise BadInputError(
+            f"expected two positive numbers [mm], got {value!r}", file=path, field="raytrace." + key
+        )
+    return (float(value[0]), float(value[1]))
+
+
+def _parse_raytrace(document: dict, path: Path, series: dict) -> RaytraceSettings | None:
+    if "raytrace" not in document:
+        return None
+    defaults = RaytraceSettings()
+    table = _table(document, "raytrace", path, set(RaytraceSettings.__dataclass_fields__))
+    name = _string(table, "series", path, default=defaults.series)
+    if name not in series:
+        raise BadInputError(
+            f"no [series.{name}] in this scene (known: {', '.join(series)})",
+            file=path,
+            field="raytrace.series",
+        )
+    apertures = table.get("beam_apertures_mm", [list(a) for a in defaults.beam_apertures_mm])
+    if not (
+        isinstance(apertures, list)
+        and apertures
+        and all(
+            isinstance(a, list)
+            and len(a) == 2
+            and all(isinstance(v, int | float) and not isinstance(v, bool) and v > 0 for v in a)
+            for a in apertures
+        )
+    ):
+        raise BadInputError(
+            "expected a list of [diameter, distance from the source] pairs, both > 0 [mm]",
+            file=path,
+            field="raytrace.beam_apertures_mm",
+        )
+    rays = table.get("rays", defaults.rays)
+    if isinstance(rays, bool) or not isinstance(rays, int) or rays < 1:
+        raise BadInputError(
+            f"expected a positive integer, got {rays!r}", file=path, field="raytrace.rays"
+        )
+    settings = RaytraceSettings(
+        series=name,
+        beam_apertures_mm=tuple((float(d), float(z)) for d, z in apertures),
+        sample_size_mm=_pair(table, "sample_size_mm", path, defaults.sample_size_mm),
+        detector_size_mm=_pair(table, "detector_size_mm", path, defaults.detector_size_mm),
+        signal_region_mm=_pair(table, "signal_region_mm", path, defaults.signal_region_mm),
+        rays=rays,
+        **{
+            key: _prefixed_number(table, key, path, getattr(defaults, key), "raytrace.")
+            for key in (
+                "source_diameter_mm",
+                "source_distance_mm",
+                "detector_behind_aperture_mm",
+                "image_theta_i_deg",
+            )
+        },
+    )
+    if not 0 <= settings.image_theta_i_deg < 90:
+        raise BadInputError(
+            "expected an angle in [0, 90) deg", file=path, field="raytrace.image_theta_i_deg"
+        )
+    if max(z for _, z in settings.beam_apertures_mm) >= settings.source_distance_mm:
+        raise BadInputError(
+            "every beam aperture must lie between the source and the sample",
+            file=path,
+            field="raytrace.beam_apertures_mm",
+        )
+    return settings
+
+
+def _prefixed_number(table: dict, key: str, path: Path, default: float, prefix: str) -> float:
+    try:
+        return _number(table, key, path, default=default, positive=key != "image_theta_i_deg")
+    except BadInputError as error:
+        raise BadInputError(error.problem, file=path, field=prefix + key) from None
 
 
 def parse_scene(document: dict, path: Path) -> Scene:
@@ -350,6 +480,7 @@ def parse_scene(document: dict, path: Path) -> Scene:
             reference_params=reference_params,
         ),
         priors=priors,
+        raytrace=_parse_raytrace(document, path, series),
     )
 
 

@@ -1,12 +1,24 @@
 """Shared fixtures: the bundled scene and one reduced NUTS run (compiling NUTS takes ~15 s)."""
 
+import os
+
 import pytest
+from hypothesis import HealthCheck, settings
 
 import brdf_infer  # noqa: F401  (float64 for every test)
 from brdf_infer.posterior import run_posterior
 from brdf_infer.scene import load_scene
 
 REDUCED_NUTS = {"chains": 4, "warmup": 300, "draws": 300}
+
+# Property tests: random exploration locally; CI (the CI variable set, as .ci/run does)
+# replays the same examples every time so a run cannot fail by chance; "explore" searches
+# long (HYPOTHESIS_PROFILE=explore ./dev test tests/test_stability.py).
+_PROPERTY_DEFAULTS = {"deadline": None, "suppress_health_check": [HealthCheck.too_slow]}
+settings.register_profile("dev", max_examples=60, **_PROPERTY_DEFAULTS)
+settings.register_profile("ci", max_examples=60, derandomize=True, **_PROPERTY_DEFAULTS)
+settings.register_profile("explore", max_examples=2000, **_PROPERTY_DEFAULTS)
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci" if os.environ.get("CI") else "dev"))
 
 
 @pytest.fixture(scope="session")

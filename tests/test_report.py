@@ -43,7 +43,19 @@ def parse(path):
 
 
 @pytest.fixture(scope="module")
-def good_report(nuts_run):
+def good_report(nuts_run, lya):
+    """The report of the reduced run, with ray traces as ``brdf-infer run`` writes them."""
+    from brdf_infer._atomic import atomic_write_json
+    from brdf_infer.params import UV_PAPER
+    from brdf_infer.posterior import draws_params
+    from brdf_infer.raytrace import raytrace_payload, raytrace_posterior_payload, thin_draws
+
+    draws = thin_draws(draws_params(nuts_run.idata.posterior), 8)
+    traces = [
+        raytrace_posterior_payload(*lya, draws, "posterior", rays=2048),
+        raytrace_payload(*lya, UV_PAPER, "uv-paper", rays=2**14),
+    ]
+    atomic_write_json(nuts_run.out / "raytrace.json", {"traces": traces})
     return write_report(nuts_run.out, progress=lambda message: None)
 
 
@@ -69,6 +81,8 @@ def test_report_is_self_contained_and_every_image_decodes(good_report, nuts_run)
         "brdf_bands",
         "tis_band",
         "hemisphere",
+        "raytrace",
+        "detector_images",
     ):
         assert (nuts_run.out / "figures" / f"{png}.png").stat().st_size > 5000, png
 
@@ -89,6 +103,7 @@ def test_report_opens_with_the_verdict_then_the_sections(good_report):
             "Diagnostics",
             "Fit against the data",
             "Products",
+            "Ray-tracing validation",
         )
     ]
     assert order == sorted(order)

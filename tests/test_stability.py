@@ -11,7 +11,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import example, given
 from hypothesis import strategies as st
 from jax.test_util import check_grads
 
@@ -20,8 +20,6 @@ from brdf_infer.lsq import fit_lsq
 from brdf_infer.model import log_brdf_hemisphere, log_brdf_inplane, log_tis, tis
 from brdf_infer.observations import build_observation_model
 from brdf_infer.params import PAPER_CONSTANTS, UV_PAPER, Params
-
-SETTINGS = settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
 
 @pytest.fixture(autouse=True, scope="module")
@@ -53,7 +51,6 @@ def all_finite(tree) -> bool:
     return all(bool(np.all(np.isfinite(leaf))) for leaf in jax.tree_util.tree_leaves(tree))
 
 
-@SETTINGS
 @given(
     params=parameters(), theta_i=st.sampled_from([0.0, 18.0, 45.0, 80.0, 89.999]), data=st.data()
 )
@@ -66,7 +63,6 @@ def test_log_brdf_and_its_gradient_are_finite_everywhere(params, theta_i, data):
         assert np.isfinite(value) and all_finite(grads), (params, theta_i, theta_s, fold)
 
 
-@SETTINGS
 @given(
     params=parameters(),
     theta_i=st.floats(0.0, 89.9),
@@ -90,18 +86,37 @@ def test_log_brdf_is_finite_where_brdf_overflows_and_underflows():
         assert np.isfinite(value) and all_finite(grads)
 
 
-@SETTINGS
 @given(params=parameters(coefficient=20.0), theta_i=st.floats(0.0, 89.0))
+# θs0 within 1e-300° of 0 once put a GL node where d ln(sin θ)/dθ overflows (NaN gradient).
+@example(params=Params(1.0, 0.0, 0.0, 0.0, 1.0, 1.4440260625175281e-303), theta_i=0.0)
+@example(params=Params(1.0, 0.0, 0.0, 0.0, 1.0, -1e-303), theta_i=0.0)
+@example(params=Params(1e-8, 0.0, 0.0, 0.0, 0.5, 5e-324), theta_i=45.0)
+# exp of the exponent overflows (ln TIS ≈ 740): only log_tis is representable.
+@example(params=Params(1.0, 0.0, 0.0, 2.1856210873284875e-27, 12.0, -56.0), theta_i=60.0)
+# TIS ≈ 2e282 is finite, its gradient in paper units (∂/∂a2 ~ 1e24 × TIS) is not.
+@example(params=Params(1.0, 0.0, 8.7245e-23, 1.3329e-24, 10.75, -38.0), theta_i=78.0)
 def test_tis_is_bounded_by_pi_times_the_brdf_range_and_finite(params, theta_i):
-    """TIS = ∫ BRDF cos θ dω lies between π·min and π·max of the BRDF over the hemisphere."""
-    value = float(tis(theta_i, params))
+    """TIS = ∫ BRDF cos θ dω lies between π·min and π·max of the BRDF over the hemisphere.
+
+    Compared in log space: for the largest coefficients TIS itself exceeds float64 (ln TIS
+    up to ~7000), where ``log_tis`` is the documented quantity; ``tis`` must be finite, with
+    a finite gradient, wherever ln TIS < ln(float64 max) by a margin.
+    """
+    log_value, log_gradient = jax.value_and_grad(lambda p: log_tis(theta_i, p))(params)
+    assert np.isfinite(log_value) and all_finite(log_gradient)
     theta = np.linspace(0.0, 90.0, 181)[:, None]
     phi = np.linspace(0.0, 360.0, 721)[None, :]
-    brdf = np.exp(np.asarray(log_brdf_hemisphere(theta_i, theta, phi, params)))
-    assert np.isfinite(value) and value >= 0.0
-    assert math.pi * brdf.min() * (1 - 1e-6) <= value <= math.pi * brdf.max() * (1 + 1e-6)
-    gradient = jax.grad(lambda p: tis(theta_i, p))(params)
-    assert all_finite(gradient)
+    log_brdf = np.asarray(log_brdf_hemisphere(theta_i, theta, phi, params))
+    tolerance = 1e-6 * max(1.0, abs(float(log_value)))
+    assert math.log(math.pi) + log_brdf.min() - tolerance <= log_value
+    assert log_value <= math.log(math.pi) + log_brdf.max() + tolerance
+    if log_value < 700.0:
+        value, gradient = jax.value_and_grad(lambda p: tis(theta_i, p))(params)
+        assert np.isfinite(value) and value >= 0.0
+        # ∂TIS/∂p = TIS·∂lnTIS/∂p: finite unless that product itself leaves float64
+        steepest = max(abs(float(g)) for g in jax.tree_util.tree_leaves(log_gradient))
+        if log_value + math.log(max(steepest, 1.0)) < 700.0:
+            assert all_finite(gradient)
 
 
 def test_tis_of_physical_parameters_lies_in_zero_one():
@@ -109,7 +124,6 @@ def test_tis_of_physical_parameters_lies_in_zero_one():
     assert np.all((values > 0) & (values < 1))
 
 
-@SETTINGS
 @given(
     params=parameters(coefficient=5.0), theta_i=st.floats(1.0, 85.0), theta_s=st.floats(-85.0, 85.0)
 )
@@ -139,7 +153,6 @@ def test_near_collinear_a2_a3_is_reported_with_finite_output(lya):
     assert any("singular" in w or "ill-conditioned" in w for w in result.warnings), result.warnings
 
 
-@SETTINGS
 @given(
     params=parameters(),
     a=st.floats(0.01, 100.0),

@@ -8,9 +8,11 @@ from pathlib import Path
 
 from brdf_infer._atomic import atomic_write_bytes
 from brdf_infer.bench._fits import fit_rows
+from brdf_infer.bench._raytrace import raytrace_rows
 from brdf_infer.bench._samplers import sampler_rows
 from brdf_infer.bench._timing import machine_description
 from brdf_infer.bench._tis import batched_throughput, tis_rows
+from brdf_infer.raytrace._series import CHUNK_RAYS
 from brdf_infer.scene import load_scene
 
 
@@ -47,19 +49,53 @@ def _tis_plot(rows, path: Path) -> None:
     atomic_write_bytes(path, buffer.getvalue())
 
 
+def _raytrace_plot(rows, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    figure, axis = plt.subplots(figsize=(6.4, 4.2))
+    for configuration in dict.fromkeys(row.configuration for row in rows):
+        for estimator, style in (("nee", "o-"), ("naive", "s--")):
+            chosen = [
+                r for r in rows if r.configuration == configuration and r.estimator == estimator
+            ]
+            axis.loglog(
+                [r.seconds for r in chosen],
+                [r.relative_se for r in chosen],
+                style,
+                label=f"{estimator}, {configuration}",
+            )
+    axis.axhline(0.01, color="grey", linestyle=":", label="1 % target")
+    axis.set_xlabel("run time per configuration [s] (compile excluded)")
+    axis.set_ylabel("relative MC standard error of dPs/Pi [-]")
+    axis.set_title("Ray tracer (series II, uv-paper): error against run time")
+    axis.legend(fontsize=7)
+    figure.tight_layout()
+    buffer = io.BytesIO()
+    figure.savefig(buffer, format="png", dpi=120)
+    plt.close(figure)
+    atomic_write_bytes(path, buffer.getvalue())
+
+
 def write_report(out: Path, quick: bool, progress=print) -> Path:
     """Run the benchmarks and write ``out`` (Markdown) plus PNG plots beside it."""
     started = time.perf_counter()
-    progress("benchmark 1/3: TIS quadratures ...")
+    progress("benchmark 1/4: TIS quadratures ...")
     tis_table = tis_rows(quick)
     count, batch_seconds, batch_compile = batched_throughput(quick)
-    progress("benchmark 2/3: fits ...")
+    progress("benchmark 2/4: fits ...")
     scene = load_scene("lya")
     fits = fit_rows(scene, scene.load_measurements(), quick)
-    progress("benchmark 3/3: samplers ...")
+    progress("benchmark 3/4: samplers ...")
     samplers, reference = sampler_rows(scene, quick, progress)
+    progress("benchmark 4/4: ray tracer ...")
+    traces, reference_rays = raytrace_rows(scene, quick)
     plot = out.with_name(out.stem + "_tis.png")
     _tis_plot(tis_table, plot)
+    trace_plot = out.with_name(out.stem + "_raytrace.png")
+    _raytrace_plot(traces, trace_plot)
 
     sections = [
         "# Benchmarks: error against run time",
@@ -165,6 +201,45 @@ def write_report(out: Path, quick: bool, progress=print) -> Path:
                 for r in samplers
             ],
         ),
+        "",
+        "## Ray tracer (Sec. 6)",
+        "",
+        "Simulated dPs/Pi of one series II configuration with `uv-paper`: the estimator's own "
+        "relative MC standard error, and the actual error against a next-event-estimation "
+        f"run of {reference_rays:,} rays, against run time (rays in chunks of {CHUNK_RAYS:,}; "
+        "the naive estimator is the forward ray trace of the paper, next-event estimation "
+        "(nee) connects every sample hit to a point on AD). Efficiency = 1/(rel. error² × "
+        "time): how much more accuracy a second buys.",
+        "",
+        _markdown_table(
+            [
+                "configuration",
+                "estimator",
+                "rays",
+                "rel. MC error",
+                "actual rel. error",
+                "time [s]",
+                "rays/s",
+                "efficiency [1/s]",
+                "compile [s]",
+            ],
+            [
+                [
+                    r.configuration,
+                    r.estimator,
+                    f"{r.rays:,}",
+                    f"{r.relative_se:.1e}",
+                    f"{r.relative_error:.1e}",
+                    f"{r.seconds:.3f}",
+                    f"{r.rays_per_second:,.0f}",
+                    f"{1 / (r.relative_se**2 * r.seconds):.2g}",
+                    f"{r.compile_seconds:.2f}",
+                ]
+                for r in traces
+            ],
+        ),
+        "",
+        f"![ray tracer error against time]({trace_plot.name})",
         "",
     ]
     atomic_write_bytes(out, "\n".join(sections).encode())

@@ -24,6 +24,9 @@ from brdf_infer.model._inplane import log_brdf_inplane
 from brdf_infer.params import PAPER_CONSTANTS, HemisphereConstants, Params
 
 DEFAULT_NODES = 64  # Gauss–Legendre nodes per panel; see tests/test_tis.py for the error
+# Panels narrower than this are dropped: their contribution is below 1e-11 of the TIS, while
+# nodes within ~1e-300° of θ = 0 make d ln(sin θ)/dθ overflow and the gradient NaN.
+MIN_PANEL_WIDTH_DEG = 1e-9
 
 
 def _gauss_legendre(nodes: int) -> tuple[np.ndarray, np.ndarray]:
@@ -50,12 +53,13 @@ def _log_tis_single(
 
     Every quadrature term is ln(weight) + ln BRDF + ln(cos θ sin θ), summed by a weighted
     log-sum-exp, so a BRDF beyond the float64 range cannot turn a zero weight into NaN.
-    Zero-width panels (coincident kinks) are masked on their inputs (double where).
+    Zero-width and sliver panels (coincident kinks, θs0 within ``MIN_PANEL_WIDTH_DEG`` of 0)
+    are masked on their inputs (double where).
     """
     x, w = _gauss_legendre(nodes)
     edges = _panel_edges(params, fold, constants)
     lower, upper = edges[:-1, None], edges[1:, None]
-    valid = upper > lower
+    valid = upper - lower > MIN_PANEL_WIDTH_DEG
     half = jnp.where(valid, 0.5 * (upper - lower), 1.0)
     theta = jnp.where(valid, lower, 0.0) + half * (x[None, :] + 1.0)  # [deg], inside (0, 90)
     log_weight = jnp.log(half * DEG) + jnp.log(w)[None, :]  # dθ in radians

@@ -5,13 +5,17 @@ from brdf_infer.report._figures import brdf_bands as plot_brdf_bands
 from brdf_infer.report._figures import hemisphere_maps as plot_hemisphere_maps
 from brdf_infer.report._figures import posterior_predictive as plot_posterior_predictive
 from brdf_infer.report._figures import tis_band as plot_tis_band
+from brdf_infer.report._raytrace import figure_png, plot_detector_images, plot_raytrace
 
 __all__ = [
     "FIGURE_DIR",
     "REPORT_FILE",
+    "figure_png",
     "plot_brdf_bands",
+    "plot_detector_images",
     "plot_hemisphere_maps",
     "plot_posterior_predictive",
+    "plot_raytrace",
     "plot_tis_band",
     "verdict",
     "write_example",

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import io
 import json
 import time
 import warnings
@@ -16,20 +15,13 @@ from brdf_infer.errors import BadInputError
 from brdf_infer.params import PARAM_NAMES
 from brdf_infer.posterior import BANDS_FILE, POSTERIOR_FILE, SUMMARY_FILE, THRESHOLDS, draws_params
 from brdf_infer.report import _figures, _html
+from brdf_infer.report._raytrace import figure_png, plot_detector_images, plot_raytrace
 from brdf_infer.scene import load_scene
 
 REPORT_FILE = "report.html"
+RAYTRACE_FILE = "raytrace.json"
 FIGURE_DIR = "figures"
 PARETO_K_LIMIT = 0.7
-
-
-def _png(figure) -> bytes:
-    import matplotlib.pyplot as plt
-
-    buffer = io.BytesIO()
-    figure.savefig(buffer, format="png", dpi=90)
-    plt.close(figure)
-    return buffer.getvalue()
 
 
 def _load(run: Path):
@@ -73,7 +65,7 @@ def write_report(run: Path, progress=print) -> tuple[Path, list[str]]:
 
     def add(name: str, caption: str, make) -> None:
         progress(f"  figure: {name}")
-        figures.append((name, caption, _png(make())))
+        figures.append((name, caption, figure_png(make())))
 
     add("trace", "Trace plots of the six parameters (paper units).", lambda: _figures.trace(idata))
     add("rank", "Rank plots: chains that mix give flat histograms.", lambda: _figures.rank(idata))
@@ -105,6 +97,22 @@ def write_report(run: Path, progress=print) -> tuple[Path, list[str]]:
             "Hemisphere maps (cf. Fig. 9): posterior median (top) and relative width of the 95 % "
             "band (bottom).",
             lambda: _figures.hemisphere_maps(draws_params(idata.posterior), scene.model.constants),
+        )
+    traces = _load_traces(run)
+    if traces:
+        add(
+            "raytrace",
+            "Ray-traced raw reflectance of the series II setup against the measurements "
+            "(cf. Fig. 14): dPs/Pi through the detector aperture (crosses; shaded: 95 % band "
+            "over posterior draws), the Eq. (6) point estimate (dotted) and the paper's image "
+            "ratio over the signal square (small squares).",
+            lambda: plot_raytrace(traces),
+        )
+        add(
+            "detector_images",
+            f"Simulated detector images for {traces[0]['params_source']} (cf. Fig. 13); the "
+            "cyan square is the signal region of the image ratio.",
+            lambda: plot_detector_images(_images(scene, rows, traces[0])),
         )
     for name, _, png in figures:
         atomic_write_bytes(run / FIGURE_DIR / f"{name}.png", png)
@@ -202,12 +210,65 @@ def write_report(run: Path, progress=print) -> tuple[Path, list[str]]:
             if name in ("brdf_bands", "tis_band", "hemisphere")
         ),
         _tis_table(bands) if "tis" in bands else "",
+        *(
+            ["<h2>Ray-tracing validation (Sec. 6)</h2>", _raytrace_table(traces)]
+            + [
+                _html.figure(png, caption)
+                for name, caption, png in figures
+                if name in ("raytrace", "detector_images")
+            ]
+            if traces
+            else []
+        ),
     ]
     title = f"brdf_infer report: {scene.name} ({attrs['sampler']})"
     document = _html.page(title, sections)
     path = atomic_write_bytes(run / REPORT_FILE, document.encode())
     progress(f"report written in {time.perf_counter() - started:.1f} s")
     return path, failures
+
+
+def _load_traces(run: Path) -> list[dict]:
+    """The ray traces a run wrote (``raytrace.json``), possibly none."""
+    path = run / RAYTRACE_FILE
+    if not path.is_file():
+        return []
+    try:
+        return json.loads(path.read_text())["traces"]
+    except (OSError, ValueError, KeyError) as error:
+        raise BadInputError(f"cannot read the ray traces: {error}", file=path) from None
+
+
+def _images(scene, rows, trace: dict) -> dict:
+    from brdf_infer.params import Params
+    from brdf_infer.raytrace import simulate_images
+
+    return simulate_images(scene, rows, Params(**trace["params"]), seed=trace["seed"])
+
+
+def _raytrace_table(traces: list[dict]) -> str:
+    header = ["θi [deg]", "δ [deg]", "measured [-]"]
+    for trace in traces:
+        header += [f"simulated, {trace['params_source']} [-]", "simulated / measured"]
+    header += ["point estimate Eq. (6) [-]", "image ratio [-]"]
+    table = []
+    for k, row in enumerate(traces[0]["rows"]):
+        cells = [f"{row['theta_i_deg']:g}", f"{row['delta_deg']:+g}", f"{row['measured']:.3e}"]
+        for trace in traces:
+            other = trace["rows"][k]
+            text = f"{other['simulated']:.3e} ± {other['mc_se']:.1e}"
+            if "band" in other:
+                text += f" (95 %: {other['band']['lo95']:.2e}–{other['band']['hi95']:.2e})"
+            cells += [text, f"{other['simulated'] / row['measured']:.3f}"]
+        cells += [f"{row['point_estimate']:.3e}", f"{row['image_ratio']:.3e}"]
+        table.append(cells)
+    note = (
+        f"<p>{traces[0]['rays']} rays per configuration ({traces[0]['estimator']} estimator). "
+        "Simulated = power scattered through the detector aperture over the incident power, "
+        "the quantity Eq. (6) converts; image ratio = scattered over reference image summed "
+        "over the signal square, as the paper's Eq. (2) processes the CCD images.</p>"
+    )
+    return note + _html.table(header, table)
 
 
 def _tis_table(bands: dict) -> str:
@@ -252,7 +313,7 @@ def _comparison(run: Path, idata) -> str:
     )
 
 
-EXAMPLE_FIGURES = ("brdf_bands", "tis_band", "hemisphere", "predictive")
+EXAMPLE_FIGURES = ("brdf_bands", "tis_band", "hemisphere", "predictive", "raytrace")
 
 
 def write_example(run: Path, example: Path, failures: list[str]) -> Path:
