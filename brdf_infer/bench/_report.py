@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import io
 import time
 from pathlib import Path
 
@@ -13,6 +12,7 @@ from brdf_infer.bench._samplers import sampler_rows
 from brdf_infer.bench._timing import machine_description
 from brdf_infer.bench._tis import batched_throughput, tis_rows
 from brdf_infer.raytrace._series import CHUNK_RAYS
+from brdf_infer.report._raytrace import figure_png
 from brdf_infer.scene import load_scene
 
 
@@ -43,10 +43,7 @@ def _tis_plot(rows, path: Path) -> None:
     axis.set_title("TIS, Eq. (9): error against run time (uv-paper, θi = 5–70°)")
     axis.legend(fontsize=8)
     figure.tight_layout()
-    buffer = io.BytesIO()
-    figure.savefig(buffer, format="png", dpi=120)
-    plt.close(figure)
-    atomic_write_bytes(path, buffer.getvalue())
+    atomic_write_bytes(path, figure_png(figure, dpi=120))
 
 
 def _raytrace_plot(rows, path: Path) -> None:
@@ -73,10 +70,7 @@ def _raytrace_plot(rows, path: Path) -> None:
     axis.set_title("Ray tracer (series II, uv-paper): error against run time")
     axis.legend(fontsize=7)
     figure.tight_layout()
-    buffer = io.BytesIO()
-    figure.savefig(buffer, format="png", dpi=120)
-    plt.close(figure)
-    atomic_write_bytes(path, buffer.getvalue())
+    atomic_write_bytes(path, figure_png(figure, dpi=120))
 
 
 def write_report(out: Path, quick: bool, progress=print) -> Path:

@@ -28,7 +28,7 @@ import numpy as np
 
 from brdf_infer.measurements import Measurements
 from brdf_infer.model import brdf_hemisphere, solid_angle
-from brdf_infer.params import Params
+from brdf_infer.params import Params, params_to_dict
 from brdf_infer.raytrace._trace import (
     ESTIMATORS,
     TALLIES,
@@ -473,7 +473,7 @@ def _payload(scene: Scene, result: RaytraceResult, params: Params, source: str, 
     return {
         **result.to_json(),
         "series": scene.raytrace.series,
-        "params": dict(zip(Params._fields, map(float, params), strict=True)),
+        "params": params_to_dict(params),
         "params_source": source,
         "draws": draws,
         "scene_file": str(scene.path),
