@@ -18,6 +18,7 @@ from typing import Any, NoReturn
 
 import numpy as np
 
+from brdf_infer._outdir import check_output_dir
 from brdf_infer.errors import BadInputError
 
 EXIT_BAD_INPUT = 2
@@ -99,7 +100,7 @@ def _lsq_payload(scene, measurements, args: argparse.Namespace) -> dict[str, Any
         seed=args.seed,
         scale_covariance=args.scale_covariance,
     )
-    model = build_observation_model(scene, measurements)
+    model = build_observation_model(scene, measurements).with_sigma(result.row_sigma)
     paper_cost = float(model.chi2(paper_fit(scene, measurements).params))
     return {
         "method": "lsq",
@@ -124,6 +125,9 @@ def _lsq_payload(scene, measurements, args: argparse.Namespace) -> dict[str, Any
         "solver": result.solver,
         "seconds": result.seconds,
         "compile_seconds": result.compile_seconds,
+        "row_sigma": result.row_sigma.tolist(),
+        "repeatability": result.repeatability,
+        "reweightings": result.reweightings,
         "warnings": result.warnings,
     }
 
@@ -314,16 +318,9 @@ def _command_posterior(args: argparse.Namespace) -> None:
 
     scene = load_scene(args.scene)
     measurements = scene.load_measurements()
-    out = Path(args.out) if args.out else Path("reports") / scene.name / args.sampler
-    out.mkdir(parents=True, exist_ok=True)  # fail before any work if it cannot be written
+    out = check_output_dir(args.out or Path("reports") / scene.name / args.sampler)
     if args.warmup is None:
         args.warmup = 1000 if args.sampler == "nuts" else 4000
-    if args.sampler == "nuts":
-        what = f"{args.chains} chains x ({args.warmup} warmup + {args.draws} draws)"
-    else:
-        walkers = args.walkers or "max(24, 2 x dim)"
-        what = f"{walkers} walkers x {args.steps} steps ({args.warmup} burn-in)"
-    _progress(f"posterior of scene '{scene.name}' with {args.sampler}: {what} ...")
     run = run_posterior(
         scene,
         measurements,
@@ -336,8 +333,9 @@ def _command_posterior(args: argparse.Namespace) -> None:
         seed=args.seed,
         out=out,
         resume=args.resume,
-        angle_error=args.angle_error,
-        hierarchical=args.hierarchical,
+        error_model=args.error_model,
+        target_accept=args.target_accept,
+        announce=lambda what: _progress(what + " ..."),
     )
     summary = run.summary
     if args.json:
@@ -447,12 +445,16 @@ def _command_run(args: argparse.Namespace) -> None:
     from brdf_infer.posterior import run_posterior
     from brdf_infer.scene import load_scene
 
+    for option, value in (("--chains", args.chains), ("--draws", args.draws)):
+        if value < 1:
+            raise BadInputError(f"must be at least 1, got {value}", field=option)
+    if args.warmup < 0:
+        raise BadInputError(f"must be >= 0, got {args.warmup}", field="--warmup")
     start = time.perf_counter()
     scene = load_scene(args.scene)
     measurements = scene.load_measurements()
-    out = Path(args.out) if args.out else Path("reports") / scene.name
-    out.mkdir(parents=True, exist_ok=True)  # fail before any work if it cannot be written
-    steps = 4 + (scene.raytrace is not None)
+    out = check_output_dir(args.out or Path("reports") / scene.name)
+    steps = 5 + (scene.raytrace is not None)
     _progress(f"[1/{steps}] paper fit of scene '{scene.name}' ({len(measurements)} measurements)")
     paper = _paper_fit_payload(scene, measurements, None)
     atomic_write_json(out / "fit_paper.json", paper)
@@ -470,8 +472,20 @@ def _command_run(args: argparse.Namespace) -> None:
         seed=args.seed,
         out=out,
     )
+    if scene.errors.model != "spread":
+        _progress(f"[4/{steps}] NUTS posterior with the earlier spread error model (comparison)")
+        run_posterior(
+            scene,
+            measurements,
+            chains=args.chains,
+            draws=args.draws,
+            warmup=args.warmup,
+            seed=args.seed,
+            error_model="spread",
+            out=out / "variants" / "spread",
+        )
     if scene.raytrace is not None:
-        _progress(f"[4/{steps}] ray tracing series {scene.raytrace.series} (Sec. 6)")
+        _progress(f"[5/{steps}] ray tracing series {scene.raytrace.series} (Sec. 6)")
         atomic_write_json(out / "raytrace.json", {"traces": _run_traces(scene, measurements, run)})
     _progress(f"[{steps}/{steps}] report")
     from brdf_infer.report import write_report
@@ -647,6 +661,57 @@ def _run_traces(scene, measurements, run) -> list[dict]:
     return traces
 
 
+def _command_sbc(args: argparse.Namespace) -> None:
+    from brdf_infer.sbc import COVERAGE_LEVELS, SbcSettings, run_sbc, write_sbc
+    from brdf_infer.scene import load_scene
+
+    scene = load_scene(args.scene)
+    measurements = scene.load_measurements()
+    settings = SbcSettings(
+        replicates=args.replicates,
+        draws=args.draws,
+        thin=args.thin,
+        warmup=args.warmup,
+        seed=args.seed,
+        sigma_scale=args.sigma_scale,
+        target_accept=args.target_accept,
+    )
+    for name in ("replicates", "draws", "thin", "warmup"):
+        if getattr(settings, name) < 1:
+            raise BadInputError(
+                f"must be at least 1, got {getattr(settings, name)}", field=f"--{name}"
+            )
+    if not settings.sigma_scale > 0:
+        raise BadInputError(f"must be > 0, got {settings.sigma_scale}", field="--sigma-scale")
+    out = check_output_dir(args.out or Path("reports") / scene.name / "sbc")
+    _progress(
+        f"simulation-based calibration of scene '{scene.name}': {settings.replicates} "
+        f"replicates, truth ranked among {settings.draws} draws ..."
+    )
+    result = run_sbc(scene, measurements, settings, progress=not args.json and sys.stderr.isatty())
+    write_sbc(out, result)
+    if args.json:
+        _emit_json({"out": str(out), **result.as_json()})
+        return
+    rows = [
+        [
+            name,
+            f"{result.chi2_p[name]:.3f}",
+            f"{result.ks_p[name]:.3f}",
+            *(f"{100 * result.coverage[level][name]:.1f}" for level in COVERAGE_LEVELS),
+        ]
+        for name in result.quantities
+    ]
+    print(f"SBC of scene '{scene.name}': {settings.replicates} replicates, {settings.draws} draws")
+    print(_table(["quantity", "chi2 p", "KS p", "50 % cov", "90 % cov", "95 % cov"], rows))
+    verdict = "calibrated" if result.passed else "NOT calibrated: " + "; ".join(result.failures)
+    print(f"verdict: {verdict}")
+    print(
+        f"time: {result.seconds:.0f} s ({result.compile_seconds:.0f} s compiling); "
+        f"results in {out}/ (sbc.json, sbc.html)"
+    )
+
+
 def _command_report(args: argparse.Namespace) -> None:
     from brdf_infer.report import write_report
 
@@ -724,10 +789,15 @@ def build_parser() -> argparse.ArgumentParser:
         "--resume", action="store_true", help="continue an interrupted emcee run"
     )
     posterior.add_argument(
-        "--angle-error", action="store_true", help="propagate the 1-deg angle uncertainty"
+        "--error-model",
+        choices=["generative", "spread"],
+        help="override the scene's errors.model (spread: the earlier model, for comparison)",
     )
     posterior.add_argument(
-        "--hierarchical", action="store_true", help="per-sample offsets with a learned scale"
+        "--target-accept",
+        type=float,
+        default=0.8,
+        help="NUTS target acceptance probability (raise towards 0.95 if a run diverges)",
     )
     posterior.set_defaults(handler=_command_posterior)
 
@@ -778,6 +848,22 @@ def build_parser() -> argparse.ArgumentParser:
     raytrace.add_argument("--draws", type=int, default=64, help="--run: draws in the band")
     raytrace.add_argument("--out", help="also write raytrace.json and figures here")
     raytrace.set_defaults(handler=_command_raytrace)
+
+    sbc = scene_command("sbc", "simulation-based calibration: is the scene's posterior calibrated?")
+    sbc.add_argument("--replicates", type=int, default=200, help="simulated data sets")
+    sbc.add_argument("--draws", type=int, default=100, help="posterior draws per replicate")
+    sbc.add_argument("--thin", type=int, default=2, help="keep every THIN-th NUTS draw")
+    sbc.add_argument("--warmup", type=int, default=300, help="NUTS warmup per replicate")
+    sbc.add_argument("--seed", type=int, default=0)
+    sbc.add_argument(
+        "--sigma-scale",
+        type=float,
+        default=1.0,
+        help="planted fault: scale the likelihood sigma by this in the inference only",
+    )
+    sbc.add_argument("--target-accept", type=float, default=0.8, help="NUTS target acceptance")
+    sbc.add_argument("--out", help="output directory (default reports/<scene>/sbc)")
+    sbc.set_defaults(handler=_command_sbc)
 
     report = commands.add_parser("report", help="HTML diagnostic report of a posterior run")
     report.add_argument("run_dir", help="directory of a posterior run (posterior.nc, ...)")

@@ -1,11 +1,22 @@
 """Least-squares fit of Eq. (7) with optimistix: multi-start, batched, with covariance.
 
-The residuals are the standardised ln R residuals of :mod:`brdf_infer.observations` (the same
-error model the posterior uses). The solver works on the free parameters' internal
-coordinates (:mod:`brdf_infer.coordinates`), with α and θs0 mapped through a logistic transform
-onto their bounds. The covariance is the Gauss–Newton (JᵀJ)⁻¹ in the internal coordinates, not
-scaled by the reduced χ² unless asked (the error model's σ are absolute), carried to paper
-units by the delta method.
+The residuals are the ln R residuals of :mod:`brdf_infer.observations`, each divided by the
+row's σ under the scene's error model (:mod:`brdf_infer.error_model`) *without its random
+effects*: least squares treats the rows as independent, so
+
+    σ_i² = σ_value,i² + σ_rep² + (g_rot,i σ_rot)² + (g_cam,i σ_cam)²,
+
+the value's own noise, the per-row repeatability and the angle errors propagated through
+ln R at the current parameters. The sample and calibration effects, which correlate rows,
+are left out; where the repeatability is learned, σ_rep is instead set so that the reduced χ²
+is 1 (the Paule–Mandel condition), which folds every unmodelled scatter into it. The angle
+terms and σ_rep are updated after each solve until they settle (iteratively reweighted least
+squares). The ``spread`` error model keeps its fixed σ_i.
+
+The solver works on the free parameters' internal coordinates (:mod:`brdf_infer.coordinates`),
+with α and θs0 mapped through a logistic transform onto their bounds. The covariance is the
+Gauss–Newton (JᵀJ)⁻¹ in the internal coordinates, not scaled by the reduced χ² unless asked,
+carried to paper units by the delta method.
 """
 
 from __future__ import annotations
@@ -21,9 +32,15 @@ import numpy as np
 import optimistix as optx
 
 from brdf_infer.coordinates import ANGLE_SCALE_DEG, INTERNAL_NAMES, from_internal, to_internal
+from brdf_infer.error_model import angle_slopes
 from brdf_infer.errors import BadInputError
 from brdf_infer.measurements import Measurements
-from brdf_infer.observations import build_observation_model, standardized_residuals
+from brdf_infer.observations import (
+    build_observation_model,
+    log_reflectance_at,
+    predicted_log_reflectance,
+    standardized_residuals,
+)
 from brdf_infer.params import PARAM_NAMES, Params
 from brdf_infer.priors import DEFAULT_BOUNDS
 from brdf_infer.scene import Scene
@@ -34,8 +51,20 @@ SOLVERS = {
     "dogleg": optx.Dogleg,
 }
 CONVERGED_COST_TOLERANCE = 1e-6  # relative (χ² units, at least 1e-6 absolute)
+REWEIGHT_ITERATIONS = 12  # at most, of the σ update (angle terms, Paule–Mandel σ_rep)
+REWEIGHT_TOLERANCE = 1e-6  # relative change of every σ_i that ends the reweighting
 ILL_CONDITIONED = 1e8  # condition number of J in internal coordinates
-_STATUS_NAMES = {int(item._value): name for name, item in optx.RESULTS._name_to_item.items()}
+# optimistix outcomes reported per start (anything else is reported as "other")
+STATUS_NAMES: tuple[str, ...] = (
+    "successful",
+    "nonlinear_max_steps_reached",
+    "nonlinear_divergence",
+    "singular",
+    "breakdown",
+    "stagnation",
+    "max_steps_reached",
+    "nonfinite_input",
+)
 
 
 @dataclass(frozen=True)
@@ -63,6 +92,9 @@ class LsqResult:
         solver: solver name.
         seconds: run time of the batched solve (compilation excluded).
         compile_seconds: compilation time.
+        row_sigma: the σ_i that weighted each row at the end [ln R].
+        repeatability: σ_rep used (estimated by Paule–Mandel when learned) [ln R].
+        reweightings: solves of the reweighting loop.
         warnings: identifiability and convergence warnings, in words.
     """
 
@@ -84,6 +116,9 @@ class LsqResult:
     solver: str
     seconds: float
     compile_seconds: float
+    row_sigma: np.ndarray
+    repeatability: float
+    reweightings: int
     warnings: list[str] = field(default_factory=list)
 
 
@@ -158,7 +193,9 @@ def _batched_solver(solver: str, rtol: float, atol: float, max_steps: int, free_
 
         solution = optx.least_squares(residuals, method, u0, max_steps=max_steps, throw=False)
         cost = jnp.sum(residuals(solution.value, None) ** 2)
-        return transform.to_free(solution.value), cost, solution.result._value
+        matches = [solution.result == getattr(optx.RESULTS, name) for name in STATUS_NAMES]
+        status = jnp.where(jnp.any(jnp.stack(matches)), jnp.argmax(jnp.stack(matches)), -1)
+        return transform.to_free(solution.value), cost, status
 
     return jax.jit(jax.vmap(solve_one, in_axes=(0, None, None, None)))
 
@@ -229,15 +266,28 @@ def fit_lsq(
         )
     transform = _transform(scene)
     free_index = _free_index(scene)
-    arguments = (model.data, transform, model.constants)
     z0 = _start_points(scene, transform, starts, seed, init)
     u0 = jnp.asarray(np.stack([transform.from_free(z) for z in z0]))
     solve = _batched_solver(solver, rtol, atol, max_steps, free_index, model.fold)
+    reweight = _Reweighting(scene, model, len(free))
+    model = model.with_sigma(reweight.sigma)
+    arguments = (model.data, transform, model.constants)
     clock = time.perf_counter()
     compiled = solve.lower(u0, *arguments).compile()
     compile_seconds = time.perf_counter() - clock
     clock = time.perf_counter()
-    z_free, costs, status = jax.block_until_ready(compiled(u0, *arguments))
+    settled = False
+    while not settled:
+        z_free, costs, status = jax.block_until_ready(compiled(u0, *arguments))
+        best_index = int(np.argmin(np.where(np.isfinite(costs), costs, np.inf)))
+        best = transform.free_to_full(z_free[best_index], free_index)
+        settled = not reweight.update(from_internal(best))
+        if not settled and reweight.solves >= REWEIGHT_ITERATIONS:
+            break
+        if not settled:
+            model = model.with_sigma(reweight.sigma)
+            arguments = (model.data, transform, model.constants)
+            u0 = u0.at[0].set(jnp.asarray(transform.from_free(np.asarray(z_free[best_index]))))
     seconds = time.perf_counter() - clock
 
     costs = np.where(np.isfinite(costs), np.asarray(costs), np.inf)
@@ -271,6 +321,10 @@ def fit_lsq(
     warnings += _identifiability_warnings(
         scene, measurements, params, sigma, condition, transform, z_best
     )
+    if not settled:
+        warnings.append(
+            f"the row weights had not settled after {reweight.solves} reweighted solves"
+        )
     if converged < 0.8 * starts:
         warnings.append(
             f"only {converged} of {starts} starts reached the best cost {best_cost:.6g}"
@@ -290,12 +344,92 @@ def fit_lsq(
         starts=starts,
         starts_converged=converged,
         start_costs=costs,
-        start_status=[_STATUS_NAMES.get(int(s), str(int(s))) for s in np.asarray(status)],
+        start_status=[STATUS_NAMES[s] if s >= 0 else "other" for s in np.asarray(status)],
         solver=solver,
         seconds=seconds,
         compile_seconds=compile_seconds,
+        row_sigma=np.asarray(model.data.sigma),
+        repeatability=reweight.repeatability,
+        reweightings=reweight.solves,
         warnings=warnings,
     )
+
+
+class _Reweighting:
+    """The per-row σ of least squares, updated after each solve (module docstring)."""
+
+    def __init__(self, scene: Scene, model, n_free: int):
+        errors = scene.errors
+        self.model, self.errors = model, errors
+        self.value_variance = np.asarray(model.data.sigma) ** 2
+        self.generative = errors.model == "generative"
+        self.dof = model.n_points - n_free
+        self.learned = self.generative and errors.learns_repeatability and self.dof > 0
+        if not self.generative:
+            self.repeatability = 0.0
+        elif errors.learns_repeatability:
+            self.repeatability = errors.reflectance_rel  # starting value, then Paule–Mandel
+        else:
+            self.repeatability = float(errors.repeatability)
+        self.angle_variance = np.zeros_like(self.value_variance)
+        self.sigma = self._sigma()
+        self.solves = 0
+
+    def _sigma(self) -> np.ndarray:
+        return np.sqrt(self.value_variance + self.repeatability**2 + self.angle_variance)
+
+    def update(self, params: Params) -> bool:
+        """Recompute σ at ``params``; True when it changed enough to solve again."""
+        self.solves += 1
+        if not self.generative:
+            return False
+        data, errors = self.model.data, self.errors
+        if errors.angles_on:
+            g_rot, g_cam = angle_slopes(
+                lambda ti, ts: log_reflectance_at(
+                    ti, ts, params, self.model.fold, self.model.constants
+                ),
+                data.theta_i_deg,
+                data.theta_s_deg,
+            )
+            self.angle_variance = np.asarray(
+                (g_rot * errors.rotation_deg) ** 2 + (g_cam * errors.camera_deg) ** 2
+            )
+        if self.learned:
+            residuals = np.asarray(
+                predicted_log_reflectance(params, data, self.model.fold, self.model.constants)
+                - data.log_reflectance
+            )
+            self.repeatability = paule_mandel(
+                residuals, self.value_variance + self.angle_variance, self.dof
+            )
+        previous, self.sigma = self.sigma, self._sigma()
+        return bool(np.max(np.abs(self.sigma / previous - 1.0)) > REWEIGHT_TOLERANCE)
+
+
+def paule_mandel(residuals: np.ndarray, variances: np.ndarray, dof: int) -> float:
+    """The s ≥ 0 with Σ rᵢ²/(vᵢ + s²) = dof (Paule & Mandel 1982), by bisection.
+
+    0 when the rows already scatter no more than their variances say (χ²/dof ≤ 1).
+    """
+    residuals, variances = np.asarray(residuals, float), np.asarray(variances, float)
+
+    def excess(s: float) -> float:
+        total = variances + s * s
+        safe = np.where(total > 0, total, 1.0)
+        terms = np.where(total > 0, residuals**2 / safe, np.where(residuals == 0, 0.0, np.inf))
+        return float(np.sum(terms)) - dof
+
+    if excess(0.0) <= 0:
+        return 0.0
+    low, high = 0.0, float(np.sqrt(np.sum(residuals**2) / dof))
+    for _ in range(200):
+        middle = 0.5 * (low + high)
+        if excess(middle) > 0:
+            low = middle
+        else:
+            high = middle
+    return high
 
 
 def _internal_covariance(residuals_free, z_best, reduced_chi2):

@@ -1,7 +1,8 @@
-"""Measurement table: one validated row per raw-reflectance measurement (DESIGN.md CSV).
+"""Measurement table: one validated row per raw-reflectance measurement.
 
 Columns (header required, extra named columns ignored):
-``series,sample,theta_i_deg,theta_s_deg,reflectance,reflectance_err``.
+``series,sample,theta_i_deg,theta_s_deg,reflectance`` and, optionally, ``reflectance_err``
+(the 1σ of each value; without it the scene's ``errors.reflectance_rel`` stands in).
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ COLUMNS: tuple[str, ...] = (
     "reflectance",
     "reflectance_err",
 )
-_NUMERIC = COLUMNS[2:]
+REQUIRED_COLUMNS: tuple[str, ...] = COLUMNS[:5]
 
 
 @dataclass(frozen=True)
@@ -38,7 +39,7 @@ class Measurements:
         theta_i_deg: incidence angle θi [deg].
         theta_s_deg: in-plane scattering angle θs [deg] (> 0: forward side).
         reflectance: raw reflectance R of Eq. (2) [-].
-        reflectance_err: 1σ uncertainty of R [-].
+        reflectance_err: 1σ uncertainty of R [-], or None when the file has no such column.
     """
 
     path: Path
@@ -47,7 +48,7 @@ class Measurements:
     theta_i_deg: np.ndarray
     theta_s_deg: np.ndarray
     reflectance: np.ndarray
-    reflectance_err: np.ndarray
+    reflectance_err: np.ndarray | None
 
     def __len__(self) -> int:
         return len(self.series)
@@ -61,7 +62,7 @@ class Measurements:
             theta_i_deg=self.theta_i_deg[mask],
             theta_s_deg=self.theta_s_deg[mask],
             reflectance=self.reflectance[mask],
-            reflectance_err=self.reflectance_err[mask],
+            reflectance_err=None if self.reflectance_err is None else self.reflectance_err[mask],
         )
 
 
@@ -128,18 +129,20 @@ def load_measurements(path: str | Path, known_series: Iterable[str] | None = Non
             raise BadInputError(f"header column {position + 1} has no name", file=path, line=1)
         if header.count(name) > 1:
             raise BadInputError("column appears twice in the header", file=path, field=name)
-    for name in COLUMNS:
+    for name in REQUIRED_COLUMNS:
         if name not in header:
             raise BadInputError(
-                "missing header column (expected " + ",".join(COLUMNS) + ")",
+                "missing header column (expected " + ",".join(REQUIRED_COLUMNS) + " and "
+                "optionally reflectance_err)" + _delimiter_hint(header),
                 file=path,
                 field=name,
             )
     if not rows:
         raise BadInputError("no measurement rows after the header", file=path)
-    index = {name: header.index(name) for name in COLUMNS}
+    columns = [name for name in COLUMNS if name in header]
+    index = {name: header.index(name) for name in columns}
     known = None if known_series is None else set(known_series)
-    parsed: dict[str, list] = {name: [] for name in COLUMNS}
+    parsed: dict[str, list] = {name: [] for name in columns}
     seen: dict[tuple, int] = {}
     for row_number, (line, cells) in enumerate(rows, start=1):
         if len(cells) > len(header):
@@ -150,7 +153,7 @@ def load_measurements(path: str | Path, known_series: Iterable[str] | None = Non
                 line=line,
             )
         record = {}
-        for name in COLUMNS:
+        for name in columns:
             where = {"file": path, "row": row_number, "line": line, "field": name}
             position = index[name]
             text = cells[position].strip() if position < len(cells) else ""
@@ -177,11 +180,27 @@ def load_measurements(path: str | Path, known_series: Iterable[str] | None = Non
                 line=line,
             )
         seen[key] = row_number
-        for name in COLUMNS:
+        for name in columns:
             parsed[name].append(record[name])
     return Measurements(
         path=path,
         series=np.asarray(parsed["series"], dtype=str),
         sample=np.asarray(parsed["sample"], dtype=str),
-        **{name: np.asarray(parsed[name], dtype=float) for name in _NUMERIC},
+        theta_i_deg=np.asarray(parsed["theta_i_deg"], dtype=float),
+        theta_s_deg=np.asarray(parsed["theta_s_deg"], dtype=float),
+        reflectance=np.asarray(parsed["reflectance"], dtype=float),
+        reflectance_err=(
+            np.asarray(parsed["reflectance_err"], dtype=float)
+            if "reflectance_err" in parsed
+            else None
+        ),
     )
+
+
+def _delimiter_hint(header: list[str]) -> str:
+    """A hint when the header looks like another delimiter than the comma was used."""
+    joined = ",".join(header)
+    for delimiter, name in ((";", "semicolons"), ("\t", "tabs")):
+        if delimiter in joined:
+            return f"; the header seems to use {name}: separate the columns with commas"
+    return ""

@@ -118,7 +118,9 @@ def _average_samples(rows: Measurements) -> Measurements:
         theta_i_deg=np.array([u[1] for u in unique]),
         theta_s_deg=np.array([u[2] for u in unique]),
         reflectance=np.array([rows.reflectance[g].mean() for g in groups]),
-        reflectance_err=np.array([np.sqrt(np.mean(rows.reflectance_err[g] ** 2)) for g in groups]),
+        reflectance_err=None
+        if rows.reflectance_err is None
+        else np.array([np.sqrt(np.mean(rows.reflectance_err[g] ** 2)) for g in groups]),
     )
 
 

@@ -10,11 +10,22 @@ Schema (keys other than these are errors; defaults in brackets)::
     [series.NAME]                            # one table per series named in the CSV
     aperture_diameter_mm = 7.2               # required, > 0
     aperture_distance_mm = 103.8             # required, > 0
-    [errors]
-    reflectance_rel = 0.065                  # [0.065] relative 1σ of the raw reflectance
-    angle_deg = 1.0                          # [1.0] 1σ of θi and θs [deg]
-    propagate_angles = false                 # [false] add angle_deg to the likelihood (jax.grad)
-    hierarchical = false                     # [false] per-sample offsets replace the spread
+    [errors]                                 # brdf_infer.error_model explains the model
+    model = "generative"                     # ["generative"] or "spread" (the earlier model)
+    reflectance_rel = 0.065                  # [0.065] relative 1σ of the measured value
+    reflectance_rel_kind = "per_row"         # ["per_row"]: σ of rows without reflectance_err;
+                                             #   "calibration": one factor per series
+    images_per_row = 12                      # [1] images averaged into each row's value
+    angle_deg = 1.0                          # [1.0] 1σ of the angles [deg]
+    rotation_deg = 1.0                       # [angle_deg] sample rotation per (series,
+                                             #   sample, θi) setting [deg]
+    camera_deg = 1.0                         # [angle_deg] camera position per row [deg]
+    propagate_angles = true                  # [true] angle errors through ln R
+    angle_method = "linearised"              # ["linearised"] or "latent" (errors in variables)
+    hierarchical = true                      # [true] per-sample random effect, learned scale
+    sample_sd_prior = 0.2                    # [0.2] half-normal scale of its prior [ln R]
+    repeatability = "learned"                # ["learned"] or a fixed per-row 1σ [ln R]
+    repeatability_sd_prior = 0.1             # [0.1] half-normal scale of its prior [ln R]
     [model]
     fold = false                             # [false] Eq. (10) in in-plane predictions
     out_of_plane = true                      # [true] Eq. (8): hemisphere products (TIS, maps)
@@ -62,6 +73,13 @@ from typing import Any
 import numpy as np
 
 from brdf_infer._resources import data_path
+from brdf_infer.error_model import (
+    ANGLE_METHODS,
+    ERROR_MODELS,
+    LEARNED,
+    REFLECTANCE_REL_KINDS,
+    ErrorSettings,
+)
 from brdf_infer.errors import BadInputError
 from brdf_infer.measurements import Measurements, load_measurements
 from brdf_infer.params import PAPER_CONSTANTS, PARAM_NAMES, PARAMETER_SETS, HemisphereConstants
@@ -83,25 +101,6 @@ class SeriesGeometry:
 
     aperture_diameter_mm: float
     aperture_distance_mm: float
-
-
-@dataclass(frozen=True)
-class ErrorModel:
-    """Measurement uncertainties (Sec. 3, 5.3).
-
-    Attributes:
-        reflectance_rel: relative 1σ of the raw reflectance [-].
-        angle_deg: 1σ of the angles θi, θs [deg].
-        propagate_angles: the posterior adds the angle uncertainty to σ by first-order
-            propagation.
-        hierarchical: the posterior uses per-sample offsets with a learned scale instead of
-            the inter-sample spread.
-    """
-
-    reflectance_rel: float = 0.065
-    angle_deg: float = 1.0
-    propagate_angles: bool = False
-    hierarchical: bool = False
 
 
 @dataclass(frozen=True)
@@ -196,7 +195,7 @@ class Scene:
     series: dict[str, SeriesGeometry]
     description: str = ""
     wavelength_nm: float | None = None
-    errors: ErrorModel = field(default_factory=ErrorModel)
+    errors: ErrorSettings = field(default_factory=ErrorSettings)
     model: ModelSettings = field(default_factory=ModelSettings)
     paper_fit: PaperFitSettings = field(default_factory=PaperFitSettings)
     outputs: OutputSettings = field(default_factory=OutputSettings)
@@ -226,15 +225,47 @@ class Scene:
             return []
         path = self.outputs.tis_reference
         try:
-            with path.open() as handle:
+            with path.open(encoding="utf-8-sig") as handle:
                 rows = list(csv.DictReader(handle))
-            return [(float(r["theta_i_deg"]), float(r["tis"]), r["label"]) for r in rows]
-        except (OSError, KeyError, ValueError, TypeError) as error:
-            raise BadInputError(f"cannot read theta_i_deg,tis,label: {error}", file=path) from None
+            points = [(float(r["theta_i_deg"]), float(r["tis"]), r["label"]) for r in rows]
+        except (OSError, KeyError, ValueError, TypeError, UnicodeDecodeError) as error:
+            raise BadInputError(
+                f"cannot read theta_i_deg,tis,label: {error}",
+                file=path,
+                field="outputs.tis_reference",
+            ) from None
+        if not points:
+            raise BadInputError(
+                "no rows after the header theta_i_deg,tis,label",
+                file=path,
+                field="outputs.tis_reference",
+            )
+        return points
 
     def load_measurements(self) -> Measurements:
         """The scene's measurement table, validated against its series."""
         return load_measurements(self.measurements_path, known_series=self.series)
+
+    def check_files(self) -> None:
+        """Resolve and read every file the scene names, before any work.
+
+        Raises:
+            BadInputError: a file is missing or malformed; the message names the scene, the
+                key and the resolved path.
+        """
+        for key, path in (
+            ("measurements", self.measurements_path),
+            ("outputs.tis_reference", self.outputs.tis_reference),
+        ):
+            if path is not None and not path.is_file():
+                what = "is not a file" if path.exists() else "no such file"
+                raise BadInputError(
+                    f"{what}: {path.resolve()} (named by scene '{self.name}')",
+                    file=self.path,
+                    field=key,
+                )
+        self.load_measurements()
+        self.load_tis_reference()
 
     def apertures(self, measurements: Measurements) -> tuple[np.ndarray, np.ndarray]:
         """Aperture diameter d and distance r [mm] of each measurement row's series."""
@@ -376,11 +407,76 @@ def _parse_raytrace(document: dict, path: Path, series: dict) -> RaytraceSetting
     return settings
 
 
-def _prefixed_number(table: dict, key: str, path: Path, default: float, prefix: str) -> float:
+def _prefixed_number(
+    table: dict, key: str, path: Path, default: float, prefix: str, *, positive: bool = True
+) -> float:
     try:
-        return _number(table, key, path, default=default, positive=key != "image_theta_i_deg")
+        return _number(
+            table, key, path, default=default, positive=positive and key != "image_theta_i_deg"
+        )
     except BadInputError as error:
         raise BadInputError(error.problem, file=path, field=prefix + key) from None
+
+
+def _choice(table: dict, key: str, path: Path, choices: tuple[str, ...], default: str) -> str:
+    value = table.get(key, default)
+    if value not in choices:
+        raise BadInputError(
+            f"expected one of {', '.join(choices)}, got {value!r}", file=path, field="errors." + key
+        )
+    return value
+
+
+def _parse_errors(document: dict, path: Path) -> ErrorSettings:
+    """The ``[errors]`` table (schema: :class:`brdf_infer.error_model.ErrorSettings`)."""
+    defaults = ErrorSettings()
+    table = _table(document, "errors", path, set(ErrorSettings.__dataclass_fields__))
+
+    def number(key: str, default: float, *, positive: bool = False) -> float:
+        value = _prefixed_number(table, key, path, default, "errors.", positive=False)
+        if value < 0 or (positive and value == 0):
+            bound = "> 0" if positive else ">= 0"
+            raise BadInputError(f"must be {bound}, got {value:g}", file=path, field="errors." + key)
+        return value
+
+    images = table.get("images_per_row", defaults.images_per_row)
+    if isinstance(images, bool) or not isinstance(images, int) or images < 1:
+        raise BadInputError(
+            f"expected a positive integer, got {images!r}", file=path, field="errors.images_per_row"
+        )
+    repeatability = table.get("repeatability", defaults.repeatability)
+    if isinstance(repeatability, str) and repeatability != LEARNED:
+        raise BadInputError(
+            f'expected "{LEARNED}" or a number >= 0, got {repeatability!r}',
+            file=path,
+            field="errors.repeatability",
+        )
+    if repeatability != LEARNED:
+        repeatability = number("repeatability", 0.0)
+    angle = number("angle_deg", defaults.angle_deg)
+    return ErrorSettings(
+        model=_choice(table, "model", path, ERROR_MODELS, defaults.model),
+        reflectance_rel=number("reflectance_rel", defaults.reflectance_rel),
+        reflectance_rel_kind=_choice(
+            table,
+            "reflectance_rel_kind",
+            path,
+            REFLECTANCE_REL_KINDS,
+            defaults.reflectance_rel_kind,
+        ),
+        images_per_row=images,
+        angle_deg=angle,
+        rotation_deg=number("rotation_deg", angle),
+        camera_deg=number("camera_deg", angle),
+        propagate_angles=_boolean(table, "propagate_angles", path, "errors.", True),
+        angle_method=_choice(table, "angle_method", path, ANGLE_METHODS, defaults.angle_method),
+        hierarchical=_boolean(table, "hierarchical", path, "errors.", True),
+        sample_sd_prior=number("sample_sd_prior", defaults.sample_sd_prior, positive=True),
+        repeatability=repeatability,
+        repeatability_sd_prior=number(
+            "repeatability_sd_prior", defaults.repeatability_sd_prior, positive=True
+        ),
+    )
 
 
 def parse_scene(document: dict, path: Path) -> Scene:
@@ -408,12 +504,7 @@ def parse_scene(document: dict, path: Path) -> Scene:
             )
         except BadInputError as error:
             raise BadInputError(error.problem, file=path, field=prefix + str(error.field)) from None
-    errors = _table(
-        document,
-        "errors",
-        path,
-        {"reflectance_rel", "angle_deg", "propagate_angles", "hierarchical"},
-    )
+    errors = _parse_errors(document, path)
     model = _table(document, "model", path, {"fold", "out_of_plane", *HemisphereConstants._fields})
     paper = _table(document, "paper_fit", path, {"alpha", "theta_s0_deg", "selection"})
     outputs = _table(
@@ -456,12 +547,7 @@ def parse_scene(document: dict, path: Path) -> Scene:
         wavelength_nm=None if wavelength is None else _number(document, "wavelength_nm", path),
         measurements_path=(path.parent / measurements),
         series=series,
-        errors=ErrorModel(
-            reflectance_rel=_number(errors, "reflectance_rel", path, default=0.065),
-            angle_deg=_number(errors, "angle_deg", path, default=1.0),
-            propagate_angles=_boolean(errors, "propagate_angles", path, "errors.", False),
-            hierarchical=_boolean(errors, "hierarchical", path, "errors.", False),
-        ),
+        errors=errors,
         model=ModelSettings(fold=fold, out_of_plane=out_of_plane, constants=constants),
         paper_fit=PaperFitSettings(
             alpha=_number(paper, "alpha", path, default=4.5, positive=True),
@@ -500,11 +586,15 @@ def scene_file(name_or_path: str | Path) -> Path:
     )
 
 
-def load_scene(name_or_path: str | Path = DEFAULT_SCENE) -> Scene:
+def load_scene(name_or_path: str | Path = DEFAULT_SCENE, *, check_files: bool = True) -> Scene:
     """Load and validate a scene by built-in name (``lya``) or TOML path.
 
+    Every key is checked, and (``check_files``) every file the scene names is resolved and
+    read, so that a bad scene fails before any work.
+
     Raises:
-        BadInputError: unreadable file, TOML syntax error, unknown key, wrong type.
+        BadInputError: unreadable file, TOML syntax error, unknown key, wrong type, a missing
+            or malformed measurement or reference file.
     """
     path = scene_file(name_or_path)
     try:
@@ -514,4 +604,7 @@ def load_scene(name_or_path: str | Path = DEFAULT_SCENE) -> Scene:
         raise BadInputError(f"invalid TOML: {error}", file=path) from None
     except (OSError, UnicodeDecodeError) as error:
         raise BadInputError(f"cannot read: {error}", file=path) from None
-    return parse_scene(document, path)
+    scene = parse_scene(document, path)
+    if check_files:
+        scene.check_files()
+    return scene

@@ -54,8 +54,12 @@ def with_row(row: str, position: int = 2) -> str:
 
 CSV_CASES = {
     "missing column": (
-        HEADER.replace(",reflectance_err", "") + "\nI,1,18,18,5e-5\n",
-        "field 'reflectance_err'",
+        HEADER.replace(",reflectance,", ",") + "\nI,1,18,18,3e-6\n",
+        "field 'reflectance'",
+    ),
+    "semicolons": (
+        HEADER.replace(",", ";") + "\nI;1;18;18;5e-5;3e-6\n",
+        "separate the columns with commas",
     ),
     "duplicated column": (
         HEADER + ",sample\n" + GOOD_ROWS[0] + ",x\n",
@@ -148,6 +152,30 @@ SCENE_CASES = {
     ),
     "no series": (SCENE.split("[series.I]")[0], "field 'series'"),
     "toml syntax": (SCENE + "[errors\n", "invalid TOML"),
+    "unknown error model": (
+        SCENE.replace("[errors]", '[errors]\nmodel = "gaussian"'),
+        "field 'errors.model': expected one of generative, spread",
+    ),
+    "unknown kind of the relative error": (
+        SCENE.replace("[errors]", '[errors]\nreflectance_rel_kind = "shared"'),
+        "field 'errors.reflectance_rel_kind': expected one of per_row, calibration",
+    ),
+    "images per row not a positive integer": (
+        SCENE.replace("[errors]", "[errors]\nimages_per_row = 0"),
+        "field 'errors.images_per_row': expected a positive integer",
+    ),
+    "negative repeatability": (
+        SCENE.replace("[errors]", "[errors]\nrepeatability = -0.1"),
+        "field 'errors.repeatability': must be >= 0",
+    ),
+    "repeatability neither learned nor a number": (
+        SCENE.replace("[errors]", '[errors]\nrepeatability = "auto"'),
+        "field 'errors.repeatability'",
+    ),
+    "unknown angle method": (
+        SCENE.replace("[errors]", '[errors]\nangle_method = "exact"'),
+        "field 'errors.angle_method'",
+    ),
 }
 
 

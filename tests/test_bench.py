@@ -1,8 +1,11 @@
 """``brdf-infer bench --quick`` writes a report with error next to time for every method."""
 
+import pytest
+
 from tests.helpers import run_cli
 
 
+@pytest.mark.slow  # ≈ 80 s; the benchmark itself (brdf-infer bench) runs every section
 def test_quick_benchmark_report(tmp_path, capsys):
     out = tmp_path / "benchmarks.md"
     code, _, err = run_cli("bench", "--quick", "--out", str(out), capsys=capsys)

@@ -21,11 +21,12 @@ from brdf_infer.posterior import (
     run_posterior,
 )
 from brdf_infer.posterior._results import write_inference_data
+from brdf_infer.posterior._run import run_fingerprint
 from brdf_infer.scene import load_scene
-from brdf_infer.synthetic import synthetic_measurements
+from brdf_infer.synthetic import simulate_measurements
 from tests.helpers import REPO, run_cli
 
-REDUCED_EMCEE = {"walkers": 24, "steps": 12000, "warmup": 2000}
+REDUCED_EMCEE = {"walkers": 24, "steps": 16000, "warmup": 3000}
 
 
 @pytest.fixture(scope="module")
@@ -81,9 +82,9 @@ def test_posterior_file_holds_every_group_and_the_paper_unit_parameters(nuts_run
     ):
         assert group in idata.groups(), group
     for name in PARAM_NAMES:
-        assert idata.posterior[name].shape == (4, 300)
+        assert idata.posterior[name].shape == (4, 500)
         assert np.all(np.isfinite(idata.posterior[name]))
-    assert idata.log_likelihood["obs"].shape == (4, 300, 42)
+    assert idata.log_likelihood["obs"].shape == (4, 500, 42)
     attrs = idata.posterior.attrs
     assert attrs["scene"] == "lya" and attrs["sampler"] == "nuts"
     assert "jax" in json.loads(attrs["versions"]) and "[series.I]" in attrs["scene_toml"]
@@ -129,16 +130,15 @@ def test_tis_from_run_json_contract(nuts_run, capsys):
     assert payload["lo95"][3] <= payload["median"][3] <= payload["hi95"][3]
 
 
-@pytest.mark.parametrize("seed", [0, 1, 2, 3])
-def test_credible_intervals_cover_the_truth_on_synthetic_data(lya, seed):
+def test_posterior_recovers_parameters_simulated_from_the_generative_model(lya):
+    """One data set drawn from the scene's own error model at uv-paper: every parameter's
+    truth inside its central 99 % interval (calibration as such is SBC's job,
+    tests/test_sbc.py; this catches a gross bias). a2 and a3 are compared through b2, b3, the
+    coordinates the sampler moves (a2 = b2·90^−(1+α) inherits α's whole uncertainty)."""
     scene, measurements = lya
-    data = synthetic_measurements(scene, measurements, UV_PAPER, noise_rel=0.065, seed=seed)
-    run = run_posterior(
-        scene, data, sampler="nuts", chains=2, warmup=300, draws=300, seed=seed, progress=False
-    )
+    data = simulate_measurements(scene, measurements, UV_PAPER, seed=3)
+    run = run_posterior(scene, data, chains=2, warmup=500, draws=500, seed=3, progress=False)
     params = draws_params(run.idata.posterior)
-    # the paper-unit a2, a3 scale as 90^-alpha: compare alpha, theta_s0, brdf0, a1 directly
-    # and a2, a3 through b2 = a2 90^(1+alpha), b3 = a3 90^(2+alpha), their sampled coordinates
     truth = {
         "brdf0": UV_PAPER.brdf0,
         "a1": UV_PAPER.a1,
@@ -156,7 +156,7 @@ def test_credible_intervals_cover_the_truth_on_synthetic_data(lya, seed):
         "b3": np.asarray(run.idata.posterior["b3"]).ravel(),
     }
     for name, value in truth.items():
-        low, high = np.quantile(values[name], [0.025, 0.975])
+        low, high = np.quantile(values[name], [0.005, 0.995])
         assert low <= value <= high, (name, low, value, high)
 
 
@@ -180,7 +180,7 @@ def emcee_command(steps: int, *extra: str) -> list[str]:
 
 
 def test_emcee_resume_after_kill_reproduces_the_uninterrupted_run(tmp_path):
-    command = emcee_command(3000, "--json")
+    command = emcee_command(1500, "--json")
     reference = subprocess.run(
         [*command, "--out", str(tmp_path / "whole")],
         capture_output=True,
@@ -199,7 +199,7 @@ def test_emcee_resume_after_kill_reproduces_the_uninterrupted_run(tmp_path):
     checkpoint = interrupted / CHECKPOINT_FILE
     deadline = time.time() + 240
     while time.time() < deadline and process.poll() is None:
-        if checkpoint.exists() and int(np.load(checkpoint)["done"]) >= 1000:
+        if checkpoint.exists() and int(np.load(checkpoint)["done"]) >= 500:
             break
         time.sleep(0.05)
     assert process.poll() is None, "the run finished before it could be interrupted"
@@ -207,7 +207,7 @@ def test_emcee_resume_after_kill_reproduces_the_uninterrupted_run(tmp_path):
     process.wait()
     assert not (interrupted / "posterior.nc").exists()
     done = int(np.load(checkpoint)["done"])
-    assert 0 < done < 3000
+    assert 0 < done < 1500
     resumed = subprocess.run(
         [*command, "--out", str(interrupted), "--resume"],
         capture_output=True,
@@ -254,20 +254,67 @@ def test_interrupted_netcdf_write_keeps_the_previous_file(nuts_run, tmp_path, mo
     assert [p.name for p in tmp_path.iterdir()] == ["posterior.nc"]
 
 
-def test_angle_error_and_hierarchical_options(lya):
-    scene, measurements = lya
-    plain = build_posterior_model(scene, measurements)
-    with_angles = build_posterior_model(scene, measurements, angle_error=True)
-    _, sigma_plain = plain.mean_and_sigma(UV_PAPER)
-    _, sigma_angles = with_angles.mean_and_sigma(UV_PAPER)
-    assert np.all(np.asarray(sigma_angles) >= np.asarray(sigma_plain))
-    assert np.max(np.asarray(sigma_angles) - np.asarray(sigma_plain)) > 0.01
-    for options in ({"angle_error": True}, {"hierarchical": True}):
-        run = run_posterior(
-            scene, measurements, chains=1, warmup=150, draws=150, progress=False, **options
-        )
-        assert all(np.all(np.isfinite(run.idata.posterior[name])) for name in PARAM_NAMES)
-    assert "sample_offset" in run.idata.posterior
+def test_the_earlier_spread_error_model_stays_reachable(lya, capsys, tmp_path):
+    code, out, err = run_cli(
+        "posterior",
+        "--error-model",
+        "spread",
+        "--chains",
+        "1",
+        "--warmup",
+        "150",
+        "--draws",
+        "150",
+        "--out",
+        str(tmp_path),
+        "--json",
+        capsys=capsys,
+    )
+    assert code == 0, err
+    summary = json.loads(out)
+    assert summary["error_model"]["model"] == "spread" and summary["noise"] == {}
+    idata = az.from_netcdf(tmp_path / "posterior.nc")
+    assert "sample_sd" not in idata.posterior and "repeatability" not in idata.posterior
+    assert json.loads(idata.posterior.attrs["error_model"])["model"] == "spread"
+
+
+def test_resume_refuses_a_checkpoint_another_run_wrote(lya, tmp_path, capsys):
+    """A checkpoint of lya-fixed (other scene text, priors and dimension) is not resumed as
+    lya: exit 2, one line naming what differs, nothing written."""
+    fixed = load_scene("lya-fixed")
+    model = build_posterior_model(fixed, lya[1])
+    run_emcee(
+        model,
+        walkers=16,
+        steps=100,
+        burn=10,
+        checkpoint=tmp_path / CHECKPOINT_FILE,
+        checkpoint_every=50,
+        fingerprint=run_fingerprint(model, lya[1]),
+        progress=False,
+    )
+    before = sorted(p.name for p in tmp_path.iterdir())
+    arguments = ["--walkers", "16", "--steps", "100", "--warmup", "10", "--resume"]
+    code, out, err = run_cli(
+        "posterior", "--sampler", "emcee", *arguments, "--out", str(tmp_path), capsys=capsys
+    )
+    assert code == 2 and out == "" and err.count("\n") == 1 and "Traceback" not in err
+    assert "differs in: scene, model options, dimension" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
+    code, _, err = run_cli(
+        "posterior",
+        "lya-fixed",
+        "--sampler",
+        "emcee",
+        *arguments[:4],
+        "--warmup",
+        "20",
+        "--resume",
+        "--out",
+        str(tmp_path),
+        capsys=capsys,
+    )
+    assert code == 2 and "differs in: burn (10 there, 20 now)" in err
 
 
 def test_fixed_scene_keeps_alpha_and_theta_s0(lya):
@@ -281,7 +328,7 @@ def test_fixed_scene_keeps_alpha_and_theta_s0(lya):
 def test_bad_sampler_settings_are_clear_errors(lya, capsys):
     with pytest.raises(BadInputError, match="NUTS runs are not checkpointed"):
         run_posterior(*lya, sampler="nuts", resume=True)
-    with pytest.raises(BadInputError, match="at least 12 walkers"):
+    with pytest.raises(BadInputError, match="at least 16 walkers"):
         run_emcee(build_posterior_model(*lya), walkers=4, steps=10, burn=1)
     code, out, err = run_cli(
         "posterior", "--sampler", "emcee", "--resume", "--out", "/tmp/none-here", capsys=capsys

@@ -111,7 +111,7 @@ def test_report_opens_with_the_verdict_then_the_sections(good_report):
 
 
 def test_deliberately_bad_run_lists_its_failures(lya, tmp_path, capsys):
-    run_posterior(*lya, chains=1, warmup=20, draws=20, out=tmp_path, progress=False)
+    run_posterior(*lya, chains=1, warmup=150, draws=20, out=tmp_path, progress=False)
     code, out, err = run_cli("report", str(tmp_path), "--json", capsys=capsys)
     assert code == 0, err
     verdict = json.loads(out)["verdict"]

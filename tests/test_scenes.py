@@ -161,21 +161,21 @@ def test_unphysical_tis_is_reported(tmp_path, capsys):
     assert json.loads(out)["tis"][0] > 1 and "not physical" in err
 
 
-def test_scene_switches_on_angle_error_and_hierarchical(lya, tmp_path):
+def test_scene_switches_off_angle_errors_and_the_sample_effect(lya, tmp_path):
     scene, measurements = lya
     text = scene.path.read_text().replace(
         'measurements = "lya_measurements.csv"', f'measurements = "{scene.measurements_path}"'
     )
     text = text.replace(
-        "angle_deg = 1.0", "angle_deg = 1.0\npropagate_angles = true\nhierarchical = true"
+        "angle_deg = 1.0", "angle_deg = 1.0\npropagate_angles = false\nhierarchical = false"
     )
     text = text.replace('tis_reference = "lya_tis_reference.csv"', "")
     path = tmp_path / "options.toml"
     path.write_text(text)
     options = load_scene(path)
-    assert options.errors.propagate_angles and options.errors.hierarchical
+    assert not options.errors.propagate_angles and not options.errors.hierarchical
     run = run_posterior(
         options, measurements, sampler="emcee", steps=300, warmup=100, progress=False
     )
-    assert run.summary["options"]["angle_error"] and run.summary["options"]["hierarchical"]
-    assert "sample_offset" in run.idata.posterior
+    assert run.summary["error_model"]["hierarchical"] is False
+    assert "sample_sd" not in run.idata.posterior and "repeatability" in run.idata.posterior

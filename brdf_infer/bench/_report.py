@@ -9,10 +9,13 @@ from brdf_infer._atomic import atomic_write_bytes
 from brdf_infer.bench._fits import fit_rows
 from brdf_infer.bench._raytrace import raytrace_rows
 from brdf_infer.bench._samplers import sampler_rows
+from brdf_infer.bench._sbc import HEADERS as SBC_HEADERS
+from brdf_infer.bench._sbc import sbc_rows
 from brdf_infer.bench._timing import machine_description
 from brdf_infer.bench._tis import batched_throughput, tis_rows
 from brdf_infer.raytrace._series import CHUNK_RAYS
 from brdf_infer.report._raytrace import figure_png
+from brdf_infer.report._sbc import ecdf_differences, png
 from brdf_infer.scene import load_scene
 
 
@@ -76,16 +79,23 @@ def _raytrace_plot(rows, path: Path) -> None:
 def write_report(out: Path, quick: bool, progress=print) -> Path:
     """Run the benchmarks and write ``out`` (Markdown) plus PNG plots beside it."""
     started = time.perf_counter()
-    progress("benchmark 1/4: TIS quadratures ...")
+    progress("benchmark 1/5: TIS quadratures ...")
     tis_table = tis_rows(quick)
     count, batch_seconds, batch_compile = batched_throughput(quick)
-    progress("benchmark 2/4: fits ...")
+    progress("benchmark 2/5: fits ...")
     scene = load_scene("lya")
     fits = fit_rows(scene, scene.load_measurements(), quick)
-    progress("benchmark 3/4: samplers ...")
+    progress("benchmark 3/5: samplers ...")
     samplers, reference = sampler_rows(scene, quick, progress)
-    progress("benchmark 4/4: ray tracer ...")
+    progress("benchmark 4/5: ray tracer ...")
     traces, reference_rays = raytrace_rows(scene, quick)
+    progress("benchmark 5/5: simulation-based calibration ...")
+    calibrations = sbc_rows(scene, quick, progress)
+    sbc_plots = []
+    for row, suffix in zip(calibrations, ("sbc", "sbc_planted"), strict=True):
+        path = out.with_name(f"{out.stem}_{suffix}.png")
+        atomic_write_bytes(path, png(ecdf_differences(row.result)))
+        sbc_plots.append(path)
     plot = out.with_name(out.stem + "_tis.png")
     _tis_plot(tis_table, plot)
     trace_plot = out.with_name(out.stem + "_raytrace.png")
@@ -137,8 +147,11 @@ def write_report(out: Path, quick: bool, progress=print) -> Path:
         "",
         "## Fits",
         "",
-        "Final cost χ² = Σ((ln R_pred − ln R_obs)/σ)² under the lsq error model (σ² = 6.5 %² + "
-        "inter-sample spread²) over every measurement row, against run time. The paper's "
+        "Final cost χ² = Σ((ln R_pred − ln R_obs)/σ)² over every measurement row, σ the row "
+        "weights of least squares (the value's own noise, the angle errors through ln R and "
+        "the Paule–Mandel repeatability at the Levenberg–Marquardt optimum; brdf_infer.lsq), "
+        "against run time. The optimistix rows reweight as they go and report their own final "
+        "χ²; the paper's "
         "regression minimises a different objective (unweighted, fixed α and θs0, its own "
         "selection of rows), so its χ² is what its coefficients score here. Multi-start "
         "methods run the same starts; optimistix solves them in one vmapped call, SciPy one "
@@ -234,6 +247,25 @@ def write_report(out: Path, quick: bool, progress=print) -> Path:
         ),
         "",
         f"![ray tracer error against time]({trace_plot.name})",
+        "",
+        "## Simulation-based calibration",
+        "",
+        "`brdf-infer sbc lya`: each replicate draws every parameter and latent from the "
+        "prior, simulates a data set at the bundled geometry through the scene's generative "
+        "error model, samples it with NUTS (300 warmup, 200 draws thinned to 100) and ranks the "
+        "truth. Quantities: the six parameters, TIS(70°) and the two learned noise scales. "
+        "Verdict at a family-wise 1 % (Bonferroni over the quantities). The planted fault "
+        "runs the inference with the likelihood σ 35 % too wide: the learned repeatability "
+        "and sample scales absorb most of it (the six parameters stay near calibrated), and "
+        "the check flags it through those scales. Wall time includes simulating and "
+        "compiling; per replicate excludes compiling (replicates run one per core).",
+        "",
+        _markdown_table(SBC_HEADERS, [row.cells for row in calibrations]),
+        "",
+        *(
+            f"![SBC ECDF differences, {row.case}]({path.name})"
+            for row, path in zip(calibrations, sbc_plots, strict=True)
+        ),
         "",
     ]
     atomic_write_bytes(out, "\n".join(sections).encode())

@@ -55,10 +55,10 @@ def sampler_rows(scene: Scene, quick: bool, progress=print) -> tuple[list[Sample
     """Rows for NUTS and emcee at growing lengths, and a description of the reference run."""
     model = build_posterior_model(scene, scene.load_measurements())
     if quick:  # a long emcee run compiles in seconds; NUTS would take two compilations
-        description = "emcee, 24 walkers x 10000 steps (2000 burn-in), seed 99"
+        description = "emcee, 24 walkers x 6000 steps (1000 burn-in), seed 99"
         progress(f"  reference: {description}")
         reference = _flat(
-            run_emcee(model, walkers=24, steps=10000, burn=2000, seed=99, progress=False)
+            run_emcee(model, walkers=24, steps=6000, burn=1000, seed=99, progress=False)
         )
     else:
         description = "NUTS, 4 chains x 5000 draws after 1000 warmup, seed 99"
@@ -67,13 +67,13 @@ def sampler_rows(scene: Scene, quick: bool, progress=print) -> tuple[list[Sample
             run_nuts(model, chains=4, warmup=1000, draws=5000, seed=99, progress=False)
         )
     rows = []
-    chains, warmup = (2, 300) if quick else (4, 1000)
+    chains, warmup = (2, 500) if quick else (4, 1000)
     for draws in (250,) if quick else (250, 500, 1000):
         label = f"{chains} chains x ({warmup} warmup + {draws} draws)"
         progress(f"  NUTS {label}")
         result = run_nuts(model, chains=chains, warmup=warmup, draws=draws, progress=False)
         rows.append(_row("NUTS (dense mass)", label, result, reference))
-    for steps in (3000,) if quick else (6000, 12000, 20000):
+    for steps in (2000,) if quick else (6000, 12000, 20000):
         progress(f"  emcee 24 walkers x {steps} steps")
         result = run_emcee(model, walkers=24, steps=steps, burn=steps // 5, progress=False)
         rows.append(_row("emcee", f"24 walkers x {steps} steps", result, reference))

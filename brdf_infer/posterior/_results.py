@@ -10,15 +10,17 @@ from pathlib import Path
 from typing import Any
 
 import jax
+import jax.numpy as jnp
 import numpy as np
-from numpyro.infer import Predictive, log_likelihood
+from numpyro.infer import Predictive
 
 import brdf_infer
 from brdf_infer._arviz import az
 from brdf_infer._atomic import atomic_write_json, publish
 from brdf_infer.errors import BadInputError
 from brdf_infer.params import PARAM_NAMES
-from brdf_infer.posterior._model import PosteriorModel
+from brdf_infer.posterior._loo import pointwise_loo_terms
+from brdf_infer.posterior._model import NOISE_SITES, PosteriorModel
 from brdf_infer.posterior._samplers import Draws
 
 POSTERIOR_FILE, SUMMARY_FILE, BANDS_FILE = "posterior.nc", "summary.json", "bands.json"
@@ -40,38 +42,76 @@ def _versions() -> dict[str, str]:
     }
 
 
+def flatten_draws(sites: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Sites of shape (chain, draw, ...) as (chain × draw, ...)."""
+    return {k: v.reshape(v.shape[0] * v.shape[1], *v.shape[2:]) for k, v in sites.items()}
+
+
+def loo_terms(model: PosteriorModel, sites: dict[str, np.ndarray]):
+    """(log p(yᵢ | y₋ᵢ, θ), P(ỹᵢ ≤ yᵢ | y₋ᵢ, θ)) of every draw and row, each (chain, draw, row).
+
+    The leave-one-out conditionals of the model's (possibly correlated) normal likelihood
+    (:mod:`brdf_infer.posterior._loo`); for independent rows the ordinary pointwise terms.
+    """
+    chains, n_draws = next(iter(sites.values())).shape[:2]
+    parts = model.draw_parts(flatten_draws(sites))
+    log_lik, cdf = pointwise_loo_terms(
+        model.data.rows.log_reflectance, parts.mean, parts.factor, parts.diagonal
+    )
+    shape = (chains, n_draws, -1)
+    return np.asarray(log_lik).reshape(shape), np.asarray(cdf).reshape(shape)
+
+
+def replicated_data(model: PosteriorModel, sites: dict[str, np.ndarray], seed: int) -> np.ndarray:
+    """One replicated data set (ln R of every row) per draw, shape (chain, draw, row)."""
+    chains, n_draws = next(iter(sites.values())).shape[:2]
+    flat = {k: jnp.asarray(v) for k, v in flatten_draws(sites).items() if k != "obs"}
+
+    def draw(key):
+        predictive = Predictive(model, posterior_samples=flat, return_sites=["obs"])
+        return predictive(key, mode="predict")["obs"]
+
+    replicated = jax.jit(draw)(jax.random.PRNGKey(seed + 7))
+    return np.asarray(replicated).reshape(chains, n_draws, -1)
+
+
+def sample_index(model: PosteriorModel) -> np.ndarray:
+    """Index of each row's physical sample in ``model.sample_names``."""
+    names = model.sample_names
+    return np.array([names.index(str(s)) for s in model.row_samples], dtype=int)
+
+
 def inference_data(model: PosteriorModel, draws: Draws, seed: int) -> az.InferenceData:
-    """ArviZ InferenceData with posterior, sample_stats, log_likelihood, posterior_predictive,
-    observed_data and constant_data; the six ``Params`` fields in paper units in the posterior."""
-    chains, n_draws = next(iter(draws.sites.values())).shape[:2]
-    flat = {k: v.reshape(chains * n_draws, *v.shape[2:]) for k, v in draws.sites.items()}
-    sampled = {k: v for k, v in flat.items() if k not in ("obs",)}
-    log_lik = log_likelihood(model, sampled)["obs"].reshape(chains, n_draws, -1)
-    predictive = Predictive(model, posterior_samples=sampled, return_sites=["obs"])
-    replicated = predictive(jax.random.PRNGKey(seed + 7), predict=True)["obs"]
-    replicated = replicated.reshape(chains, n_draws, -1)
-    data = model.data
+    """ArviZ InferenceData with posterior, sample_stats, log_likelihood (the leave-one-out
+    conditionals, for PSIS-LOO), posterior_predictive, observed_data and constant_data; the six
+    ``Params`` fields in paper units in the posterior."""
+    log_lik, _ = loo_terms(model, draws.sites)
+    rows, noise = model.data.rows, model.data.noise
     idata = az.from_dict(
         posterior=dict(draws.sites),
         sample_stats=draws.stats,
-        log_likelihood={"obs": np.asarray(log_lik)},
-        posterior_predictive={"obs": np.asarray(replicated)},
-        observed_data={"obs": np.asarray(data.log_reflectance)},
+        log_likelihood={"obs": log_lik},
+        posterior_predictive={"obs": replicated_data(model, draws.sites, seed)},
+        observed_data={"obs": np.asarray(rows.log_reflectance)},
         constant_data={
-            "theta_i_deg": np.asarray(data.theta_i_deg),
-            "theta_s_deg": np.asarray(data.theta_s_deg),
-            "log_aperture": np.asarray(data.log_aperture),
-            "sigma": np.asarray(data.sigma),
-            "sample_index": model.sample_index,
+            "theta_i_deg": np.asarray(rows.theta_i_deg),
+            "theta_s_deg": np.asarray(rows.theta_s_deg),
+            "log_aperture": np.asarray(rows.log_aperture),
+            "sigma_row": np.asarray(noise.sigma_row),
+            "sample_index": sample_index(model),
+            "series_index": np.asarray(model.row_series, dtype=int),
         },
         dims={
             "obs": ["row"],
             "theta_i_deg": ["row"],
             "theta_s_deg": ["row"],
             "log_aperture": ["row"],
-            "sigma": ["row"],
+            "sigma_row": ["row"],
             "sample_index": ["row"],
+            "series_index": ["row"],
             "anchor_excess": ["anchor"],
+            "rotation_error_std": ["rotation_setting"],
+            "camera_error_std": ["row"],
         },
     )
     scene = model.scene
@@ -85,8 +125,9 @@ def inference_data(model: PosteriorModel, draws: Draws, seed: int) -> az.Inferen
             "seed": seed,
             "fold": int(scene.model.fold),
             "constants": json.dumps(scene.model.constants._asdict()),
-            "angle_error_deg": model.angle_error_deg,
-            "hierarchical": int(model.hierarchical),
+            "error_model": json.dumps(scene.errors.describe()),
+            "free_parameters": json.dumps(list(scene.free_parameters)),
+            "samples": json.dumps(list(model.sample_names)),
             "anchors": json.dumps(None if model.anchors is None else model.anchors.tolist()),
             "versions": json.dumps(_versions()),
             "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
@@ -95,16 +136,27 @@ def inference_data(model: PosteriorModel, draws: Draws, seed: int) -> az.Inferen
     return idata
 
 
-def diagnostics(idata: az.InferenceData, draws: Draws) -> dict[str, Any]:
-    """R-hat, bulk/tail ESS per sampled parameter (paper units; fixed ones are listed apart),
-    divergences and BFMI (NUTS), run length in autocorrelation times (emcee), and the list of
-    thresholds that failed (:data:`THRESHOLDS`)."""
-    sampled = [name for name in PARAM_NAMES if np.ptp(np.asarray(idata.posterior[name])) > 0]
+def diagnostics(
+    idata: az.InferenceData, draws: Draws, free: tuple[str, ...] = PARAM_NAMES
+) -> dict[str, Any]:
+    """R-hat, bulk/tail ESS per free parameter (paper units) and learned noise scale (fixed
+    parameters are listed apart), divergences and BFMI (NUTS), run length in autocorrelation
+    times (emcee), and the list of thresholds that failed (:data:`THRESHOLDS`). A statistic
+    that is undefined (a chain that never moved) counts as failed."""
+    sampled = [name for name in PARAM_NAMES if name in free]
+    sampled += [name for name in NOISE_SITES if name in idata.posterior]
     summary = az.summary(idata, var_names=sampled, kind="all", round_to="none")
+
+    def worst(column: str, largest: bool) -> float:
+        values = np.asarray(summary[column], float)
+        if np.any(~np.isfinite(values)):
+            return float("nan")
+        return float(values.max() if largest else values.min())
+
     result: dict[str, Any] = {
-        "r_hat_max": float(summary["r_hat"].max()),
-        "ess_bulk_min": float(summary["ess_bulk"].min()),
-        "ess_tail_min": float(summary["ess_tail"].min()),
+        "r_hat_max": worst("r_hat", True),
+        "ess_bulk_min": worst("ess_bulk", False),
+        "ess_tail_min": worst("ess_tail", False),
         "parameters": {
             name: {column: float(summary.loc[name, column]) for column in summary.columns}
             for name in sampled
@@ -120,10 +172,10 @@ def diagnostics(idata: az.InferenceData, draws: Draws) -> dict[str, Any]:
         result["acceptance_fraction"] = draws.extra["acceptance_fraction"]
         result["thin"] = draws.extra["thin"]
     failures = []
-    if result["r_hat_max"] > THRESHOLDS["r_hat"]:
+    if not result["r_hat_max"] <= THRESHOLDS["r_hat"]:
         failures.append(f"R-hat {result['r_hat_max']:.3f} > {THRESHOLDS['r_hat']}")
     for kind in ("bulk", "tail"):
-        if result[f"ess_{kind}_min"] < THRESHOLDS["ess"]:
+        if not result[f"ess_{kind}_min"] >= THRESHOLDS["ess"]:
             failures.append(f"{kind} ESS {result[f'ess_{kind}_min']:.0f} < {THRESHOLDS['ess']}")
     if result.get("divergences", 0) > 0:
         failures.append(f"{result['divergences']} divergent transitions")

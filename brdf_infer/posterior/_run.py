@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
+import dataclasses
+import hashlib
+import json
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -10,13 +14,16 @@ from typing import Any
 import numpy as np
 
 from brdf_infer._arviz import az
+from brdf_infer.error_model import ERROR_MODELS
 from brdf_infer.errors import BadInputError
 from brdf_infer.measurements import Measurements
 from brdf_infer.params import PARAM_NAMES
 from brdf_infer.posterior._bands import compute_bands, draws_params
-from brdf_infer.posterior._model import build_posterior_model
-from brdf_infer.posterior._results import diagnostics, inference_data, write_results
-from brdf_infer.posterior._samplers import run_emcee, run_nuts
+from brdf_infer.posterior._loo import loo_pit, uniformity_p_value
+from brdf_infer.posterior._model import NOISE_SITES, PosteriorModel, build_posterior_model
+from brdf_infer.posterior._potential import FlatPotential
+from brdf_infer.posterior._results import diagnostics, inference_data, loo_terms, write_results
+from brdf_infer.posterior._samplers import emcee_settings, load_checkpoint, run_emcee, run_nuts
 from brdf_infer.scene import Scene
 
 CHECKPOINT_FILE = "emcee_checkpoint.npz"
@@ -32,6 +39,75 @@ class PosteriorRun:
     out: Path | None
 
 
+def with_error_model(scene: Scene, error_model: str | None) -> Scene:
+    """``scene`` with its ``errors.model`` replaced (None: unchanged)."""
+    if error_model is None or error_model == scene.errors.model:
+        return scene
+    if error_model not in ERROR_MODELS:
+        raise BadInputError(
+            f"unknown error model {error_model!r} ({', '.join(ERROR_MODELS)})",
+            field="--error-model",
+        )
+    return dataclasses.replace(scene, errors=dataclasses.replace(scene.errors, model=error_model))
+
+
+def run_fingerprint(model: PosteriorModel, measurements: Measurements) -> dict[str, str]:
+    """Hashes of what a run samples: the scene text, the measurement rows, the model options."""
+
+    def digest(data: bytes) -> str:
+        return hashlib.sha256(data).hexdigest()[:16]
+
+    rows = b"".join(
+        np.ascontiguousarray(array).tobytes()
+        for array in (
+            measurements.series.astype(str),
+            measurements.sample.astype(str),
+            measurements.theta_i_deg,
+            measurements.theta_s_deg,
+            measurements.reflectance,
+            np.zeros(0) if measurements.reflectance_err is None else measurements.reflectance_err,
+        )
+    )
+    scene = model.scene
+    options = {
+        "errors": scene.errors.describe(),
+        "fold": scene.model.fold,
+        "constants": scene.model.constants._asdict(),
+        "priors": {name: dataclasses.asdict(prior) for name, prior in scene.priors.items()},
+        "anchors": None if model.anchors is None else model.anchors.tolist(),
+    }
+    return {
+        "scene": digest(scene.path.read_bytes()),
+        "measurements": digest(rows),
+        "model options": digest(json.dumps(options, sort_keys=True, default=str).encode()),
+    }
+
+
+def _interval(values: np.ndarray) -> dict[str, float]:
+    low, median, high = np.quantile(np.asarray(values).reshape(-1), [0.025, 0.5, 0.975])
+    return {"median": float(median), "lo95": float(low), "hi95": float(high)}
+
+
+def predictive_checks(model: PosteriorModel, idata: az.InferenceData, sites: dict) -> dict:
+    """PSIS-LOO (elpd with its standard error, p_loo, largest Pareto k) and the LOO-PIT of
+    every row with a Kolmogorov–Smirnov test of its uniformity."""
+    import warnings
+
+    with warnings.catch_warnings():  # high Pareto k are reported in the verdict instead
+        warnings.simplefilter("ignore", UserWarning)
+        loo = az.loo(idata, pointwise=True)
+    log_lik, cdf = loo_terms(model, sites)
+    pit = loo_pit(log_lik.reshape(-1, log_lik.shape[-1]), cdf.reshape(-1, cdf.shape[-1]))
+    return {
+        "elpd_loo": float(loo.elpd_loo),
+        "se": float(loo.se),
+        "p_loo": float(loo.p_loo),
+        "pareto_k_max": float(np.max(loo.pareto_k)),
+        "loo_pit": pit.tolist(),
+        "loo_pit_ks_p": uniformity_p_value(pit),
+    }
+
+
 def run_posterior(
     scene: Scene,
     measurements: Measurements,
@@ -43,11 +119,12 @@ def run_posterior(
     walkers: int | None = None,
     steps: int = 20000,
     seed: int = 0,
+    target_accept: float = 0.8,
     out: Path | None = None,
     resume: bool = False,
-    angle_error: bool = False,
-    hierarchical: bool = False,
+    error_model: str | None = None,
     progress: bool | None = None,
+    announce: Callable[[str], None] | None = None,
 ) -> PosteriorRun:
     """Sample the scene's posterior and write posterior.nc, summary.json, bands.json.
 
@@ -56,13 +133,17 @@ def run_posterior(
         chains, draws, warmup: NUTS settings (emcee: ``warmup`` is the burn-in in steps).
         walkers, steps: emcee settings (walkers default: max(24, 2 × dimension)).
         seed: random seed of the sampler.
+        target_accept: NUTS target acceptance probability (raise it towards 0.95 when a
+            run reports divergent transitions).
         out: output directory (nothing written when None; emcee then keeps no checkpoint).
         resume: continue an interrupted emcee run from ``out``'s checkpoint.
-        angle_error: propagate the scene's angle uncertainty (also on when the scene's
-            ``errors.propagate_angles`` is).
-        hierarchical: per-sample offsets instead of the spread term (also on when the scene's
-            ``errors.hierarchical`` is).
+        error_model: override the scene's ``errors.model`` (``generative`` or ``spread``).
         progress: progress bar on stderr (default: when stderr is a terminal).
+        announce: called with a one-line description of the run once every setting (and a
+            checkpoint to resume) has been checked, before any sampling.
+
+    Raises:
+        BadInputError: a setting out of range, or a checkpoint that this run did not write.
     """
     if sampler not in ("nuts", "emcee"):
         raise BadInputError(f"unknown sampler {sampler!r} (nuts, emcee)", field="--sampler")
@@ -76,19 +157,35 @@ def run_posterior(
             raise BadInputError(f"must be at least 1, got {value}", field=f"--{name}")
     if warmup < 0:
         raise BadInputError(f"must be >= 0, got {warmup}", field="--warmup")
+    if not 0 < target_accept < 1:
+        raise BadInputError(f"must lie in (0, 1), got {target_accept}", field="--target-accept")
     if resume and sampler != "emcee":
         raise BadInputError(
             "--resume continues an emcee run; NUTS runs are not checkpointed", field="--resume"
         )
     started = time.perf_counter()
-    angle_error = angle_error or scene.errors.propagate_angles
-    hierarchical = hierarchical or scene.errors.hierarchical
-    model = build_posterior_model(
-        scene, measurements, angle_error=angle_error, hierarchical=hierarchical
-    )
+    scene = with_error_model(scene, error_model)
+    model = build_posterior_model(scene, measurements)
+    if sampler == "nuts":
+        what = f"{chains} chains x ({warmup} warmup + {draws} draws)"
+    else:
+        dimension = FlatPotential(model).dimension
+        settings = emcee_settings(dimension, walkers, steps, warmup, seed)
+        if resume:
+            identity = {**run_fingerprint(model, measurements), "dimension": str(dimension)}
+            load_checkpoint(None if out is None else out / CHECKPOINT_FILE, settings, identity)
+        what = f"{settings['walkers']} walkers x {steps} steps ({warmup} burn-in)"
+    if announce is not None:
+        announce(f"posterior of scene '{scene.name}' with {sampler}: {what}")
     if sampler == "nuts":
         result = run_nuts(
-            model, chains=chains, warmup=warmup, draws=draws, seed=seed, progress=progress
+            model,
+            chains=chains,
+            warmup=warmup,
+            draws=draws,
+            seed=seed,
+            target_accept=target_accept,
+            progress=progress,
         )
     else:
         checkpoint = None if out is None else out / CHECKPOINT_FILE
@@ -102,6 +199,7 @@ def run_posterior(
             seed=seed,
             checkpoint=checkpoint,
             resume=resume,
+            fingerprint=run_fingerprint(model, measurements),
             progress=progress,
         )
     idata = inference_data(model, result, seed)
@@ -109,7 +207,7 @@ def run_posterior(
     bands = compute_bands(
         params, scene.output_theta_i_deg, scene.model.fold, scene.model.constants, scene.makes_tis
     )
-    checks = diagnostics(idata, result)
+    checks = diagnostics(idata, result, scene.free_parameters)
     tis_70 = (
         {key: bands["tis"][key][70] for key in ("median", "lo68", "hi68", "lo95", "hi95")}
         if "tis" in bands
@@ -119,14 +217,15 @@ def run_posterior(
         "scene": scene.name,
         "sampler": result.sampler,
         "settings": result.settings,
-        "options": {
-            "angle_error": angle_error,
-            "hierarchical": hierarchical,
-            "anchors": None if model.anchors is None else model.anchors.tolist(),
-        },
+        "error_model": scene.errors.describe(),
+        "options": {"anchors": None if model.anchors is None else model.anchors.tolist()},
         "n_points": len(measurements),
         "median": {name: float(np.median(getattr(params, name))) for name in PARAM_NAMES},
+        "noise": {
+            name: _interval(result.sites[name]) for name in NOISE_SITES if name in result.sites
+        },
         "diagnostics": checks,
+        "predictive": predictive_checks(model, idata, result.sites),
         "tis_70deg": tis_70,
         "pi_brdf0": {key: bands["pi_brdf0"][key] for key in ("median", "lo95", "hi95")},
         "seconds": {**result.seconds, "total": time.perf_counter() - started},

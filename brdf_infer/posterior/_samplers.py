@@ -22,14 +22,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
-from jax.flatten_util import ravel_pytree
-from numpyro.infer import MCMC, NUTS, init_to_uniform
-from numpyro.infer.util import initialize_model
 
 from brdf_infer._atomic import atomic_write_bytes
 from brdf_infer._compile_clock import compile_clock
 from brdf_infer.errors import BadInputError
 from brdf_infer.posterior._model import PosteriorModel
+from brdf_infer.posterior._nuts import NutsProgram, chain_keys
+from brdf_infer.posterior._potential import FlatPotential
 
 
 @dataclass
@@ -69,38 +68,23 @@ def run_nuts(
     target_accept: float = 0.8,
     progress: bool | None = None,
 ) -> Draws:
-    """NUTS with a dense mass matrix; chains run one after another (2-core machines).
-
-    Warmup and sampling run in one call, so the loop is compiled once (separate calls
-    compile twice: ~20 s instead of ~11 s here).
-    """
-    kernel = NUTS(model, dense_mass=True, target_accept_prob=target_accept)
-    mcmc = MCMC(
-        kernel,
-        num_warmup=warmup,
-        num_samples=draws,
-        num_chains=chains,
-        chain_method="sequential",
-        progress_bar=_progress_enabled(progress),
+    """NUTS with a dense mass matrix (:class:`brdf_infer.posterior._nuts.NutsProgram`): the
+    chains run one after another through one compiled program."""
+    program = NutsProgram(model, warmup=warmup, target_accept=target_accept)
+    output = program.run(
+        model.data, chain_keys(seed, 1, chains)[0], draws, progress=_progress_enabled(progress)
     )
-    fields = ("diverging", "energy", "potential_energy", "accept_prob", "num_steps")
-    with compile_clock() as compile_seconds:
-        clock = time.perf_counter()
-        mcmc.run(jax.random.PRNGKey(seed), extra_fields=fields)
-        iteration_seconds = time.perf_counter() - clock - compile_seconds[0]
-    sites = {k: np.asarray(v) for k, v in mcmc.get_samples(group_by_chain=True).items()}
-    extra = {k: np.asarray(v) for k, v in mcmc.get_extra_fields(group_by_chain=True).items()}
-    stats = {
-        "diverging": extra["diverging"],
-        "energy": extra["energy"],
-        "lp": -extra["potential_energy"],
-        "acceptance_rate": extra["accept_prob"],
-        "n_steps": extra["num_steps"],
-        "tree_depth": np.log2(extra["num_steps"] + 1).astype(int),
-    }
+    sites, stats = output.sites, output.stats
     return Draws(
         sites=sites,
-        stats=stats,
+        stats={
+            "diverging": stats["diverging"],
+            "energy": stats["energy"],
+            "lp": -stats["potential_energy"],
+            "acceptance_rate": stats["accept_prob"],
+            "n_steps": stats["num_steps"],
+            "tree_depth": np.log2(stats["num_steps"] + 1).astype(int),
+        },
         sampler="nuts",
         settings={
             "chains": chains,
@@ -110,44 +94,42 @@ def run_nuts(
             "dense_mass": True,
             "target_accept": target_accept,
         },
-        seconds={"sampling": iteration_seconds, "compile": compile_seconds[0]},
+        seconds=output.seconds,
     )
 
 
 class _LogDensity:
-    """NumPyro's potential as a flat-vector log density, jitted and vmapped over walkers."""
+    """The model's log density on the flat unconstrained space, jitted and vmapped over
+    walkers."""
 
     def __init__(self, model: PosteriorModel, seed: int):
-        info = initialize_model(jax.random.PRNGKey(seed), model, init_strategy=init_to_uniform())
-        flat, self.unravel = ravel_pytree(info.param_info.z)
-        self.ndim = flat.size
-        self.postprocess = jax.jit(jax.vmap(lambda x: info.postprocess_fn(self.unravel(x))))
-        potential = info.potential_fn
-        self._potential = lambda x: potential(self.unravel(x))
+        self.flat = FlatPotential(model)
+        self.ndim = self.flat.dimension
+        data = model.data
+        self.postprocess = jax.jit(jax.vmap(lambda x: self.flat.constrain(x, data)))
+        self._potential = lambda x: self.flat.potential(x, data)
         self._batched = jax.jit(jax.vmap(lambda x: -self._potential(x)))
         self._init_key = jax.random.PRNGKey(seed + 1)
-        self._model = model
+        self._data = data
 
     def __call__(self, positions: np.ndarray) -> np.ndarray:
         values = np.asarray(self._batched(jnp.asarray(positions)))
         return np.where(np.isfinite(values), values, -np.inf)
 
     def maximum_a_posteriori(self, starts: int = 8) -> np.ndarray:
-        """The MAP on the unconstrained space: BFGS from ``starts`` NUTS-style inits, vmapped."""
-        positions = []
-        for key in jax.random.split(self._init_key, starts):
-            info = initialize_model(key, self._model, init_strategy=init_to_uniform())
-            positions.append(ravel_pytree(info.param_info.z)[0])
-        potential = self._potential
+        """The MAP on the unconstrained space: BFGS from ``starts`` dispersed points, vmapped."""
+        keys = jax.random.split(self._init_key, starts)
+        potential, flat, data = self._potential, self.flat, self._data
         solver = optx.BFGS(rtol=1e-9, atol=1e-9)
 
-        def minimise(x0):
+        def minimise(key):
+            x0 = flat.best_of_uniform(key, data, 4)
             solution = optx.minimise(
                 lambda x, _: potential(x), solver, x0, max_steps=5000, throw=False
             )
             return solution.value, potential(solution.value)
 
-        values, potentials = jax.jit(jax.vmap(minimise))(jnp.stack(positions))
+        values, potentials = jax.jit(jax.vmap(minimise))(keys)
         potentials = jnp.where(jnp.isfinite(potentials), potentials, jnp.inf)
         return np.asarray(values[jnp.argmin(potentials)])
 
@@ -177,6 +159,62 @@ def _deferred_interrupts():
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
+
+
+def emcee_settings(dimension: int, walkers: int | None, steps: int, burn: int, seed: int) -> dict:
+    """The checked settings of an emcee run (``walkers`` default: max(24, 2 × dimension)).
+
+    Raises:
+        BadInputError: fewer than 2 × dimension walkers, or ``burn`` ≥ ``steps``.
+    """
+    walkers = max(24, 2 * dimension) if walkers is None else walkers
+    if walkers < 2 * dimension:
+        raise BadInputError(
+            f"emcee needs at least {2 * dimension} walkers, got {walkers}", field="--walkers"
+        )
+    if not 0 <= burn < steps:
+        raise BadInputError(
+            f"burn-in ({burn}) must be below the number of steps ({steps})", field="--warmup"
+        )
+    return {"walkers": walkers, "steps": steps, "burn": burn, "seed": seed}
+
+
+def load_checkpoint(path: Path | None, settings: dict, identity: dict):
+    """The checkpoint at ``path`` if this run (``settings``, ``identity``) wrote it.
+
+    Raises:
+        BadInputError: no checkpoint, or one that another run wrote (one line naming what
+            differs).
+    """
+    if path is None or not path.exists():
+        raise BadInputError("no checkpoint to resume from", file=path)
+    try:
+        saved = np.load(path)
+    except (OSError, ValueError) as error:
+        raise BadInputError(f"cannot read the checkpoint: {error}", file=path) from None
+    _check_checkpoint(path, saved, settings, identity)
+    return saved
+
+
+def _check_checkpoint(path: Path, saved, settings: dict, identity: dict) -> None:
+    """Refuse a checkpoint that another run wrote: one line naming everything that differs."""
+    differences = []
+    for key, value in identity.items():
+        stored = f"identity_{key}"
+        if stored not in saved.files or str(saved[stored]) != value:
+            differences.append(key)
+    for key, value in settings.items():
+        if key not in saved.files or int(saved[key]) != value:
+            differences.append(
+                f"{key} ({int(saved[key]) if key in saved.files else '?'} there, {value} now)"
+            )
+    if differences:
+        raise BadInputError(
+            "the checkpoint was written by another run (differs in: "
+            + ", ".join(differences)
+            + "); start afresh without --resume or with another --out",
+            file=path,
+        )
 
 
 def _save_checkpoint(path: Path, content: dict) -> None:
@@ -216,6 +254,7 @@ def run_emcee(
     checkpoint: Path | None = None,
     resume: bool = False,
     checkpoint_every: int = 500,
+    fingerprint: dict[str, str] | None = None,
     progress: bool | None = None,
 ) -> Draws:
     """emcee's affine-invariant ensemble on NumPyro's potential, checkpointed as it goes.
@@ -235,43 +274,31 @@ def run_emcee(
             match the settings.
     """
     density = _LogDensity(model, seed)
-    walkers = max(24, 2 * density.ndim) if walkers is None else walkers
-    if walkers < 2 * density.ndim:
-        raise BadInputError(
-            f"emcee needs at least {2 * density.ndim} walkers, got {walkers}", field="--walkers"
-        )
-    if not 0 <= burn < steps:
-        raise BadInputError(
-            f"burn-in ({burn}) must be below the number of steps ({steps})", field="--warmup"
-        )
-    settings = {"walkers": walkers, "steps": steps, "burn": burn, "seed": seed}
-    with compile_clock() as compile_seconds:
-        clock = time.perf_counter()
-        start = density.initial_positions(walkers, seed)
-        start_log_prob = density(start)
-        initialise_seconds = time.perf_counter() - clock - compile_seconds[0]  # MAP search
-
+    settings = emcee_settings(density.ndim, walkers, steps, burn, seed)
+    walkers = settings["walkers"]
+    identity = {**(fingerprint or {}), "dimension": str(density.ndim)}
     chain_parts, log_prob_parts, accepted, done = [], [], np.zeros(walkers), 0
-    state = emcee.State(
-        start, log_prob=start_log_prob, random_state=np.random.RandomState(seed).get_state()
-    )
-    if resume:
-        if checkpoint is None or not checkpoint.exists():
-            raise BadInputError("no checkpoint to resume from", file=checkpoint)
-        saved = np.load(checkpoint)
-        if {k: int(saved[k]) for k in settings} != settings:
-            raise BadInputError(
-                "checkpoint was written with other settings (walkers, steps, burn, seed)",
-                file=checkpoint,
+    initialise_seconds = 0.0
+    with compile_clock() as compile_seconds:
+        if resume:
+            saved = load_checkpoint(checkpoint, settings, identity)
+            done = int(saved["done"])
+            chain_parts, log_prob_parts = [saved["chain"]], [saved["log_prob"]]
+            accepted = saved["accepted"]
+            state = emcee.State(
+                saved["coords"],
+                log_prob=saved["state_log_prob"],
+                random_state=_random_state_from(saved),
             )
-        done = int(saved["done"])
-        chain_parts, log_prob_parts = [saved["chain"]], [saved["log_prob"]]
-        accepted = saved["accepted"]
-        state = emcee.State(
-            saved["coords"],
-            log_prob=saved["state_log_prob"],
-            random_state=_random_state_from(saved),
-        )
+        else:
+            clock = time.perf_counter()
+            start = density.initial_positions(walkers, seed)
+            state = emcee.State(
+                start,
+                log_prob=density(start),
+                random_state=np.random.RandomState(seed).get_state(),
+            )
+            initialise_seconds = time.perf_counter() - clock - compile_seconds[0]  # MAP search
 
     clock = time.perf_counter()
     bar = None
@@ -297,6 +324,7 @@ def run_emcee(
                     checkpoint,
                     {
                         **{k: np.array(v) for k, v in settings.items()},
+                        **{f"identity_{k}": np.array(v) for k, v in identity.items()},
                         "done": np.array(done),
                         "chain": np.concatenate(chain_parts),
                         "log_prob": np.concatenate(log_prob_parts),
@@ -334,7 +362,7 @@ def run_emcee(
         },
         extra={
             "autocorrelation_time": tau,
-            "steps_per_autocorrelation_time": float(steps / np.max(tau)),
+            "steps_per_autocorrelation_time": float((steps - burn) / np.max(tau)),
             "acceptance_fraction": float(np.mean(accepted) / steps),
             "thin": thin,
         },

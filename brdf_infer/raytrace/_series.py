@@ -132,7 +132,12 @@ def configurations(scene: Scene, measurements: Measurements) -> list[Configurati
     series = scene.raytrace.series
     rows = measurements.series == series
     theta_i, theta_s = measurements.theta_i_deg[rows], measurements.theta_s_deg[rows]
-    reflectance, error = measurements.reflectance[rows], measurements.reflectance_err[rows]
+    reflectance = measurements.reflectance[rows]
+    error = (
+        scene.errors.reflectance_rel * reflectance
+        if measurements.reflectance_err is None
+        else measurements.reflectance_err[rows]
+    )
     result = []
     for pair in sorted(set(zip(theta_i.tolist(), theta_s.tolist(), strict=True))):
         same = (theta_i == pair[0]) & (theta_s == pair[1])

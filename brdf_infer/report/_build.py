@@ -14,7 +14,7 @@ from brdf_infer._atomic import atomic_write_bytes
 from brdf_infer.errors import BadInputError
 from brdf_infer.params import PARAM_NAMES
 from brdf_infer.posterior import BANDS_FILE, POSTERIOR_FILE, SUMMARY_FILE, THRESHOLDS, draws_params
-from brdf_infer.report import _figures, _html
+from brdf_infer.report import _figures, _html, _noise
 from brdf_infer.report._raytrace import figure_png, plot_detector_images, plot_raytrace
 from brdf_infer.scene import load_scene
 
@@ -77,7 +77,24 @@ def write_report(run: Path, progress=print) -> tuple[Path, list[str]]:
         "Posterior predictive against the measured raw reflectance, per series (cf. Figs. 4, 6).",
         lambda: _figures.posterior_predictive(idata, rows.series),
     )
-    add("loo_pit", "LOO-PIT calibration of the predictive.", lambda: _figures.loo_pit(idata))
+    pits = _loo_pits(run, summary)
+    if pits:
+        add(
+            "loo_pit",
+            "LOO-PIT of the leave-one-out predictive of each row under this run's error model and "
+            "under the earlier spread model (σ² = 6.5 %² + s(θi)²), where the run has it as a "
+            "variant; Kolmogorov–Smirnov p-values of uniformity in the titles.",
+            lambda: _noise.loo_pit_comparison(pits),
+        )
+    spread = _noise.spread_check(idata)
+    if spread is not None:
+        add(
+            "spread_check",
+            "Inter-sample spread per θi: the sd of ln R over the samples measured at one "
+            "geometry (points) against its posterior predictive distribution (bars) and the "
+            "fitted sample-to-sample scale τ (green).",
+            lambda: spread,
+        )
     add("pareto_k", "PSIS-LOO Pareto k per measurement.", lambda: _figures.pareto_k(loo))
     add(
         "brdf_bands",
@@ -162,14 +179,14 @@ def write_report(run: Path, progress=print) -> tuple[Path, list[str]]:
         _html.table(
             ["series", "sample", "θi [deg]", "θs [deg]", "R [-]", "σ_R [-]"],
             [
-                [s, m, f"{i:g}", f"{t:g}", f"{r:.3e}", f"{e:.2e}"]
+                [s, m, f"{i:g}", f"{t:g}", f"{r:.3e}", "–" if e is None else f"{e:.2e}"]
                 for s, m, i, t, r, e in zip(
                     rows.series,
                     rows.sample,
                     rows.theta_i_deg,
                     rows.theta_s_deg,
                     rows.reflectance,
-                    rows.reflectance_err,
+                    [None] * len(rows) if rows.reflectance_err is None else rows.reflectance_err,
                     strict=True,
                 )
             ],
@@ -189,7 +206,14 @@ def write_report(run: Path, progress=print) -> tuple[Path, list[str]]:
         *(
             _html.figure(png, caption)
             for name, caption, png in figures
-            if name in ("predictive", "loo_pit", "pareto_k")
+            if name in ("predictive", "pareto_k")
+        ),
+        "<h2>Error model</h2>",
+        _error_model_table(summary),
+        *(
+            _html.figure(png, caption)
+            for name, caption, png in figures
+            if name in ("loo_pit", "spread_check")
         ),
         _html.table(
             ["PSIS-LOO", "value"],
@@ -226,6 +250,87 @@ def write_report(run: Path, progress=print) -> tuple[Path, list[str]]:
     path = atomic_write_bytes(run / REPORT_FILE, document.encode())
     progress(f"report written in {time.perf_counter() - started:.1f} s")
     return path, failures
+
+
+SPREAD_VARIANT = "spread"
+
+
+def _loo_pits(run: Path, summary: dict) -> dict[str, tuple[list, float]]:
+    """Error model name → (LOO-PIT values, KS p) of this run and of its spread variant."""
+    pits = {}
+    if "predictive" in summary:
+        name = summary.get("error_model", {}).get("model", "this run")
+        pits[f"{name} (this run)"] = (
+            summary["predictive"]["loo_pit"],
+            summary["predictive"]["loo_pit_ks_p"],
+        )
+    variant = run / "variants" / SPREAD_VARIANT / SUMMARY_FILE
+    if variant.is_file():
+        other = json.loads(variant.read_text())
+        pits["spread (earlier model)"] = (
+            other["predictive"]["loo_pit"],
+            other["predictive"]["loo_pit_ks_p"],
+        )
+    return pits
+
+
+def _error_model_table(summary: dict) -> str:
+    """The noise sources of the run's error model with their sizes."""
+    errors = summary.get("error_model")
+    if not errors:
+        return ""
+    if errors["model"] == "spread":
+        return (
+            "<p>The earlier spread model: independent rows with σ² = "
+            f"{errors['reflectance_rel']:g}² + s(θi)², s the inter-sample spread of ln R.</p>"
+        )
+    noise = summary.get("noise", {})
+
+    def learned(name: str) -> str:
+        if name not in noise:
+            return "off"
+        value = noise[name]
+        return f"{value['median']:.3f} (95 %: {value['lo95']:.3f}–{value['hi95']:.3f}), learned"
+
+    repeatability = (
+        learned("repeatability")
+        if errors["repeatability"] == "learned"
+        else f"{errors['repeatability']:g}, fixed"
+    )
+    calibration = (
+        f"{errors['reflectance_rel']:g} per series, fixed"
+        if errors["reflectance_rel_kind"] == "calibration"
+        else "off"
+    )
+    angles = errors["propagate_angles"]
+    rows = [
+        [
+            "value noise e_i",
+            f"σ of each row ÷ √{errors['images_per_row']} (row's reflectance_err, else "
+            f"reflectance_rel {errors['reflectance_rel']:g})",
+        ],
+        ["repeatability ν_i (per row)", repeatability],
+        [
+            "sample-to-sample u_j (per sample)",
+            learned("sample_sd") if errors["hierarchical"] else "off",
+        ],
+        ["calibration κ_c (per series)", calibration],
+        [
+            "sample rotation ε (per series, sample, θi)",
+            f"{errors['rotation_deg']:g}° through ln R ({errors['angle_method']})"
+            if angles
+            else "off",
+        ],
+        [
+            "camera position η (per row)",
+            f"{errors['camera_deg']:g}° through ln R ({errors['angle_method']})"
+            if angles
+            else "off",
+        ],
+    ]
+    return "<p>Every noise source enters once (sizes in ln R):</p>" + _html.table(
+        ["source", "size"], rows
+    )
 
 
 def _load_traces(run: Path) -> list[dict]:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import matplotlib
 
 from brdf_infer._arviz import az
@@ -18,7 +20,9 @@ MAP_THETA_I_DEG = (5.0, 30.0, 50.0, 70.0)
 
 
 def _sampled(idata: az.InferenceData) -> list[str]:
-    return [n for n in PARAM_NAMES if np.ptp(np.asarray(idata.posterior[n])) > 0]
+    """The free parameters of the run (also a chain that never moved is shown)."""
+    free = json.loads(idata.posterior.attrs.get("free_parameters", json.dumps(PARAM_NAMES)))
+    return [n for n in PARAM_NAMES if n in free]
 
 
 def trace(idata: az.InferenceData):
@@ -75,7 +79,7 @@ def posterior_predictive(idata: az.InferenceData, series: np.ndarray):
     low, median, high = np.quantile(replicated, [0.025, 0.5, 0.975], axis=0)
     theta_i = np.asarray(idata.constant_data["theta_i_deg"])
     theta_s = np.asarray(idata.constant_data["theta_s_deg"])
-    sigma = np.asarray(idata.constant_data["sigma"])
+    sigma = np.asarray(idata.constant_data["sigma_row"])
     names = list(dict.fromkeys(series))
     figure, axes = plt.subplots(1, len(names), figsize=(5.5 * len(names), 4.2), squeeze=False)
     for axis, name in zip(axes[0], names, strict=True):
@@ -92,7 +96,7 @@ def posterior_predictive(idata: az.InferenceData, series: np.ndarray):
             axis.errorbar(
                 xs,
                 observed[chosen],
-                yerr=observed[chosen] * sigma[chosen],
+                yerr=observed[chosen] * sigma[chosen],  # the value's own 1σ
                 fmt="o",
                 color=colour,
                 ms=4,
@@ -103,27 +107,6 @@ def posterior_predictive(idata: az.InferenceData, series: np.ndarray):
         axis.set_ylabel("raw reflectance R [-]")
         axis.set_title(f"series {name}: measured (points, 1σ), 95 % predictive (bars)")
         axis.legend(fontsize=8)
-    figure.tight_layout()
-    return figure
-
-
-def loo_pit(idata: az.InferenceData):
-    """ECDF of the LOO-PIT values against the uniform, with a 95 % band from uniform draws."""
-    pit = np.sort(np.asarray(az.loo_pit(idata, y="obs")).ravel())
-    n = pit.size
-    grid = np.linspace(0.0, 1.0, 201)
-    ecdf = np.searchsorted(pit, grid, side="right") / n
-    uniform = np.sort(np.random.default_rng(0).uniform(size=(2000, n)), axis=1)
-    reference = np.stack([np.searchsorted(u, grid, side="right") / n for u in uniform])
-    low, high = np.quantile(reference - grid, [0.025, 0.975], axis=0)
-    figure, axis = plt.subplots(figsize=(6, 4))
-    axis.fill_between(grid, low, high, color="grey", alpha=0.3, label="95 % for uniform PIT")
-    axis.step(grid, ecdf - grid, where="post", label=f"LOO-PIT ECDF − uniform ({n} points)")
-    axis.axhline(0.0, color="k", lw=0.5)
-    axis.set_xlabel("PIT value [-]")
-    axis.set_ylabel("ECDF − uniform CDF [-]")
-    axis.set_title("LOO-PIT calibration (inside the band when calibrated)")
-    axis.legend(fontsize=8)
     figure.tight_layout()
     return figure
 

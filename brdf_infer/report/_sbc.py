@@ -1,0 +1,142 @@
+"""Figures and HTML page of simulation-based calibration (``brdf-infer sbc``)."""
+
+from __future__ import annotations
+
+import io
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from brdf_infer.report import _html
+from brdf_infer.sbc import (
+    COVERAGE_LEVELS,
+    HISTOGRAM_BINS,
+    SbcResult,
+    ecdf_band,
+    uniform_rank_band,
+)
+
+LABELS = {
+    "brdf0": "brdf0 [sr⁻¹]",
+    "a1": "a1 [deg⁻²]",
+    "a2": "a2 [deg^(−1−α)]",
+    "a3": "a3 [deg^(−2−α)]",
+    "alpha": "α [-]",
+    "theta_s0": "θs0 [deg]",
+    "tis70": "TIS(70°) [-]",
+    "sample_sd": "sample sd τ [ln R]",
+    "repeatability": "repeatability σ_rep [ln R]",
+}
+
+
+def png(figure: Figure, dpi: int = 90) -> bytes:
+    """The figure as PNG bytes (no pyplot, no backend switching)."""
+    buffer = io.BytesIO()
+    figure.savefig(buffer, format="png", dpi=dpi)
+    return buffer.getvalue()
+
+
+def _grid(count: int) -> tuple[Figure, np.ndarray]:
+    columns = 4
+    lines = int(np.ceil(count / columns))
+    figure = Figure(figsize=(12, 2.8 * lines), layout="constrained")
+    axes = figure.subplots(lines, columns, squeeze=False).ravel()
+    for axis in axes[count:]:
+        axis.set_visible(False)
+    return figure, axes
+
+
+def rank_histograms(result: SbcResult) -> Figure:
+    """Rank histograms with the 99 % range of a bin's count under uniform ranks."""
+    settings = result.settings
+    figure, axes = _grid(len(result.quantities))
+    edges = np.linspace(0, settings.draws + 1, HISTOGRAM_BINS + 1)
+    low, high = uniform_rank_band(settings.replicates, HISTOGRAM_BINS)
+    for axis, name in zip(axes, result.quantities, strict=False):
+        axis.axhspan(low, high, color="0.85", label="99 % range, uniform")
+        axis.axhline(settings.replicates / HISTOGRAM_BINS, color="0.5", lw=0.8)
+        axis.hist(result.ranks[name], bins=edges, color="C0", alpha=0.85)
+        axis.set_title(f"{LABELS[name]}\nχ² p = {result.chi2_p[name]:.2g}", fontsize=9)
+        axis.set_xlabel(f"rank of the truth among {settings.draws} draws")
+        axis.set_ylabel("replicates")
+    axes[0].legend(fontsize=7, loc="lower left")
+    figure.suptitle(
+        f"SBC rank histograms, {settings.replicates} replicates (flat within the grey band "
+        "when the posterior is calibrated)"
+    )
+    return figure
+
+
+def ecdf_differences(result: SbcResult) -> Figure:
+    """ECDF of the normalised ranks minus the uniform CDF, with simultaneous 95 % bands."""
+    settings = result.settings
+    points = np.linspace(0.0, 1.0, 101)[1:-1]
+    low, high = ecdf_band(settings.replicates, points)
+    figure, axes = _grid(len(result.quantities))
+    for axis, name in zip(axes, result.quantities, strict=False):
+        fractions = (np.asarray(result.ranks[name]) + 0.5) / (settings.draws + 1)
+        ecdf = np.mean(fractions[:, None] <= points[None, :], axis=0)
+        axis.fill_between(points, low - points, high - points, color="0.85", label="95 % band")
+        axis.axhline(0.0, color="0.5", lw=0.8)
+        axis.plot(points, ecdf - points, color="C3")
+        axis.set_title(f"{LABELS[name]}\nKS p = {result.ks_p[name]:.2g}", fontsize=9)
+        axis.set_xlabel("normalised rank [-]")
+        axis.set_ylabel("ECDF − uniform [-]")
+    axes[0].legend(fontsize=7, loc="lower left")
+    figure.suptitle(
+        "SBC ECDF differences with simultaneous 95 % bands (Säilynoja et al. 2022): "
+        "∩-shaped = posterior too wide, ∪-shaped = too narrow, tilted = biased"
+    )
+    return figure
+
+
+def sbc_figures(result: SbcResult) -> dict[str, bytes]:
+    """PNG bytes of the SBC figures, by file stem."""
+    return {
+        "sbc_ranks": png(rank_histograms(result)),
+        "sbc_ecdf": png(ecdf_differences(result)),
+    }
+
+
+def sbc_page(result: SbcResult, figures: dict[str, bytes]) -> str:
+    """A self-contained HTML page: verdict, tests and coverage table, figures."""
+    settings = result.settings
+    verdict = (
+        _html.verdict_box([]) if result.passed else _html.verdict_box(result.failures)
+    ).replace("every diagnostic passes its threshold", "the posterior is calibrated")
+    rows = []
+    for name in result.quantities:
+        rows.append(
+            [
+                LABELS[name],
+                f"{result.chi2_p[name]:.3f}",
+                f"{result.ks_p[name]:.3f}",
+                *(f"{result.coverage[level][name]:.1%}" for level in COVERAGE_LEVELS),
+            ]
+        )
+    low, high = result.coverage_range[0.9]
+    fault = (
+        f"<p><strong>Planted fault:</strong> the inference used a likelihood σ scaled by "
+        f"{settings.sigma_scale:g}; a working check must fail.</p>"
+        if settings.sigma_scale != 1
+        else ""
+    )
+    sections = [
+        verdict,
+        fault,
+        "<p>Each replicate draws the parameters and every latent from the scene's prior, "
+        "simulates a data set at the scene's geometry through the scene's generative model, "
+        f"samples its posterior with NUTS ({settings.warmup} warmup, "
+        f"{settings.draws} × {settings.thin} draws, thinned by {settings.thin}) and ranks the "
+        "truth among the draws. Tests fail below 0.01/m (m quantities, family-wise level "
+        f"1 %); 90 % coverage must lie in [{low:.1%}, {high:.1%}].</p>",
+        _html.table(
+            ["quantity", "χ² p", "KS p", "50 % coverage", "90 % coverage", "95 % coverage"], rows
+        ),
+        f"<p>{settings.replicates} replicates in {result.seconds:.0f} s "
+        f"({result.compile_seconds:.0f} s compiling); "
+        f"{int(np.sum(result.divergences > 0))} replicate(s) with divergent transitions.</p>",
+        _html.figure(figures["sbc_ranks"], "Rank histograms."),
+        _html.figure(figures["sbc_ecdf"], "ECDF differences."),
+    ]
+    return _html.page("Simulation-based calibration", sections)
