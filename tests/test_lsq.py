@@ -109,8 +109,9 @@ def test_noisy_synthetic_scenes_covered_by_two_sigma(lya, truth):
     Nominal coverage is 95 %. The bound is binomial: with a correct covariance,
     P(≤ 15 of 20 covered) = 0.26 %, so over six parameters the test fails by chance with
     probability < 2 %, while a covariance too small by a third (nominal 2σ acting as 1.33σ,
-    82 % coverage) lets all six pass with probability 0.72⁶ = 0.14. (The earlier error model, σ² = 6.5 %² +
-    spread², passed an 85 % bound only because it overstated this noise.) Checked in the
+    82 % coverage) lets all six pass with probability 0.72⁶ = 0.14. (The earlier error
+    model, σ² = 6.5 %² + spread², passed an 85 % bound only because it overstated this
+    noise.) Checked in the
     internal coordinates, where the linearised covariance is a fair description: in paper
     units a2 = b2·90^−(1+α), whose delta-method σ ignores that a 0.7 change in α rescales a2 by
     23 (see README).
