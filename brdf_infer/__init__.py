@@ -12,9 +12,10 @@ import jax
 jax.config.update("jax_enable_x64", True)
 
 from brdf_infer._cache import enable_compilation_cache  # noqa: E402
+from brdf_infer._resources import data_path  # noqa: E402
 from brdf_infer.params import UV_PAPER, VIS_PAPER, Params  # noqa: E402
 
 enable_compilation_cache()
 
 __version__ = "0.1.0"
-__all__ = ["UV_PAPER", "VIS_PAPER", "Params", "__version__"]
+__all__ = ["UV_PAPER", "VIS_PAPER", "Params", "__version__", "data_path"]

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import signal
 import sys
 import time
@@ -31,12 +32,42 @@ class _Parser(argparse.ArgumentParser):
         self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message} (see --help)\n")
 
 
+def _headless() -> None:
+    """Figures are written to files, never shown: the non-interactive backend, set here and
+    not on import, so that notebooks keep their inline figures."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+
+
 def _progress(message: str) -> None:
     print(message, file=sys.stderr, flush=True)
 
 
 def _emit_json(content: dict[str, Any]) -> None:
     print(json.dumps(content))
+
+
+def _scene_and_measurements(name: str):
+    """The scene (every file it names checked) and its rows; unit-plausibility warnings on
+    stderr."""
+    from brdf_infer.plausibility import measurement_warnings
+    from brdf_infer.scene import load_scene
+
+    scene = load_scene(name)
+    measurements = scene.load_measurements()
+    for warning in measurement_warnings(measurements):
+        _progress(f"warning: {warning}")
+    return scene, measurements
+
+
+def _fit_warnings(scene, measurements, params, what: str) -> list[str]:
+    from brdf_infer.plausibility import parameter_warnings
+
+    if not scene.model.out_of_plane:
+        return []
+    angles = scene.band_theta_i_deg(measurements)
+    return parameter_warnings(params, angles, scene.model.constants, what)
 
 
 def _table(headers: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
@@ -100,6 +131,10 @@ def _lsq_payload(scene, measurements, args: argparse.Namespace) -> dict[str, Any
         seed=args.seed,
         scale_covariance=args.scale_covariance,
     )
+    for warning in result.warnings + _fit_warnings(
+        scene, measurements, result.params, "the least-squares optimum"
+    ):
+        _progress(f"warning: {warning}")
     model = build_observation_model(scene, measurements).with_sigma(result.row_sigma)
     paper_cost = float(model.chi2(paper_fit(scene, measurements).params))
     return {
@@ -128,7 +163,8 @@ def _lsq_payload(scene, measurements, args: argparse.Namespace) -> dict[str, Any
         "row_sigma": result.row_sigma.tolist(),
         "repeatability": result.repeatability,
         "reweightings": result.reweightings,
-        "warnings": result.warnings,
+        "warnings": result.warnings
+        + _fit_warnings(scene, measurements, result.params, "the least-squares optimum"),
     }
 
 
@@ -163,15 +199,11 @@ def _print_lsq(payload: dict[str, Any]) -> None:
             [[a, *(f"{c:+.2f}" for c in row)] for a, row in zip(names, correlation, strict=True)],
         )
     )
-    for warning in payload["warnings"]:
-        print(f"warning: {warning}")
 
 
 def _command_fit(args: argparse.Namespace) -> None:
-    from brdf_infer.scene import load_scene
 
-    scene = load_scene(args.scene)
-    measurements = scene.load_measurements()
+    scene, measurements = _scene_and_measurements(args.scene)
     if args.method == "lsq":
         payload = _lsq_payload(scene, measurements, args)
         if args.json:
@@ -253,6 +285,7 @@ def _command_tis(args: argparse.Namespace) -> None:
     if args.run is not None:
         _tis_from_run(args, theta_i)
         return
+    args.params = args.params or "uv-paper"
     params = resolve_params(args.params)
     (values, errors), first, second = _timed(tis_with_error, theta_i, params, fold=not args.no_fold)
     values, errors = np.asarray(values), np.asarray(errors)
@@ -314,10 +347,8 @@ def _tis_from_run(args: argparse.Namespace, theta_i: np.ndarray) -> None:
 
 def _command_posterior(args: argparse.Namespace) -> None:
     from brdf_infer.posterior import run_posterior
-    from brdf_infer.scene import load_scene
 
-    scene = load_scene(args.scene)
-    measurements = scene.load_measurements()
+    scene, measurements = _scene_and_measurements(args.scene)
     out = check_output_dir(args.out or Path("reports") / scene.name / args.sampler)
     if args.warmup is None:
         args.warmup = 1000 if args.sampler == "nuts" else 4000
@@ -395,7 +426,7 @@ def _command_brdf(args: argparse.Namespace) -> None:
         phi = None
     else:
         theta_s = _angles(args.theta_s, "--theta-s", 0.0, 90.0)
-        phi = np.asarray(args.phi, float)
+        phi = _angles(args.phi, "--phi", 0.0, 360.0, upper_open=True)
     arrays = [theta_i, theta_s] + ([] if phi is None else [phi])
     try:
         arrays = np.broadcast_arrays(*arrays)
@@ -441,9 +472,9 @@ def _command_scenes(args: argparse.Namespace) -> None:
 
 
 def _command_run(args: argparse.Namespace) -> None:
+    _headless()
     from brdf_infer._atomic import atomic_write_json
     from brdf_infer.posterior import run_posterior
-    from brdf_infer.scene import load_scene
 
     for option, value in (("--chains", args.chains), ("--draws", args.draws)):
         if value < 1:
@@ -451,8 +482,7 @@ def _command_run(args: argparse.Namespace) -> None:
     if args.warmup < 0:
         raise BadInputError(f"must be >= 0, got {args.warmup}", field="--warmup")
     start = time.perf_counter()
-    scene = load_scene(args.scene)
-    measurements = scene.load_measurements()
+    scene, measurements = _scene_and_measurements(args.scene)
     out = check_output_dir(args.out or Path("reports") / scene.name)
     steps = 5 + (scene.raytrace is not None)
     _progress(f"[1/{steps}] paper fit of scene '{scene.name}' ({len(measurements)} measurements)")
@@ -533,6 +563,7 @@ def _require_raytrace(scene) -> None:
 
 
 def _command_raytrace(args: argparse.Namespace) -> None:
+    _headless()
     from brdf_infer.raytrace import raytrace_payload, raytrace_posterior_payload, thin_draws
     from brdf_infer.scene import load_scene
 
@@ -662,11 +693,10 @@ def _run_traces(scene, measurements, run) -> list[dict]:
 
 
 def _command_sbc(args: argparse.Namespace) -> None:
+    _headless()
     from brdf_infer.sbc import COVERAGE_LEVELS, SbcSettings, run_sbc, write_sbc
-    from brdf_infer.scene import load_scene
 
-    scene = load_scene(args.scene)
-    measurements = scene.load_measurements()
+    scene, measurements = _scene_and_measurements(args.scene)
     settings = SbcSettings(
         replicates=args.replicates,
         draws=args.draws,
@@ -713,6 +743,7 @@ def _command_sbc(args: argparse.Namespace) -> None:
 
 
 def _command_report(args: argparse.Namespace) -> None:
+    _headless()
     from brdf_infer.report import write_report
 
     path, failures = write_report(Path(args.run_dir), progress=_progress)
@@ -724,6 +755,7 @@ def _command_report(args: argparse.Namespace) -> None:
 
 
 def _command_bench(args: argparse.Namespace) -> None:
+    _headless()
     from brdf_infer.bench import write_report
 
     path = write_report(Path(args.out), args.quick, progress=_progress)
@@ -733,29 +765,46 @@ def _command_bench(args: argparse.Namespace) -> None:
 # --------------------------------------------------------------------------- parser
 
 
+class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
+    """Shows every option's default (a None or False default is left unsaid)."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        if action.default is None or action.default is False or action.default == argparse.SUPPRESS:
+            return action.help or ""
+        return super()._get_help_string(action)
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The ``brdf-infer`` argument parser."""
     parser = _Parser(
         prog="brdf-infer",
         description="Bayesian BRDF/TIS inference for black coatings (Strumik et al. 2024).",
+        formatter_class=_HelpFormatter,
     )
-    commands = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    commands = parser.add_subparsers(
+        dest="command", required=True, parser_class=_Parser, metavar="COMMAND"
+    )
+
+    def command(name: str, help_text: str) -> argparse.ArgumentParser:
+        return commands.add_parser(
+            name, help=help_text, description=help_text, formatter_class=_HelpFormatter
+        )
 
     def scene_command(name: str, help_text: str) -> argparse.ArgumentParser:
-        command = commands.add_parser(name, help=help_text, description=help_text)
-        command.add_argument("scene", nargs="?", default="lya", help="built-in name or TOML path")
-        command.add_argument("--json", action="store_true", help="one JSON object on stdout")
-        return command
+        parser = command(name, help_text)
+        parser.add_argument("scene", nargs="?", default="lya", help="built-in name or TOML path")
+        parser.add_argument("--json", action="store_true", help="one JSON object on stdout")
+        return parser
 
     run = scene_command(
         "run", "main job: paper fit, least squares, NUTS posterior and report in reports/<scene>/"
     )
-    run.add_argument("--out", help="output directory (default reports/<scene>)")
+    run.add_argument("--out", help="output directory (default: reports/<scene>)")
     run.add_argument("--example", help="also write the small committed example report here")
     run.add_argument("--chains", type=int, default=4, help="NUTS chains")
     run.add_argument("--draws", type=int, default=1000, help="NUTS draws per chain")
     run.add_argument("--warmup", type=int, default=1000, help="NUTS warmup per chain")
-    run.add_argument("--seed", type=int, default=0)
+    run.add_argument("--seed", type=int, default=0, help="random seed")
     run.set_defaults(handler=_command_run)
 
     fit = scene_command(
@@ -763,7 +812,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     fit.add_argument("--method", choices=["paper", "lsq"], default="paper", help="fit method")
     fit.add_argument("--starts", type=int, default=16, help="lsq: number of starts")
-    fit.add_argument("--solver", choices=["lm", "gauss-newton", "dogleg"], default="lm")
+    fit.add_argument(
+        "--solver", choices=["lm", "gauss-newton", "dogleg"], default="lm", help="lsq: solver"
+    )
     fit.add_argument("--seed", type=int, default=0, help="lsq: seed of the starting points")
     fit.add_argument(
         "--scale-covariance", action="store_true", help="lsq: scale covariance by reduced chi2"
@@ -773,18 +824,18 @@ def build_parser() -> argparse.ArgumentParser:
     fit.set_defaults(handler=_command_fit)
 
     posterior = scene_command("posterior", "sample the posterior with NUTS or emcee")
-    posterior.add_argument("--sampler", choices=["nuts", "emcee"], default="nuts")
+    posterior.add_argument("--sampler", choices=["nuts", "emcee"], default="nuts", help="sampler")
     posterior.add_argument("--chains", type=int, default=4, help="NUTS chains")
     posterior.add_argument("--draws", type=int, default=1000, help="NUTS draws per chain")
     posterior.add_argument(
         "--warmup", type=int, help="NUTS warmup per chain (1000) or emcee burn-in steps (4000)"
     )
     posterior.add_argument(
-        "--walkers", type=int, help="emcee walkers (default max(24, 2 x dimension))"
+        "--walkers", type=int, help="emcee walkers (default: max(24, 2 x dimension))"
     )
     posterior.add_argument("--steps", type=int, default=20000, help="emcee steps")
-    posterior.add_argument("--seed", type=int, default=0)
-    posterior.add_argument("--out", help="output directory (default reports/<scene>/<sampler>)")
+    posterior.add_argument("--seed", type=int, default=0, help="random seed")
+    posterior.add_argument("--out", help="output directory (default: reports/<scene>/<sampler>)")
     posterior.add_argument(
         "--resume", action="store_true", help="continue an interrupted emcee run"
     )
@@ -801,17 +852,20 @@ def build_parser() -> argparse.ArgumentParser:
     )
     posterior.set_defaults(handler=_command_posterior)
 
-    tis = commands.add_parser("tis", help="total integrated scatter, Eq. (9)")
-    tis.add_argument("--params", default="uv-paper", help="parameter set name or JSON file")
-    tis.add_argument("--run", help="posterior run directory: credible band over its draws")
-    tis.add_argument("--theta-i", type=float, nargs="+", default=[0, 5, 30, 50, 70])
+    tis = command("tis", "total integrated scatter, Eq. (9), of a parameter set or a run")
+    source = tis.add_mutually_exclusive_group()
+    source.add_argument("--params", help="parameter set name or JSON file (default: uv-paper)")
+    source.add_argument("--run", help="posterior run directory: credible band over its draws")
+    tis.add_argument(
+        "--theta-i", type=float, nargs="+", default=[0, 5, 30, 50, 70], help="θi [deg]"
+    )
     tis.add_argument("--no-fold", action="store_true", help="leave out the folding of Eq. (10)")
     tis.add_argument("--json", action="store_true", help="one JSON object on stdout")
     tis.set_defaults(handler=_command_tis)
 
-    brdf = commands.add_parser("brdf", help="BRDF, in-plane Eq. (7) or hemisphere Eq. (8)")
+    brdf = command("brdf", "BRDF, in-plane Eq. (7) or hemisphere Eq. (8)")
     brdf.add_argument("--params", default="uv-paper", help="parameter set name or JSON file")
-    brdf.add_argument("--theta-i", type=float, nargs="+", required=True)
+    brdf.add_argument("--theta-i", type=float, nargs="+", required=True, help="θi [deg]")
     brdf.add_argument(
         "--theta-s",
         type=float,
@@ -819,7 +873,9 @@ def build_parser() -> argparse.ArgumentParser:
         required=True,
         help="in-plane theta_s (without --phi) or polar theta (with --phi) [deg]",
     )
-    brdf.add_argument("--phi", type=float, nargs="+", help="azimuth [deg], forward plane at 180")
+    brdf.add_argument(
+        "--phi", type=float, nargs="+", help="azimuth [deg] in [0, 360), forward plane at 180"
+    )
     brdf.add_argument("--fold", action="store_true", help="in-plane: apply Eq. (10)")
     brdf.add_argument("--no-fold", action="store_true", help="hemisphere: leave out Eq. (10)")
     brdf.add_argument("--json", action="store_true", help="one JSON object on stdout")
@@ -828,22 +884,22 @@ def build_parser() -> argparse.ArgumentParser:
     raytrace = scene_command(
         "raytrace", "ray-trace the series II setup (Sec. 6) and compare with the measurements"
     )
-    source = raytrace.add_mutually_exclusive_group()
-    source.add_argument(
+    trace_source = raytrace.add_mutually_exclusive_group()
+    trace_source.add_argument(
         "--params", help="parameter set name or JSON file (default: the scene's reference set)"
     )
-    source.add_argument(
+    trace_source.add_argument(
         "--run", help="posterior run directory: medians and 95 %% band over its draws"
     )
     raytrace.add_argument(
         "--rays", type=int, help="rays per configuration (and per draw with --run)"
     )
-    raytrace.add_argument("--seed", type=int, default=0)
+    raytrace.add_argument("--seed", type=int, default=0, help="random seed")
     raytrace.add_argument(
         "--estimator",
         choices=["nee", "naive"],
         default="nee",
-        help="next-event estimation (default) or the naive forward ray trace",
+        help="next-event estimation or the naive forward ray trace",
     )
     raytrace.add_argument("--draws", type=int, default=64, help="--run: draws in the band")
     raytrace.add_argument("--out", help="also write raytrace.json and figures here")
@@ -854,7 +910,7 @@ def build_parser() -> argparse.ArgumentParser:
     sbc.add_argument("--draws", type=int, default=100, help="posterior draws per replicate")
     sbc.add_argument("--thin", type=int, default=2, help="keep every THIN-th NUTS draw")
     sbc.add_argument("--warmup", type=int, default=300, help="NUTS warmup per replicate")
-    sbc.add_argument("--seed", type=int, default=0)
+    sbc.add_argument("--seed", type=int, default=0, help="random seed")
     sbc.add_argument(
         "--sigma-scale",
         type=float,
@@ -862,20 +918,20 @@ def build_parser() -> argparse.ArgumentParser:
         help="planted fault: scale the likelihood sigma by this in the inference only",
     )
     sbc.add_argument("--target-accept", type=float, default=0.8, help="NUTS target acceptance")
-    sbc.add_argument("--out", help="output directory (default reports/<scene>/sbc)")
+    sbc.add_argument("--out", help="output directory (default: reports/<scene>/sbc)")
     sbc.set_defaults(handler=_command_sbc)
 
-    report = commands.add_parser("report", help="HTML diagnostic report of a posterior run")
+    report = command("report", "HTML report of a posterior run: the answer, then diagnostics")
     report.add_argument("run_dir", help="directory of a posterior run (posterior.nc, ...)")
     report.add_argument("--json", action="store_true", help="one JSON object on stdout")
     report.set_defaults(handler=_command_report)
 
-    bench = commands.add_parser("bench", help="error-against-run-time benchmarks")
-    bench.add_argument("--quick", action="store_true", help="small sizes, under a minute")
+    bench = command("bench", "error-against-run-time benchmarks of every numerical method")
+    bench.add_argument("--quick", action="store_true", help="small sizes, a couple of minutes")
     bench.add_argument("--out", default="reports/benchmarks.md", help="Markdown report path")
     bench.set_defaults(handler=_command_bench)
 
-    scenes = commands.add_parser("scenes", help="list the built-in scenes")
+    scenes = command("scenes", "list the built-in scenes")
     scenes.add_argument("--json", action="store_true", help="one JSON object on stdout")
     scenes.set_defaults(handler=_command_scenes)
     return parser
@@ -902,8 +958,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"brdf-infer: error: {where}{error.strerror or error}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:
-        print("brdf-infer: interrupted (an emcee run continues with --resume)", file=sys.stderr)
+        hint = " (continue it with --resume)" if getattr(args, "sampler", None) == "emcee" else ""
+        print(f"brdf-infer: interrupted{hint}", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # e.g. `brdf-infer ... | head`: the reader left, so do we
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 0
     return 0
 
 

@@ -125,7 +125,7 @@ def resolve_params(name_or_file: str) -> Params:
             f"neither a parameter set ({known}) nor an existing JSON file", file=name_or_file
         )
     try:
-        content = json.loads(path.read_text())
+        content = json.loads(path.read_text(encoding="utf-8-sig"))
     except (OSError, UnicodeDecodeError) as error:
         raise BadInputError(f"cannot read: {error}", file=path) from None
     except json.JSONDecodeError as error:

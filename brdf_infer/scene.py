@@ -38,7 +38,7 @@ Schema (keys other than these are errors; defaults in brackets)::
     theta_s0_deg = -12.0                     # [-12.0] fixed θs0 [deg]
     selection = "paper"                      # ["paper"] see brdf_infer.paper_fit.SELECTIONS
     [outputs]
-    theta_i_deg = [18, 45, 60, 75, 80]       # [these] incidence angles of BRDF bands [deg]
+    theta_i_deg = [18, 45, 60, 75, 80]       # [the measured θi, at most 6] BRDF bands [deg]
     tis = true                               # [true] TIS band (needs out_of_plane)
     maps = true                              # [true] hemisphere maps (needs out_of_plane)
     tis_reference = "reference.csv"          # [none] theta_i_deg,tis,label points to compare
@@ -86,6 +86,7 @@ from brdf_infer.params import PAPER_CONSTANTS, PARAM_NAMES, PARAMETER_SETS, Hemi
 from brdf_infer.priors import DEFAULT_PRIORS, Prior, parse_prior
 
 BUILTIN_SCENES: tuple[str, ...] = ("lya", "lya-fixed", "vis-532")
+MAX_DEFAULT_BAND_ANGLES = 6
 DEFAULT_SCENE = "lya"
 _SCENE_SUFFIX = ".scene.toml"
 
@@ -124,14 +125,15 @@ class OutputSettings:
     """Which products a run makes.
 
     Attributes:
-        theta_i_deg: incidence angles of the in-plane BRDF bands [deg].
+        theta_i_deg: incidence angles of the in-plane BRDF bands [deg] (None: the measured
+            ones, see :meth:`Scene.band_theta_i_deg`).
         tis: make the TIS band (only with the out-of-plane extension).
         maps: make the hemisphere maps (only with the out-of-plane extension).
         tis_reference: CSV of reference TIS points (theta_i_deg, tis, label), or None.
         reference_params: a named parameter set drawn beside the BRDF bands, or None.
     """
 
-    theta_i_deg: tuple[float, ...] = (18.0, 45.0, 60.0, 75.0, 80.0)
+    theta_i_deg: tuple[float, ...] | None = None
     tis: bool = True
     maps: bool = True
     tis_reference: Path | None = None
@@ -207,9 +209,16 @@ class Scene:
         """Names of the parameters that are not fixed, in ``Params`` order."""
         return tuple(name for name in PARAM_NAMES if not self.priors[name].fixed)
 
-    @property
-    def output_theta_i_deg(self) -> tuple[float, ...]:
-        return self.outputs.theta_i_deg
+    def band_theta_i_deg(self, measurements: Measurements) -> tuple[float, ...]:
+        """Incidence angles of the in-plane BRDF bands [deg]: the scene's ``[outputs]
+        theta_i_deg``, else the measured ones (at most six, spread over their range)."""
+        if self.outputs.theta_i_deg is not None:
+            return self.outputs.theta_i_deg
+        angles = np.unique(measurements.theta_i_deg)
+        if angles.size > MAX_DEFAULT_BAND_ANGLES:
+            picks = np.round(np.linspace(0, angles.size - 1, MAX_DEFAULT_BAND_ANGLES)).astype(int)
+            angles = angles[picks]
+        return tuple(float(a) for a in angles)
 
     @property
     def makes_tis(self) -> bool:
@@ -528,7 +537,7 @@ def parse_scene(document: dict, path: Path) -> Scene:
             for name in HemisphereConstants._fields
         )
     )
-    theta_i_out = outputs.get("theta_i_deg", list(OutputSettings.theta_i_deg))
+    theta_i_out = outputs.get("theta_i_deg", [])
     if not isinstance(theta_i_out, list) or not all(
         isinstance(v, int | float) and not isinstance(v, bool) and 0 <= v < 90 for v in theta_i_out
     ):
@@ -555,7 +564,7 @@ def parse_scene(document: dict, path: Path) -> Scene:
             selection=_string(paper, "selection", path, default="paper"),
         ),
         outputs=OutputSettings(
-            theta_i_deg=tuple(float(v) for v in theta_i_out),
+            theta_i_deg=tuple(float(v) for v in theta_i_out) if theta_i_out else None,
             tis=_boolean(outputs, "tis", path, "outputs.", True),
             maps=_boolean(outputs, "maps", path, "outputs.", True),
             tis_reference=(

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 
@@ -74,3 +75,42 @@ def simulate_measurements(
     conditioned = handlers.condition(model, data=truth)
     draw = Predictive(conditioned, num_samples=1)(jax.random.PRNGKey(seed), mode="simulate")
     return replace(template, reflectance=np.exp(np.asarray(draw["obs"][0])))
+
+
+# Measurement geometries unlike the bundled scene's, for checking that sampling stays clean on
+# other data: (sample, θi, θs) per row [deg], one series.
+GEOMETRIES: dict[str, list[tuple[str, float, float]]] = {
+    "single-series": [
+        ("1", ti, ti + delta) for ti in (10, 25, 40, 55, 70) for delta in (-10, 0, 10, 15)
+    ],
+    "grazing": [("1", ti, ti + delta) for ti in (70, 74, 78, 82, 86) for delta in (-12, -8, -4, 0)],
+    "specular": [(str(k), ti, ti) for ti in (10, 25, 40, 55, 70) for k in (1, 2, 3, 4)],
+}
+
+
+def write_geometry_scene(directory: Path, geometry: str, params: Params, seed: int = 0) -> Path:
+    """A scene of :data:`GEOMETRIES` ``geometry`` with default settings (no priors, errors or
+    outputs named) and data simulated from its generative model at ``params``; returns the
+    scene file. Each row's σ column is 6 % of its value."""
+    from brdf_infer.scene import load_scene
+
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    rows = GEOMETRIES[geometry]
+    header = "series,sample,theta_i_deg,theta_s_deg,reflectance,reflectance_err"
+    placeholder = [f"A,{m},{ti:g},{ts:g},1e-4,6e-6" for m, ti, ts in rows]
+    (directory / "measurements.csv").write_text("\n".join([header, *placeholder]) + "\n")
+    path = directory / "scene.toml"
+    path.write_text(
+        f'name = "{geometry}"\nmeasurements = "measurements.csv"\n'
+        "[series.A]\naperture_diameter_mm = 7.5\naperture_distance_mm = 110.0\n"
+    )
+    scene = load_scene(path)
+    template = scene.load_measurements()
+    data = simulate_measurements(scene, template, params, seed=seed)
+    lines = [
+        f"A,{m},{ti:g},{ts:g},{r:.6e},{0.06 * r:.6e}"
+        for (m, ti, ts), r in zip(rows, data.reflectance, strict=True)
+    ]
+    (directory / "measurements.csv").write_text("\n".join([header, *lines]) + "\n")
+    return path

@@ -8,6 +8,8 @@ import sys
 import time
 
 import arviz as az
+import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -62,12 +64,38 @@ def test_the_two_samplers_agree_within_a_fifth_of_a_posterior_sd(nuts_run, emcee
         assert difference <= 0.2 * sd, (name, difference / sd)
 
 
-def test_reparametrisation_is_used_on_the_bundled_scene(lya):
-    model = build_posterior_model(*lya)
-    np.testing.assert_array_equal(model.anchors, [[18.0, 18.0], [45.0, 60.0], [80.0, 85.0]])
+def test_whitening_keeps_the_target_exactly(lya):
+    """log p(u) of the whitened model = log p(c(u)) of the direct model + ln|det ∂c/∂u|, the
+    Jacobian taken independently by forward-mode differentiation of c(u)."""
+    from numpyro.infer.util import log_density
+
+    whitened = build_posterior_model(*lya)
+    direct = build_posterior_model(*lya, reparametrise=False)
+    assert whitened.whiten and not direct.whiten
+    shared = {"alpha": 3.4, "t_s0": -0.13, "sample_sd": 0.04, "repeatability": 0.06}
+
+    def coefficients(u):
+        _, trace = log_density(whitened, (), {}, {**shared, "linear_std": u})
+        return jnp.stack([trace[name]["value"] for name in ("log_brdf0", "b1", "b2", "b3")])
+
+    @jax.jit
+    def densities(u):
+        c = coefficients(u)
+        values = dict(zip(("log_brdf0", "b1", "b2", "b3"), c, strict=True))
+        log_whitened = log_density(whitened, (), {}, {**shared, "linear_std": u})[0]
+        log_direct = log_density(direct, (), {}, {**shared, **values})[0]
+        return log_whitened, log_direct, jax.jacfwd(coefficients)(u)
+
+    for u in (jnp.zeros(4), jnp.array([0.7, -1.2, 0.4, 2.0])):
+        log_whitened, log_direct, jacobian = densities(u)
+        expected = log_direct + jnp.linalg.slogdet(jacobian)[1]
+        assert float(log_whitened) == pytest.approx(float(expected), rel=1e-10, abs=1e-8)
+
+
+def test_fixed_coefficients_stay_out_of_the_whitened_block(lya):
     fixed = build_posterior_model(load_scene("lya-fixed"), lya[1])
-    assert fixed.anchors is not None
-    assert build_posterior_model(*lya, reparametrise=False).anchors is None
+    assert fixed.whiten
+    assert build_posterior_model(*lya, reparametrise=False).whiten is False
 
 
 def test_posterior_file_holds_every_group_and_the_paper_unit_parameters(nuts_run):

@@ -98,16 +98,50 @@ def test_report_opens_with_the_verdict_then_the_sections(good_report):
         text.index(h)
         for h in (
             "Verdict",
+            '<div class="result">',
+            "TIS(θi = 18°)",
+            "π·BRDF0",
+            "In-plane BRDF at the scene",
             "The run",
             "ArviZ summary",
             "Diagnostics",
             "Fit against the data",
+            "Error model",
             "Products",
             "Ray-tracing validation",
         )
     ]
     assert order == sorted(order)
     assert "R-hat ≤ 1.01" in text and "Pareto k" in text and "TIS [%]" in text
+    assert "b2 = a2·90^(1+α)" in text  # the priors table names each prior's coordinate
+
+
+def test_a_scene_without_a_reference_draws_no_reference(lya, tmp_path):
+    """Captions and legends describe what is drawn: no reference curve, no reference words."""
+    import dataclasses
+
+    from brdf_infer.report._figures import brdf_bands
+
+    scene, measurements = lya
+    bare = dataclasses.replace(
+        scene, outputs=dataclasses.replace(scene.outputs, reference_params=None)
+    )
+    bands = {"brdf_inplane": json.loads(json.dumps(_tiny_band()))}
+    figure = brdf_bands(bands, bare, measurements)
+    labels = [t.get_text() for t in figure.axes[0].get_legend().get_texts()]
+    assert not any("reference" in label or "paper" in label for label in labels), labels
+
+
+def _tiny_band() -> dict:
+    import numpy as np
+
+    theta_s = list(np.arange(-90.0, 90.5, 1.0))
+    values = [[0.01] * len(theta_s)]
+    return {
+        "theta_i_deg": [45.0],
+        "theta_s_deg": theta_s,
+        **{k: values for k in ("median", "lo68", "hi68", "lo95", "hi95")},
+    }
 
 
 def test_deliberately_bad_run_lists_its_failures(lya, tmp_path, capsys):

@@ -2,7 +2,7 @@
 with ArviZ diagnostics and credible bands for the BRDF and the TIS."""
 
 from brdf_infer.posterior._bands import QUANTILES, compute_bands, draws_params, tis_band
-from brdf_infer.posterior._model import PosteriorModel, build_posterior_model, choose_anchors
+from brdf_infer.posterior._model import PosteriorModel, build_posterior_model
 from brdf_infer.posterior._results import (
     BANDS_FILE,
     POSTERIOR_FILE,
@@ -26,7 +26,6 @@ __all__ = [
     "PosteriorModel",
     "PosteriorRun",
     "build_posterior_model",
-    "choose_anchors",
     "compute_bands",
     "diagnostics",
     "draws_params",

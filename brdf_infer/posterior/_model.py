@@ -9,14 +9,23 @@ multivariate normal of the rows' ln R with covariance D + W Wᵀ, marginalised o
 calibration and (linearised) angle effects; with ``angle_method = "latent"`` the angle errors
 are sampled as latent variables instead. For ``spread`` independent normals.
 
-Reparametrisation. (b1, b2, b3) and (α, θs0) form a curved ridge: changing α or θs0
-rescales every power term, and the coefficients must follow nonlinearly. When all three
-coefficients are free, the sampler instead moves the model's ln-BRDF excess
-E_k = ln BRDF(θi_k, θs_k) − ln BRDF0 at three measured anchor geometries (the lowest, median
-and highest incidence angle, each at its largest measured θs). For fixed (α, θs0) the map
-E = A(α, θs0)·b is linear, so b = A⁻¹E, and the prior stays exactly the scene's prior on the
-b's through the log-Jacobian −ln|det A|. On the bundled data this removes the divergences of
-the b-parametrisation and raises the bulk ESS two- to fivefold (see README).
+Reparametrisation. For fixed (α, θs0) the model's ln R is linear in the coefficients
+c = (ln BRDF0, b1, b2, b3) — the paper's own observation (Sec. 4.2: "for fixed values of
+parameters α and θs0, the other parameters … can be found … using the linear regression").
+In c and (α, θs0) the posterior is a curved ridge whose shape depends on where the scene
+measured. The sampler therefore moves whitened coefficients u with
+
+    c = m(α, θs0, scales) + L(α, θs0, scales)⁻ᵀ u,
+
+m and L Lᵀ the mean and precision of c in the linear-Gaussian regression of the measured ln R
+on the design at (α, θs0) — with the scene's priors on c (as normals) and the rows' covariance
+without its angle terms (generalised least squares, so that shared sample and calibration
+effects widen the level as they should). That is a smooth bijection for every
+(α, θs0, scales), so with its log-Jacobian −Σ ln Lᵢᵢ and the exact prior of c the target
+stays exactly the scene's posterior; but u is close to N(0, I) and nearly independent of
+(α, θs0) for *any* measurement geometry, where the earlier anchor reparametrisation depended
+on the data covering three incidence angles above every θs0 the prior allows. Coefficients
+the scene fixes stay fixed; ``reparametrise=False`` samples the c directly.
 """
 
 from __future__ import annotations
@@ -39,7 +48,7 @@ from brdf_infer.error_model import (
     noise_layout,
 )
 from brdf_infer.measurements import Measurements
-from brdf_infer.model import positive_power
+from brdf_infer.model import log_fold, positive_power
 from brdf_infer.observations import (
     Observations,
     build_observation_model,
@@ -47,10 +56,11 @@ from brdf_infer.observations import (
     predicted_log_reflectance,
 )
 from brdf_infer.params import Params
-from brdf_infer.priors import DEFAULT_BOUNDS, Prior
+from brdf_infer.priors import Prior
 from brdf_infer.scene import Scene
 
-COEFFICIENTS = ("a1", "a2", "a3")
+LINEAR = ("brdf0", "a1", "a2", "a3")  # priors of c = (ln BRDF0, b1, b2, b3)
+LINEAR_SITES = ("log_brdf0", "b1", "b2", "b3")
 NOISE_SITES = ("sample_sd", "repeatability")
 
 
@@ -71,37 +81,50 @@ def prior_distribution(prior: Prior, scale: float = 1.0) -> dist.Distribution:
     raise ValueError(f"no distribution for a {prior.kind} prior")
 
 
-def anchor_basis(anchors: jnp.ndarray, alpha, t_s0) -> jnp.ndarray:
-    """A with E = A·b: rows [t x', t x'^α, t² x'^α] at the anchors (t = θi/90, x' = x/90)."""
-    t = anchors[:, 0] / ANGLE_SCALE_DEG
-    x = anchors[:, 1] / ANGLE_SCALE_DEG - t_s0
+def linear_design(rows: Observations, alpha, t_s0) -> jnp.ndarray:
+    """Columns [1, t x', t x'^α, t² x'^α] of c = (ln BRDF0, b1, b2, b3) in ln BRDF (Eq. 7),
+    t = θi/90°, x' = θs/90° − θs0/90° (zero below θs0)."""
+    t = rows.theta_i_deg / ANGLE_SCALE_DEG
+    x = rows.theta_s_deg / ANGLE_SCALE_DEG - t_s0
     x_linear = jnp.where(x > 0, x, 0.0)
     x_alpha = positive_power(x, alpha)
-    return jnp.stack([t * x_linear, t * x_alpha, t * t * x_alpha], axis=1)
+    return jnp.stack([jnp.ones_like(t), t * x_linear, t * x_alpha, t * t * x_alpha], axis=1)
 
 
-def choose_anchors(scene: Scene, measurements: Measurements) -> np.ndarray | None:
-    """Three measured (θi, θs) anchors, or None when the b-parametrisation must be used.
+def gaussian_moments(prior: Prior) -> tuple[float, float]:
+    """Mean and sd of a non-fixed prior, as a normal stand-in for the whitening regression."""
+    if prior.kind == "uniform":
+        return 0.5 * (prior.lower + prior.upper), (prior.upper - prior.lower) / np.sqrt(12.0)
+    return prior.loc, prior.scale  # normal; truncated normal: its untruncated moments suffice
 
-    Anchors need a1–a3 free, three distinct incidence angles, and θs above every θs0 the
-    prior allows (so that A stays regular).
+
+def whitened_coefficients(design, target, factor, diagonal, prior_mean, prior_sd, standard):
+    """c = m + L⁻ᵀ u and ln|∂c/∂u| for the regression target = design·c + noise,
+    Cov(noise) = D + W Wᵀ (Woodbury: one small Cholesky).
+
+    Args:
+        design: (rows, k) columns of the free coefficients.
+        target: (rows,) ln R minus everything that does not depend on c.
+        factor: (rows, q) W.
+        diagonal: (rows,) D.
+        prior_mean, prior_sd: (k,) normal stand-in of the coefficients' prior.
+        standard: (k,) the whitened coordinates u.
     """
-    if not all(name in scene.free_parameters for name in COEFFICIENTS):
-        return None
-    prior = scene.priors["theta_s0"]
-    if prior.fixed:
-        highest_theta_s0 = prior.value
-    else:
-        highest_theta_s0 = (
-            prior.upper if np.isfinite(prior.upper) else DEFAULT_BOUNDS["theta_s0"][1]
-        )
-    angles = np.unique(measurements.theta_i_deg)
-    if angles.size < 3:
-        return None
-    chosen = [angles[0], angles[(angles.size - 1) // 2], angles[-1]]
-    anchors = [[a, measurements.theta_s_deg[measurements.theta_i_deg == a].max()] for a in chosen]
-    anchors = np.array(anchors)
-    return anchors if np.all(anchors[:, 1] > highest_theta_s0) else None
+    design_d = design / diagonal[:, None]
+    factor_d = factor / diagonal[:, None]
+    capacitance = jnp.eye(factor.shape[1]) + factor.T @ factor_d
+    capacitance_cholesky = jnp.linalg.cholesky(capacitance)
+
+    def woodbury(left, right):  # leftᵀ (D + W Wᵀ)⁻¹ right, left and right already ÷ D
+        inner = jax.scipy.linalg.cho_solve((capacitance_cholesky, True), factor.T @ right)
+        return left.T @ (right * diagonal[:, None]) - (factor.T @ left).T @ inner
+
+    precision = jnp.diag(1.0 / prior_sd**2) + woodbury(design_d, design_d)
+    cholesky = jnp.linalg.cholesky(precision)
+    rhs = prior_mean / prior_sd**2 + woodbury(design_d, (target / diagonal)[:, None])[:, 0]
+    mean = jax.scipy.linalg.cho_solve((cholesky, True), rhs)
+    offset = jax.scipy.linalg.solve_triangular(cholesky.T, standard, lower=False)
+    return mean + offset, -jnp.sum(jnp.log(jnp.diag(cholesky)))
 
 
 class ModelData(NamedTuple):
@@ -110,13 +133,10 @@ class ModelData(NamedTuple):
     Attributes:
         rows: geometry and measured ln R of each row.
         noise: the rows' noise structure.
-        anchors: (3, 2) anchor geometries (θi, θs) [deg] of the reparametrisation (unused
-            when the model samples the b's directly).
     """
 
     rows: Observations
     noise: NoiseLayout
-    anchors: jnp.ndarray
 
 
 class LikelihoodParts(NamedTuple):
@@ -134,7 +154,7 @@ class PosteriorModel:
     Attributes:
         scene: the scene (priors, error model, model components).
         data: the scene's own data (the default argument of the model).
-        use_anchors: sample the anchor excess instead of the b's.
+        whiten: sample the whitened coefficients u instead of c (module docstring).
         sample_names: the physical samples, in order of appearance.
         row_samples: the physical sample of each row.
         row_series: index of each row's series (in order of appearance).
@@ -144,15 +164,11 @@ class PosteriorModel:
 
     scene: Scene
     data: ModelData
-    use_anchors: bool
+    whiten: bool
     sample_names: tuple[str, ...]
     row_samples: tuple[str, ...]
     row_series: tuple[int, ...]
     sigma_scale: float = 1.0
-
-    @property
-    def anchors(self) -> np.ndarray | None:
-        return np.asarray(self.data.anchors) if self.use_anchors else None
 
     @property
     def errors(self):
@@ -165,12 +181,12 @@ class PosteriorModel:
             data: the rows (default: the scene's).
             mode: ``fit`` (``obs`` observed), ``predict`` (``obs`` drawn, e.g. for the
                 posterior predictive) or ``simulate`` (every parameter drawn from its prior
-                directly, without the anchor reparametrisation, and ``obs`` drawn: the
-                generative model of SBC).
+                directly, without the reparametrisation, and ``obs`` drawn: the generative
+                model of SBC).
         """
         data = self.data if data is None else data
-        params = self._parameters(data, reparametrise=mode != "simulate")
         scales = self._noise_scales()
+        params = self._parameters(data, scales, whiten=self.whiten and mode != "simulate")
         rows = data.rows
         if self.errors.angles_on and self.errors.angle_method == "latent":
             theta_i, theta_s = self._latent_angles(data, scales)
@@ -201,7 +217,7 @@ class PosteriorModel:
     def _components(self) -> tuple:
         return self.scene.model.fold, self.scene.model.constants
 
-    def _parameters(self, data: ModelData, reparametrise: bool) -> Params:
+    def _parameters(self, data: ModelData, scales: NoiseScales, whiten: bool) -> Params:
         priors = self.scene.priors
 
         def parameter(name: str, site: str, scale: float = 1.0):
@@ -210,34 +226,63 @@ class PosteriorModel:
                 return jnp.asarray(prior.value / scale)
             return numpyro.sample(site, prior_distribution(prior, scale))
 
-        log_brdf0 = parameter("brdf0", "log_brdf0")
         alpha = parameter("alpha", "alpha")
         if priors["alpha"].fixed:
             numpyro.deterministic("alpha", alpha)
         t_s0 = parameter("theta_s0", "t_s0", ANGLE_SCALE_DEG)
-        if self.use_anchors and reparametrise:
-            excess = numpyro.sample(
-                "anchor_excess", dist.ImproperUniform(dist.constraints.real, (), (3,))
-            )
-            basis = anchor_basis(data.anchors, alpha, t_s0)
-            b = jnp.linalg.solve(basis, excess)
-            log_prior = sum(
-                prior_distribution(priors[name]).log_prob(b[k])
-                for k, name in enumerate(COEFFICIENTS)
-            )
-            numpyro.factor("coefficient_prior", log_prior - jnp.linalg.slogdet(basis)[1])
-            b1, b2, b3 = (numpyro.deterministic(n, b[k]) for k, n in enumerate(("b1", "b2", "b3")))
+        free = [k for k, name in enumerate(LINEAR) if not priors[name].fixed]
+        if whiten and free:
+            coefficients = self._whitened(data, scales, alpha, t_s0, free)
         else:
-            b1, b2, b3 = (
-                parameter(name, site)
-                for name, site in zip(COEFFICIENTS, ("b1", "b2", "b3"), strict=True)
-            )
+            coefficients = [
+                parameter(name, site) for name, site in zip(LINEAR, LINEAR_SITES, strict=True)
+            ]
+        log_brdf0, b1, b2, b3 = coefficients
         params = from_internal(
             jnp.stack(jnp.broadcast_arrays(log_brdf0, b1, b2, b3, alpha, t_s0), axis=-1)
         )
         for name in ("brdf0", "a1", "a2", "a3", "theta_s0"):
             numpyro.deterministic(name, getattr(params, name))
         return params
+
+    def _whitened(self, data: ModelData, scales: NoiseScales, alpha, t_s0, free: list[int]):
+        """The coefficients c from whitened coordinates u (module docstring)."""
+        priors = self.scene.priors
+        rows, noise = data.rows, data.noise
+        fixed_values = jnp.array(
+            [priors[name].value if priors[name].fixed else 0.0 for name in LINEAR]
+        )
+        design = linear_design(rows, alpha, t_s0)
+        fold, constants = self._components
+        offset = rows.log_aperture + design @ fixed_values
+        if fold:
+            offset = offset + jnp.where(
+                rows.theta_s_deg >= 0, log_fold(rows.theta_s_deg, constants), 0.0
+            )
+        zero = jnp.zeros_like(rows.theta_i_deg)
+        factor, diagonal = covariance_factors(noise, scales, zero, zero)  # no angle terms
+        moments = np.array([gaussian_moments(priors[LINEAR[k]]) for k in free])
+        standard = numpyro.sample(
+            "linear_std", dist.ImproperUniform(dist.constraints.real, (), (len(free),))
+        )
+        values, log_jacobian = whitened_coefficients(
+            design[:, free],
+            rows.log_reflectance - offset,
+            factor * self.sigma_scale,
+            diagonal * self.sigma_scale**2,
+            jnp.asarray(moments[:, 0]),
+            jnp.asarray(moments[:, 1]),
+            standard,
+        )
+        log_prior = sum(
+            prior_distribution(priors[LINEAR[k]]).log_prob(values[position])
+            for position, k in enumerate(free)
+        )
+        numpyro.factor("coefficient_prior", log_prior + log_jacobian)
+        coefficients = list(fixed_values)
+        for position, k in enumerate(free):
+            coefficients[k] = numpyro.deterministic(LINEAR_SITES[k], values[position])
+        return coefficients
 
     def _noise_scales(self) -> NoiseScales:
         errors = self.errors
@@ -327,16 +372,10 @@ class PosteriorModel:
         return jax.jit(jax.vmap(lambda p, s: self.likelihood_parts(p, s)))(params, scales)
 
 
-def build_model_data(
-    scene: Scene, measurements: Measurements, anchors: np.ndarray | None
-) -> ModelData:
+def build_model_data(scene: Scene, measurements: Measurements) -> ModelData:
     """The :class:`ModelData` of ``measurements`` under ``scene``."""
     rows = build_observation_model(scene, measurements).data
-    return ModelData(
-        rows=rows,
-        noise=noise_layout(scene.errors, measurements),
-        anchors=jnp.asarray(np.zeros((3, 2)) if anchors is None else anchors, float),
-    )
+    return ModelData(rows=rows, noise=noise_layout(scene.errors, measurements))
 
 
 def build_posterior_model(
@@ -347,13 +386,12 @@ def build_posterior_model(
     Args:
         scene: priors, error model, components.
         measurements: every row, each sample separately.
-        reparametrise: use the anchor reparametrisation where possible (off: the b's).
+        reparametrise: sample whitened coefficients (off: the coefficients themselves).
     """
-    anchors = choose_anchors(scene, measurements) if reparametrise else None
     return PosteriorModel(
         scene=scene,
-        data=build_model_data(scene, measurements, anchors),
-        use_anchors=anchors is not None,
+        data=build_model_data(scene, measurements),
+        whiten=reparametrise,
         sample_names=tuple(dict.fromkeys(str(s) for s in measurements.sample)),
         row_samples=tuple(str(s) for s in measurements.sample),
         row_series=tuple(

@@ -109,7 +109,7 @@ def inference_data(model: PosteriorModel, draws: Draws, seed: int) -> az.Inferen
             "sigma_row": ["row"],
             "sample_index": ["row"],
             "series_index": ["row"],
-            "anchor_excess": ["anchor"],
+            "linear_std": ["coefficient"],
             "rotation_error_std": ["rotation_setting"],
             "camera_error_std": ["row"],
         },
@@ -128,7 +128,7 @@ def inference_data(model: PosteriorModel, draws: Draws, seed: int) -> az.Inferen
             "error_model": json.dumps(scene.errors.describe()),
             "free_parameters": json.dumps(list(scene.free_parameters)),
             "samples": json.dumps(list(model.sample_names)),
-            "anchors": json.dumps(None if model.anchors is None else model.anchors.tolist()),
+            "reparametrised": int(model.whiten),
             "versions": json.dumps(_versions()),
             "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
         }

@@ -74,7 +74,7 @@ def run_fingerprint(model: PosteriorModel, measurements: Measurements) -> dict[s
         "fold": scene.model.fold,
         "constants": scene.model.constants._asdict(),
         "priors": {name: dataclasses.asdict(prior) for name, prior in scene.priors.items()},
-        "anchors": None if model.anchors is None else model.anchors.tolist(),
+        "reparametrised": model.whiten,
     }
     return {
         "scene": digest(scene.path.read_bytes()),
@@ -205,7 +205,11 @@ def run_posterior(
     idata = inference_data(model, result, seed)
     params = draws_params(result.sites)
     bands = compute_bands(
-        params, scene.output_theta_i_deg, scene.model.fold, scene.model.constants, scene.makes_tis
+        params,
+        scene.band_theta_i_deg(measurements),
+        scene.model.fold,
+        scene.model.constants,
+        scene.makes_tis,
     )
     checks = diagnostics(idata, result, scene.free_parameters)
     tis_70 = (
@@ -218,7 +222,7 @@ def run_posterior(
         "sampler": result.sampler,
         "settings": result.settings,
         "error_model": scene.errors.describe(),
-        "options": {"anchors": None if model.anchors is None else model.anchors.tolist()},
+        "options": {"reparametrised": model.whiten},
         "n_points": len(measurements),
         "median": {name: float(np.median(getattr(params, name))) for name in PARAM_NAMES},
         "noise": {

@@ -67,7 +67,21 @@ def write_report(run: Path, progress=print) -> tuple[Path, list[str]]:
         progress(f"  figure: {name}")
         figures.append((name, caption, figure_png(make())))
 
-    add("trace", "Trace plots of the six parameters (paper units).", lambda: _figures.trace(idata))
+    reference = scene.outputs.reference_params
+    add(
+        "brdf_bands",
+        "In-plane BRDF at the scene's incidence angles: posterior median, 68 % and 95 % bands, "
+        "and the measured raw reflectance converted by Eq. (6)"
+        + (f"; dashed: the reference parameter set '{reference}'" if reference else "")
+        + ".",
+        lambda: _figures.brdf_bands(bands, scene, rows),
+    )
+    add(
+        "trace",
+        "Trace plots in the sampler's well-conditioned coordinates (ln BRDF0, b1–b3, α, θs0 "
+        "and the learned noise scales).",
+        lambda: _figures.trace(idata),
+    )
     add("rank", "Rank plots: chains that mix give flat histograms.", lambda: _figures.rank(idata))
     add("pair", "Pair plot; divergent transitions marked.", lambda: _figures.pair(idata))
     if "energy" in idata.sample_stats:
@@ -96,23 +110,19 @@ def write_report(run: Path, progress=print) -> tuple[Path, list[str]]:
             lambda: spread,
         )
     add("pareto_k", "PSIS-LOO Pareto k per measurement.", lambda: _figures.pareto_k(loo))
-    add(
-        "brdf_bands",
-        "In-plane BRDF: posterior median, 68 % and 95 % bands, data and the paper's curve "
-        "(cf. Fig. 11).",
-        lambda: _figures.brdf_bands(bands, scene, rows),
-    )
     if "tis" in bands:
         add(
             "tis_band",
-            "TIS(θi) band with the scene's reference points.",
+            "TIS(θi): posterior median, 68 % and 95 % bands"
+            + (", with the scene's reference points" if scene.outputs.tis_reference else "")
+            + ".",
             lambda: _figures.tis_band(bands, scene.load_tis_reference()),
         )
     if scene.makes_maps:
         add(
             "hemisphere",
-            "Hemisphere maps (cf. Fig. 9): posterior median (top) and relative width of the 95 % "
-            "band (bottom).",
+            "Hemisphere maps (cf. Fig. 9): posterior median BRDF on one logarithmic colour scale "
+            "(top) and the relative width of its 95 % band (bottom).",
             lambda: _figures.hemisphere_maps(draws_params(idata.posterior), scene.model.constants),
         )
     traces = _load_traces(run)
@@ -148,6 +158,8 @@ def write_report(run: Path, progress=print) -> tuple[Path, list[str]]:
             f"emcee ≥ {THRESHOLDS['tau_multiple']} autocorrelation times."
         )
         + "</p>",
+        _result_box(summary, bands, scene.band_theta_i_deg(rows)),
+        *(_html.figure(png, caption) for name, caption, png in figures if name == "brdf_bands"),
         "<h2>The run</h2>",
         _html.table(
             ["item", "value"],
@@ -167,14 +179,9 @@ def write_report(run: Path, progress=print) -> tuple[Path, list[str]]:
                 ["created", attrs.get("created", "")],
             ],
         ),
-        "<h3>Priors (each on its well-conditioned coordinate)</h3>",
-        _html.table(
-            ["parameter", "kind", "loc", "scale", "lower", "upper", "value"],
-            [
-                [name, p.kind, p.loc, p.scale, p.lower, p.upper, p.value]
-                for name, p in scene.priors.items()
-            ],
-        ),
+        "<h3>Priors</h3>",
+        "<p>Each prior is on the coordinate named (the sampler's well-conditioned one).</p>",
+        _priors_table(scene),
         "<h3>Data</h3>",
         _html.table(
             ["series", "sample", "θi [deg]", "θs [deg]", "R [-]", "σ_R [-]"],
@@ -231,7 +238,7 @@ def write_report(run: Path, progress=print) -> tuple[Path, list[str]]:
         *(
             _html.figure(png, caption)
             for name, caption, png in figures
-            if name in ("brdf_bands", "tis_band", "hemisphere")
+            if name in ("tis_band", "hemisphere")
         ),
         _tis_table(bands) if "tis" in bands else "",
         *(
@@ -253,6 +260,58 @@ def write_report(run: Path, progress=print) -> tuple[Path, list[str]]:
 
 
 SPREAD_VARIANT = "spread"
+PRIOR_COORDINATES = {
+    "brdf0": "ln BRDF0 [ln sr⁻¹]",
+    "a1": "b1 = a1·90² [-]",
+    "a2": "b2 = a2·90^(1+α) [-]",
+    "a3": "b3 = a3·90^(2+α) [-]",
+    "alpha": "α [-]",
+    "theta_s0": "θs0 [deg]",
+}
+
+
+def _priors_table(scene) -> str:
+    rows = []
+    for name, prior in scene.priors.items():
+        if prior.fixed:
+            settings = f"fixed at {prior.value:g}"
+        elif prior.kind == "normal":
+            settings = f"N({prior.loc:g}, {prior.scale:g})"
+        elif prior.kind == "uniform":
+            settings = f"U[{prior.lower:g}, {prior.upper:g}]"
+        else:
+            settings = f"N({prior.loc:g}, {prior.scale:g}) on [{prior.lower:g}, {prior.upper:g}]"
+        rows.append([name, PRIOR_COORDINATES[name], settings])
+    return _html.table(["parameter", "prior on the coordinate", "prior"], rows)
+
+
+def _result_box(summary: dict, bands: dict, angles) -> str:
+    """The answer first: TIS at the scene's incidence angles and π·BRDF0, 95 % intervals."""
+    rows = []
+    if "tis" in bands:
+        grid = np.asarray(bands["tis"]["theta_i_deg"])
+        for angle in angles:
+            values = [np.interp(angle, grid, bands["tis"][k]) for k in ("median", "lo95", "hi95")]
+            rows.append(
+                [
+                    f"TIS(θi = {angle:g}°)",
+                    f"{100 * values[0]:.2f} %",
+                    f"{100 * values[1]:.2f} – {100 * values[2]:.2f} %",
+                ]
+            )
+    brdf0 = summary["pi_brdf0"]
+    rows.append(
+        [
+            "π·BRDF0 (near-normal TIS, Sec. 7)",
+            f"{100 * brdf0['median']:.2f} %",
+            f"{100 * brdf0['lo95']:.2f} – {100 * brdf0['hi95']:.2f} %",
+        ]
+    )
+    return (
+        '<div class="result"><h2>Result</h2>'
+        + _html.table(["quantity", "posterior median", "95 % credible interval"], rows)
+        + "</div>"
+    )
 
 
 def _loo_pits(run: Path, summary: dict) -> dict[str, tuple[list, float]]:

@@ -4,14 +4,10 @@ from __future__ import annotations
 
 import json
 
-import matplotlib
-
-from brdf_infer._arviz import az
-
-matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
+from brdf_infer._arviz import az
 from brdf_infer.model import brdf_hemisphere, brdf_inplane, reflectance_to_brdf
 from brdf_infer.params import PARAM_NAMES, PARAMETER_SETS, HemisphereConstants, Params
 from brdf_infer.scene import Scene
@@ -19,26 +15,90 @@ from brdf_infer.scene import Scene
 MAP_THETA_I_DEG = (5.0, 30.0, 50.0, 70.0)
 
 
-def _sampled(idata: az.InferenceData) -> list[str]:
-    """The free parameters of the run (also a chain that never moved is shown)."""
+# The sampler's well-conditioned coordinates (brdf_infer.coordinates) and noise scales, with
+# their units: what the trace and pair plots show (in paper units a2, a3 are spikes).
+SAMPLER_COORDINATES = {
+    "log_brdf0": "ln BRDF0 [ln sr⁻¹]",
+    "b1": "b1 = a1·90² [-]",
+    "b2": "b2 = a2·90^(1+α) [-]",
+    "b3": "b3 = a3·90^(2+α) [-]",
+    "alpha": "α [-]",
+    "theta_s0": "θs0 [deg]",
+    "sample_sd": "sample sd τ [ln R]",
+    "repeatability": "repeatability [ln R]",
+}
+_PAPER_NAME = {"log_brdf0": "brdf0", "b1": "a1", "b2": "a2", "b3": "a3"}
+
+
+def sampled_coordinates(idata: az.InferenceData) -> list[str]:
+    """The run's free coordinates (also a chain that never moved is shown)."""
     free = json.loads(idata.posterior.attrs.get("free_parameters", json.dumps(PARAM_NAMES)))
-    return [n for n in PARAM_NAMES if n in free]
+    return [
+        name
+        for name in SAMPLER_COORDINATES
+        if name in idata.posterior
+        and (
+            _PAPER_NAME.get(name, name) in free
+            or name
+            in (
+                "sample_sd",
+                "repeatability",
+            )
+        )
+    ]
+
+
+SHORT_NAMES = {
+    "log_brdf0": "ln BRDF0",
+    "b1": "b1",
+    "b2": "b2",
+    "b3": "b3",
+    "alpha": "α",
+    "theta_s0": "θs0 [deg]",
+    "sample_sd": "τ",
+    "repeatability": "σ_rep",
+}
+COORDINATE_NOTE = (
+    "ln BRDF0 [ln sr⁻¹]; b1 = a1·90², b2 = a2·90^(1+α), b3 = a3·90^(2+α) [-]; α [-]; θs0 [deg]; "
+    "sample sd τ and repeatability σ_rep [ln R]"
+)
+
+
+def _labeller(short: bool = False):
+    from arviz.labels import MapLabeller
+
+    return MapLabeller(var_name_map=SHORT_NAMES if short else SAMPLER_COORDINATES)
 
 
 def trace(idata: az.InferenceData):
-    axes = az.plot_trace(idata, var_names=_sampled(idata), compact=False, figsize=(10, 11))
-    figure = axes.ravel()[0].figure
-    figure.suptitle(
-        "Trace (paper units: brdf0 sr⁻¹, a1 deg⁻², a2 deg^(−1−α), a3 deg^(−2−α), θs0 deg)"
+    names = sampled_coordinates(idata)
+    axes = az.plot_trace(
+        idata,
+        var_names=names,
+        compact=False,
+        figsize=(11, 1.6 * len(names)),
+        labeller=_labeller(),
     )
+    figure = axes.ravel()[0].figure
+    for axis in axes.ravel():
+        axis.tick_params(labelsize=7)
+        axis.title.set_fontsize(9)
+    figure.suptitle("Trace in the sampler's coordinates (left: density per chain; right: draws)")
     figure.tight_layout()
     return figure
 
 
 def rank(idata: az.InferenceData):
-    names = _sampled(idata)
-    figure, axes = plt.subplots(2, 3, figsize=(11, 6))
-    az.plot_rank(idata, var_names=names, ax=axes.ravel()[: len(names)])
+    names = sampled_coordinates(idata)
+    columns = 4
+    lines = int(np.ceil(len(names) / columns))
+    figure, axes = plt.subplots(lines, columns, figsize=(12, 2.8 * lines), squeeze=False)
+    az.plot_rank(idata, var_names=names, ax=axes.ravel()[: len(names)], labeller=_labeller())
+    for axis in axes.ravel():
+        axis.tick_params(labelsize=7)
+        axis.title.set_fontsize(9)
+        axis.xaxis.label.set_fontsize(8)
+        axis.yaxis.label.set_fontsize(8)
     for axis in axes.ravel()[len(names) :]:
         axis.set_visible(False)
     figure.suptitle("Rank plots per chain (uniform when chains agree)")
@@ -48,18 +108,24 @@ def rank(idata: az.InferenceData):
 
 def pair(idata: az.InferenceData):
     has_divergences = "diverging" in idata.sample_stats
+    names = sampled_coordinates(idata)
     axes = az.plot_pair(
         idata,
-        var_names=_sampled(idata),
+        var_names=names,
         kind="scatter",
         divergences=has_divergences,
         marginals=True,
-        figsize=(11, 11),
+        figsize=(12, 12),
+        textsize=9,
+        labeller=_labeller(short=True),
         scatter_kwargs={"alpha": 0.15, "s": 2},
     )
     figure = np.ravel(axes)[0].figure
+    for axis in np.ravel(axes):
+        axis.tick_params(labelsize=7)
     note = " (divergences in red)" if has_divergences else ""
-    figure.suptitle(f"Pairs of the parameters, paper units{note}")
+    figure.suptitle(f"Pairs in the sampler's coordinates{note}:\n{COORDINATE_NOTE}", fontsize=10)
+    figure.subplots_adjust(top=0.93, left=0.07, bottom=0.06, right=0.98)
     return figure
 
 
@@ -156,7 +222,7 @@ def brdf_bands(bands: dict, scene: Scene, rows) -> plt.Figure:
         reference = scene.outputs.reference_params
         if reference is not None:
             curve = brdf_inplane(angle, theta_s, PARAMETER_SETS[reference], scene.model.fold)
-            axis.plot(theta_s, np.asarray(curve), "k--", lw=1, label=f"paper ({reference})")
+            axis.plot(theta_s, np.asarray(curve), "k--", lw=1, label=f"reference ({reference})")
         here = rows.theta_i_deg == angle
         if here.any():
             axis.plot(
@@ -215,35 +281,49 @@ def tis_band(bands: dict, reference: list[tuple[float, float, str]] = ()) -> plt
 
 
 def hemisphere_maps(params: Params, constants: HemisphereConstants, draws: int = 400) -> plt.Figure:
-    """Polar maps (Fig. 9 convention) of the posterior median and relative 95 % width."""
+    """Polar maps (Fig. 9 convention) of the posterior median BRDF on one shared logarithmic
+    colour scale, and of the relative width of its 95 % band on one shared linear scale."""
+    from matplotlib.colors import LogNorm, Normalize
+
     take = np.linspace(0, np.size(params.brdf0) - 1, min(draws, np.size(params.brdf0))).astype(int)
     batch = Params(*(np.asarray(v)[take][:, None, None] for v in params))
     theta = np.linspace(0.0, 89.0, 46)
     phi = np.linspace(0.0, 360.0, 91)
     grid_theta, grid_phi = np.meshgrid(theta, phi, indexing="ij")
-    figure, axes = plt.subplots(2, 4, figsize=(16, 8), subplot_kw={"projection": "polar"})
-    for column, angle in enumerate(MAP_THETA_I_DEG):
+    medians, widths = [], []
+    for angle in MAP_THETA_I_DEG:
         values = np.asarray(
             brdf_hemisphere(angle, grid_theta[None], grid_phi[None], batch, True, constants)
         )
         low, median, high = np.quantile(values, [0.025, 0.5, 0.975], axis=0)
-        for row, (data, label, cmap) in enumerate(
-            [
-                (np.log10(median), "log10 BRDF [sr⁻¹]", "magma"),
-                ((high - low) / median, "95 % width / median [-]", "viridis"),
-            ]
-        ):
+        medians.append(median)
+        widths.append((high - low) / median)
+    floor = max(
+        min(float(np.min(m)) for m in medians), 1e-6 * max(float(np.max(m)) for m in medians)
+    )
+    norms = (
+        LogNorm(vmin=floor, vmax=max(float(np.max(m)) for m in medians)),
+        Normalize(vmin=0.0, vmax=max(float(np.max(w)) for w in widths)),
+    )
+    labels = ("BRDF [sr⁻¹], posterior median", "95 % band width / median [-]")
+    figure, axes = plt.subplots(
+        2, 4, figsize=(15, 7.6), subplot_kw={"projection": "polar"}, layout="constrained"
+    )
+    for row, (maps, norm, label, cmap) in enumerate(
+        zip((medians, widths), norms, labels, ("viridis", "cividis"), strict=True)
+    ):
+        for column, angle in enumerate(MAP_THETA_I_DEG):
             axis = axes[row, column]
             mesh = axis.pcolormesh(
-                np.radians(grid_phi), grid_theta, data, shading="auto", cmap=cmap
+                np.radians(grid_phi), grid_theta, maps[column], shading="auto", cmap=cmap, norm=norm
             )
             axis.set_ylim(0, 90)
             axis.set_yticks([30, 60, 90])
-            axis.set_title(f"θi = {angle:g}°" if row == 0 else "", pad=12)
-            figure.colorbar(mesh, ax=axis, shrink=0.7, label=label)
+            axis.tick_params(labelsize=7)
+            axis.set_title(f"θi = {angle:g}°" if row == 0 else "", pad=10)
+        figure.colorbar(mesh, ax=axes[row, :].tolist(), shrink=0.8, label=label)
     figure.suptitle(
         "Full-hemisphere BRDF, Eqs. (8), (10): radius θ [deg], angle φ [deg] "
-        "(forward side at φ = 180°)"
+        "(forward side at φ = 180°); one colour scale per row"
     )
-    figure.tight_layout()
     return figure

@@ -7,12 +7,18 @@ import html
 from collections.abc import Sequence
 
 STYLE = """
-body { font-family: system-ui, sans-serif; max-width: 1150px; margin: 2em auto; color: #222; }
+body { font-family: system-ui, sans-serif; max-width: 1150px; margin: 2em auto; padding: 0 1em;
+  color: #222; }
 h1 { font-size: 1.6em; } h2 { border-bottom: 1px solid #ccc; padding-bottom: .2em; }
 table { border-collapse: collapse; margin: .6em 0; font-size: .9em; }
 td, th { border: 1px solid #ddd; padding: .25em .6em; text-align: right; }
 th { background: #f4f4f4; } td:first-child, th:first-child { text-align: left; }
 .verdict { padding: .8em 1.2em; border-radius: 6px; margin: 1em 0; }
+.result { padding: .4em 1.2em .8em; border: 1px solid #4a78c2; border-radius: 6px;
+  background: #eef3fb; margin: 1em 0; }
+.result h2 { border: none; margin: .3em 0; }
+.result table { font-size: 1.05em; }
+table { max-width: 100%; overflow-x: auto; display: block; }
 .pass { background: #e6f4ea; border: 1px solid #34a853; }
 .fail { background: #fce8e6; border: 1px solid #d93025; }
 figure { margin: 1.2em 0; } figure img { max-width: 100%; }

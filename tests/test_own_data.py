@@ -1,0 +1,127 @@
+"""The first hour with one's own data: other geometries sample cleanly with defaults, and a
+scene names its problems before any work."""
+
+import time
+
+import pytest
+
+from brdf_infer.params import UV_PAPER
+from brdf_infer.posterior import run_posterior
+from brdf_infer.scene import load_scene
+from brdf_infer.synthetic import GEOMETRIES, write_geometry_scene
+from tests.helpers import REPO, run_cli
+
+
+@pytest.mark.parametrize(
+    "geometry",
+    [
+        "single-series",
+        pytest.param("grazing", marks=pytest.mark.slow),
+        pytest.param("specular", marks=pytest.mark.slow),
+    ],
+)
+def test_other_geometries_sample_cleanly_with_default_settings(tmp_path, geometry):
+    """Default priors, error model and NUTS settings; 0 divergences, R-hat ≤ 1.01, ESS ≥ 400.
+    (Each geometry compiles its own sampler; two of them run with the slow tests and in the
+    benchmark, which also runs seeds 0–2 of each.)"""
+    assert geometry in GEOMETRIES
+    scene = load_scene(write_geometry_scene(tmp_path, geometry, UV_PAPER, seed=1))
+    run = run_posterior(scene, scene.load_measurements(), seed=1, progress=False)
+    diagnostics = run.summary["diagnostics"]
+    assert diagnostics["divergences"] == 0
+    assert diagnostics["r_hat_max"] <= 1.01
+    assert min(diagnostics["ess_bulk_min"], diagnostics["ess_tail_min"]) >= 400
+
+
+def readme_scene_example() -> str:
+    """The TOML block of the README's "Your own data" section, verbatim."""
+    text = (REPO / "README.md").read_text()
+    section = text[text.index("## Your own data") :]
+    return section.split("```toml\n", 1)[1].split("```", 1)[0]
+
+
+def test_readme_scene_example_runs_to_a_report(tmp_path, capsys):
+    """Copied verbatim with a CSV of the documented columns (series I of the bundled data)."""
+    (tmp_path / "scene.toml").write_text(readme_scene_example())
+    bundled = (REPO / "data" / "lya_measurements.csv").read_text().splitlines()
+    rows = [bundled[0]] + [line for line in bundled[1:] if line.startswith("I,")]
+    (tmp_path / "my_measurements.csv").write_text("\n".join(rows) + "\n")
+    out = tmp_path / "out"
+    code, stdout, err = run_cli(
+        "run",
+        str(tmp_path / "scene.toml"),
+        "--out",
+        str(out),
+        "--chains",
+        "2",
+        "--warmup",
+        "150",
+        "--draws",
+        "300",
+        capsys=capsys,
+    )
+    assert code == 0, err
+    assert (out / "report.html").is_file() and "report:" in stdout
+
+
+@pytest.mark.parametrize(
+    ("key", "line"),
+    [
+        ("measurements", 'measurements = "nowhere.csv"'),
+        ("outputs.tis_reference", 'tis_reference = "nowhere.csv"'),
+    ],
+)
+def test_a_scene_naming_a_missing_file_fails_before_any_work(tmp_path, capsys, key, line):
+    text = readme_scene_example()
+    if key == "measurements":
+        text = text.replace('measurements = "my_measurements.csv"', line)
+    else:
+        text = text.replace('# tis_reference = "reference.csv"', line)
+    (tmp_path / "scene.toml").write_text(text)
+    (tmp_path / "my_measurements.csv").write_text(
+        "series,sample,theta_i_deg,theta_s_deg,reflectance\nI,1,18,18,5e-5\n"
+    )
+    out = tmp_path / "out"
+    started = time.perf_counter()
+    code, stdout, err = run_cli(
+        "run", str(tmp_path / "scene.toml"), "--out", str(out), capsys=capsys
+    )
+    assert time.perf_counter() - started < 5
+    assert code == 2 and stdout == "" and err.count("\n") == 1
+    assert f"field '{key}'" in err and "nowhere.csv" in err and "my-coating" in err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["posterior", "--draws", "0"],
+        ["posterior", "--sampler", "emcee", "--warmup", "30000"],
+        ["run", "--chains", "0"],
+        ["sbc", "--replicates", "0"],
+    ],
+)
+def test_bad_options_create_nothing(tmp_path, capsys, argv):
+    out = tmp_path / "out"
+    code, stdout, err = run_cli(*argv, "--out", str(out), capsys=capsys)
+    assert code == 2 and stdout == "" and err.count("\n") == 1, err
+    assert not out.exists()
+
+
+def test_values_in_the_wrong_unit_are_warned_about(tmp_path, capsys):
+    from brdf_infer.measurements import load_measurements
+    from brdf_infer.params import PAPER_CONSTANTS, Params
+    from brdf_infer.plausibility import measurement_warnings, parameter_warnings
+
+    path = tmp_path / "radians.csv"
+    path.write_text(
+        "series,sample,theta_i_deg,theta_s_deg,reflectance,reflectance_err\n"
+        "I,1,0.3,0.3,5e-5,9e-5\nI,1,1.2,1.4,1e-3,1e-4\n"
+    )
+    warnings = measurement_warnings(load_measurements(path))
+    assert any("radians" in w for w in warnings)
+    assert any("larger than the value" in w and "rows 1" in w for w in warnings)
+    bright = Params(0.5, 0.0, 0.0, 0.0, 4.5, -12.0)
+    assert any("π·BRDF0" in w for w in parameter_warnings(bright, [10.0], PAPER_CONSTANTS))
+    assert any("TIS > 1" in w for w in parameter_warnings(bright, [10.0], PAPER_CONSTANTS))
+    assert parameter_warnings(UV_PAPER, [10.0, 70.0], PAPER_CONSTANTS) == []
