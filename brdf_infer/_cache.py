@@ -40,6 +40,7 @@ def enable_compilation_cache(path: Path | None = None) -> Path | None:
         path.mkdir(parents=True, exist_ok=True)
     except OSError:
         return None
+    jax.config.update("jax_enable_compilation_cache", True)
     jax.config.update("jax_compilation_cache_dir", str(path))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.2)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
@@ -47,5 +48,5 @@ def enable_compilation_cache(path: Path | None = None) -> Path | None:
 
 
 def disable_compilation_cache() -> None:
-    """Switch the persistent cache off for this process."""
-    jax.config.update("jax_compilation_cache_dir", None)
+    """Switch the persistent cache off for this process (before its first compilation)."""
+    jax.config.update("jax_enable_compilation_cache", False)

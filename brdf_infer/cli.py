@@ -785,9 +785,21 @@ def build_parser() -> argparse.ArgumentParser:
         dest="command", required=True, parser_class=_Parser, metavar="COMMAND"
     )
 
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument(
+        "--no-cache",
+        action="store_true",
+        help="do not use the persistent compilation cache (BRDF_INFER_CACHE, else "
+        "~/.cache/brdf_infer) for this run",
+    )
+
     def command(name: str, help_text: str) -> argparse.ArgumentParser:
         return commands.add_parser(
-            name, help=help_text, description=help_text, formatter_class=_HelpFormatter
+            name,
+            help=help_text,
+            description=help_text,
+            formatter_class=_HelpFormatter,
+            parents=[common],
         )
 
     def scene_command(name: str, help_text: str) -> argparse.ArgumentParser:
@@ -947,6 +959,10 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     args = build_parser().parse_args(argv)
     signal.signal(signal.SIGTERM, _interrupt)
+    if getattr(args, "no_cache", False):  # before anything is compiled
+        from brdf_infer._cache import disable_compilation_cache
+
+        disable_compilation_cache()
     try:
         require_float64()
         args.handler(args)

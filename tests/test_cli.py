@@ -63,10 +63,18 @@ def test_human_tables_show_error_beside_time(capsys):
     assert code == 0 and "sigma_E [%]" in out and "time [s]" in out
 
 
-def test_run_is_the_main_job_and_its_verdict_passes(tmp_path, capsys):
-    """The README's main job with its default settings: every diagnostic passes."""
+@pytest.mark.parametrize(
+    "settings",
+    [
+        pytest.param(["--chains", "2", "--warmup", "500", "--draws", "500"], id="reduced"),
+        pytest.param([], id="defaults", marks=pytest.mark.slow),
+    ],
+)
+def test_run_is_the_main_job_and_its_verdict_passes(tmp_path, capsys, settings):
+    """The README's main job (with its default settings among the slow tests): every
+    diagnostic passes."""
     out_dir = tmp_path / "out"
-    code, out, err = run_cli("run", "--out", str(out_dir), capsys=capsys)
+    code, out, err = run_cli("run", "--out", str(out_dir), *settings, capsys=capsys)
     assert code == 0, err
     assert "verdict: every diagnostic passes" in out
     assert (out_dir / "report.html").is_file()
