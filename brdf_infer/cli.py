@@ -19,6 +19,7 @@ from typing import Any, NoReturn
 
 import numpy as np
 
+from brdf_infer._cli_export import add_export_arguments, command_export
 from brdf_infer._outdir import check_output_dir
 from brdf_infer.errors import BadInputError
 
@@ -413,6 +414,10 @@ def _angles(values, option: str, low: float, high: float, upper_open: bool = Fal
             f"{array[bad][0]:g} deg is outside [{low:g}, {high:g}{bracket}", field=option
         )
     return array
+
+
+def _command_export(args: argparse.Namespace) -> None:
+    command_export(args, _angles, _table, _progress)
 
 
 def _command_brdf(args: argparse.Namespace) -> None:
@@ -932,6 +937,12 @@ def build_parser() -> argparse.ArgumentParser:
     sbc.add_argument("--target-accept", type=float, default=0.8, help="NUTS target acceptance")
     sbc.add_argument("--out", help="output directory (default: reports/<scene>/sbc)")
     sbc.set_defaults(handler=_command_sbc)
+
+    export = scene_command(
+        "export", "Zemax .BSDF tables or ABg fits of a parameter set or a posterior run"
+    )
+    add_export_arguments(export)
+    export.set_defaults(handler=_command_export)
 
     report = command("report", "HTML report of a posterior run: the answer, then diagnostics")
     report.add_argument("run_dir", help="directory of a posterior run (posterior.nc, ...)")

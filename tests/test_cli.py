@@ -66,7 +66,7 @@ def test_human_tables_show_error_beside_time(capsys):
 @pytest.mark.parametrize(
     "settings",
     [
-        pytest.param(["--chains", "2", "--warmup", "500", "--draws", "500"], id="reduced"),
+        pytest.param(["--chains", "4", "--warmup", "500", "--draws", "500"], id="reduced"),
         pytest.param([], id="defaults", marks=pytest.mark.slow),
     ],
 )

@@ -145,7 +145,8 @@ def _tiny_band() -> dict:
 
 
 def test_deliberately_bad_run_lists_its_failures(lya, tmp_path, capsys):
-    run_posterior(*lya, chains=1, warmup=150, draws=20, out=tmp_path, progress=False)
+    # warmup as in the shared reduced run, so its compiled program is reused; 20 draws fail
+    run_posterior(*lya, chains=1, warmup=500, draws=20, out=tmp_path, progress=False)
     code, out, err = run_cli("report", str(tmp_path), "--json", capsys=capsys)
     assert code == 0, err
     verdict = json.loads(out)["verdict"]

@@ -1,0 +1,195 @@
+"""``brdf-infer export``: arguments checked before any work, then the library's export."""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import sys
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from brdf_infer._outdir import check_output_dir
+from brdf_infer.errors import BadInputError
+
+MAX_INTEGRAL_ERROR = 0.01  # a table whose own hemisphere integral misses its TIS by more
+
+
+def add_export_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options of ``brdf-infer export``."""
+    source = parser.add_mutually_exclusive_group(required=True)
+    source.add_argument("--params", help="parameter set name (uv-paper, vis-paper) or JSON file")
+    source.add_argument("--run", help="posterior run directory: median, 95 %% bounds and draws")
+    source.add_argument(
+        "--check", metavar="FILE", help="read a .BSDF file and compare each table with its TIS"
+    )
+    parser.add_argument("--format", choices=["zemax-bsdf", "abg"], default="zemax-bsdf")
+    parser.add_argument("--out", help="output directory (required unless --check)")
+    parser.add_argument(
+        "--theta-i", type=float, nargs="+", help="angles of incidence [deg] (default 0, 5, …, 85)"
+    )
+    parser.add_argument("--azimuth-step", type=float, default=5.0, help="scatter azimuth [deg]")
+    parser.add_argument("--radial-step", type=float, default=1.0, help="scatter radial [deg]")
+    parser.add_argument(
+        "--draws",
+        type=int,
+        default=0,
+        help="--run: also write this many single-draw .BSDF files (abg: draws fitted, 100)",
+    )
+    parser.add_argument("--no-fold", action="store_true", help="leave out Eq. (10)")
+    parser.add_argument("--force", action="store_true", help="overwrite existing output files")
+
+
+def _checked_options(args: argparse.Namespace) -> None:
+    if not 0.0 < args.azimuth_step <= 45.0:
+        raise BadInputError(f"{args.azimuth_step:g} is outside (0, 45] deg", field="--azimuth-step")
+    if not 0.0 < args.radial_step <= 10.0:
+        raise BadInputError(f"{args.radial_step:g} is outside (0, 10] deg", field="--radial-step")
+    if args.draws < 0:
+        raise BadInputError(f"{args.draws} is negative", field="--draws")
+    if args.draws and args.run is None:
+        raise BadInputError("single draws need a posterior (--run)", field="--draws")
+    if args.out is None:
+        raise BadInputError("an output directory is required", field="--out")
+
+
+def _source(args: argparse.Namespace, scene_name: str):
+    from brdf_infer.export import Source
+    from brdf_infer.params import resolve_params
+    from brdf_infer.posterior import load_run_draws
+
+    if args.run is not None:
+        run = Path(args.run)
+        params, fold, constants = load_run_draws(run)
+        with contextlib.suppress(OSError, ValueError, KeyError):
+            scene_name = json.loads((run / "summary.json").read_text())["scene"]
+        return Source(str(run), params, True, fold and not args.no_fold, constants, scene_name)
+    from brdf_infer.scene import load_scene
+
+    scene = load_scene(scene_name)
+    return Source(
+        args.params,
+        resolve_params(args.params),
+        False,
+        not args.no_fold,
+        scene.model.constants,
+        scene.name,
+    )
+
+
+def command_export(
+    args: argparse.Namespace,
+    angles: Callable[..., np.ndarray],
+    table: Callable[[Sequence[str], Sequence[Sequence[str]]], str],
+    progress: Callable[[str], None],
+) -> None:
+    """Handler of ``brdf-infer export`` (``angles``, ``table``, ``progress`` from ``cli``)."""
+    from brdf_infer.export import DEFAULT_THETA_I_DEG, planned_files, run_export, scatter_grid
+
+    if args.check is not None:
+        _check_file(Path(args.check), args.json, table)
+        return
+    _checked_options(args)
+    theta_i = (
+        DEFAULT_THETA_I_DEG
+        if args.theta_i is None
+        else angles(args.theta_i, "--theta-i", 0.0, 90.0, upper_open=True)
+    )
+    out = check_output_dir(args.out)
+    source = _source(args, args.scene)
+    draws = args.draws if args.format == "zemax-bsdf" else (args.draws or 100)
+    existing = [name for name in planned_files(source, args.format, draws) if (out / name).exists()]
+    if existing and not args.force:
+        raise BadInputError(
+            f"{existing[0]} exists (use --force to overwrite)", file=out / existing[0]
+        )
+    grid = scatter_grid(np.unique(theta_i), args.azimuth_step, args.radial_step)
+    result = run_export(source, args.format, grid, out, args.draws, progress)
+    for entry in result["files"]:
+        if "table_integral" in entry:
+            error = np.max(np.abs(np.divide(entry["table_integral"], entry["tis"]) - 1.0))
+            if error > MAX_INTEGRAL_ERROR:
+                progress(
+                    f"warning: {entry['path']}: the table's hemisphere integral misses its TIS "
+                    f"by {100 * error:.1f} %; use a finer --radial-step / --azimuth-step"
+                )
+    if args.json:
+        print(json.dumps(result))
+        return
+    _print_result(result, table)
+
+
+def _print_result(result: dict, table) -> None:
+    if result["format"] == "abg":
+        rows = [
+            [
+                f"{r['theta_i_deg']:g}",
+                f"{r['A']:.4g}",
+                f"{r['B']:.4g}",
+                f"{r['g']:.4g}",
+                f"{100 * r['tis_model']:.4f}",
+                f"{abs(r['tis_abg'] / r['tis_model'] - 1):.1e}",
+                f"{r['rms_log_error']:.3f}",
+            ]
+            for r in result["rows"]
+        ]
+        headers = ["theta_i [deg]", "A [1/sr]", "B [-]", "g [-]", "TIS [%]", "|TIS_ABg/TIS-1|"]
+        print(table([*headers, "rms ln error [-]"], rows))
+    else:
+        rows = [
+            [
+                Path(f["path"]).name,
+                f["kind"],
+                f"{100 * min(f['tis']):.4f}–{100 * max(f['tis']):.4f}",
+                f"{np.max(np.abs(np.divide(f['table_integral'], f['tis']) - 1)):.1e}",
+            ]
+            for f in result["files"]
+        ]
+        print(table(["file", "kind", "TIS [%]", "max |table integral/TIS-1|"], rows))
+    folder = Path(result["files"][0]["path"]).parent
+    print(f"{len(result['files'])} files in {folder}/ ({result['seconds']:.1f} s)")
+
+
+def _check_file(path: Path, as_json: bool, table) -> None:
+    """Read a .BSDF file; per angle of incidence its TIS line and the table's own integral."""
+    from brdf_infer.export import read_bsdf, table_integral
+
+    contents = read_bsdf(path)
+    if contents.symmetry != "PlaneSymmetrical":
+        integrals = np.full(contents.tis.shape, np.nan)
+    else:
+        integrals = np.array(
+            [
+                [
+                    table_integral(t, contents.azimuth_deg, contents.radial_deg, block)
+                    for t, block in zip(contents.theta_i_deg, blocks, strict=True)
+                ]
+                for blocks in contents.bsdf
+            ]
+        )
+    payload = {
+        "path": str(path),
+        "symmetry": contents.symmetry,
+        "scatter_type": contents.scatter_type,
+        "theta_i_deg": contents.theta_i_deg.tolist(),
+        "azimuth_deg": contents.azimuth_deg.tolist(),
+        "radial_deg": contents.radial_deg.tolist(),
+        "tis": contents.tis.tolist(),
+        "table_integral": None if np.isnan(integrals).all() else integrals.tolist(),
+    }
+    if as_json:
+        print(json.dumps(payload))
+        return
+    print(
+        f"{path}: {contents.symmetry}, {contents.scatter_type}, "
+        f"{contents.theta_i_deg.size} angles of incidence, {contents.azimuth_deg.size} azimuths, "
+        f"{contents.radial_deg.size} radials",
+        file=sys.stdout,
+    )
+    rows = [
+        [f"{t:g}", f"{contents.tis[0, k]:.8g}", f"{integrals[0, k]:.6g}"]
+        for k, t in enumerate(contents.theta_i_deg)
+    ]
+    print(table(["theta_i [deg]", "TIS line [-]", "table integral [-]"], rows))

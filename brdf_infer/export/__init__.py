@@ -1,0 +1,64 @@
+"""Exports to ray tracers: Zemax tabular .BSDF files and TIS-preserving ABg fits, of one
+parameter set or of a posterior (median, 95 % bounds and single draws), and a reader of
+.BSDF files."""
+
+from brdf_infer.export._abg import (
+    AbgFit,
+    abg_bsdf,
+    abg_integral,
+    abg_log_bsdf,
+    beta_distance,
+    fit_abg,
+)
+from brdf_infer.export._files import (
+    ABG_COLUMNS,
+    FORMATS,
+    Source,
+    draw_indices,
+    export_abg,
+    export_zemax,
+    planned_files,
+    run_export,
+)
+from brdf_infer.export._grid import (
+    DEFAULT_AZIMUTH_STEP_DEG,
+    DEFAULT_RADIAL_STEP_DEG,
+    DEFAULT_THETA_I_DEG,
+    ScatterGrid,
+    brdf_table,
+    scatter_grid,
+    scattered_direction,
+    specular_frame_to_model,
+    table_integral,
+)
+from brdf_infer.export._zemax import BsdfFile, format_bsdf, read_bsdf, write_bsdf
+
+__all__ = [
+    "ABG_COLUMNS",
+    "DEFAULT_AZIMUTH_STEP_DEG",
+    "DEFAULT_RADIAL_STEP_DEG",
+    "DEFAULT_THETA_I_DEG",
+    "FORMATS",
+    "AbgFit",
+    "BsdfFile",
+    "ScatterGrid",
+    "Source",
+    "abg_bsdf",
+    "abg_integral",
+    "abg_log_bsdf",
+    "beta_distance",
+    "brdf_table",
+    "draw_indices",
+    "export_abg",
+    "export_zemax",
+    "fit_abg",
+    "format_bsdf",
+    "planned_files",
+    "read_bsdf",
+    "run_export",
+    "scatter_grid",
+    "scattered_direction",
+    "specular_frame_to_model",
+    "table_integral",
+    "write_bsdf",
+]

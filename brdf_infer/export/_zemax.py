@@ -1,0 +1,256 @@
+"""Zemax / Radiant "BSDF Data Interchange" tabular files (.BSDF): writer and reader.
+
+Layout (one keyword per line; ``#`` starts a comment line)::
+
+    Source Measured
+    Symmetry PlaneSymmetrical
+    SpectralContent Monochrome
+    ScatterType BRDF
+    SampleRotation 1
+    0
+    AngleOfIncidence N
+    <N angles>
+    ScatterAzimuth N
+    <N azimuths>
+    ScatterRadial N
+    <N radials>
+
+    Monochrome
+    DataBegin
+    TIS <value>                 (for every sample rotation, every angle of incidence)
+    <one row per azimuth: one BSDF value [sr⁻¹] per radial>
+    DataEnd
+
+Values are tab-separated with no trailing whitespace (strict readers refuse anything else);
+BSDF values carry 7 significant digits, TIS values 11. Angles in degrees; the scatter
+angles are in the specular frame (``brdf_infer.export._grid``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from brdf_infer._atomic import atomic_write_bytes
+from brdf_infer.errors import BadInputError
+
+_BSDF_FORMAT = "{:.6e}"  # 7 significant digits
+_TIS_FORMAT = "{:.10e}"  # 11 significant digits
+_SYMMETRIES = ("PlaneSymmetrical", "Asymmetrical")
+
+
+@dataclass
+class BsdfFile:
+    """Contents of a tabular BSDF file.
+
+    Attributes:
+        theta_i_deg: angles of incidence [deg], shape (n_aoi,).
+        azimuth_deg: scatter azimuths [deg], shape (n_azimuth,).
+        radial_deg: scatter radials [deg], shape (n_radial,).
+        tis: TIS line of every block, shape (n_rotation, n_aoi).
+        bsdf: tables [sr⁻¹], shape (n_rotation, n_aoi, n_azimuth, n_radial).
+        symmetry: ``PlaneSymmetrical`` or ``Asymmetrical``.
+        scatter_type: ``BRDF`` or ``BTDF``.
+        source: ``Measured`` or ``Modeled``.
+        sample_rotation_deg: sample rotations [deg], shape (n_rotation,).
+        comments: comment lines without their ``#``.
+    """
+
+    theta_i_deg: np.ndarray
+    azimuth_deg: np.ndarray
+    radial_deg: np.ndarray
+    tis: np.ndarray
+    bsdf: np.ndarray
+    symmetry: str = "PlaneSymmetrical"
+    scatter_type: str = "BRDF"
+    source: str = "Measured"
+    sample_rotation_deg: np.ndarray = field(default_factory=lambda: np.zeros(1))
+    comments: list[str] = field(default_factory=list)
+
+
+def _angles(values: np.ndarray) -> str:
+    return "\t".join(f"{float(v):g}" for v in values)
+
+
+def format_bsdf(contents: BsdfFile) -> str:
+    """The file's text (see the module docstring)."""
+    tis = np.asarray(contents.tis, float).reshape(len(contents.sample_rotation_deg), -1)
+    bsdf = np.asarray(contents.bsdf, float)
+    lines = [f"# {comment}".rstrip() for comment in contents.comments]
+    lines += [
+        f"Source {contents.source}",
+        f"Symmetry {contents.symmetry}",
+        "SpectralContent Monochrome",
+        f"ScatterType {contents.scatter_type}",
+        f"SampleRotation {len(contents.sample_rotation_deg)}",
+        _angles(contents.sample_rotation_deg),
+        f"AngleOfIncidence {len(contents.theta_i_deg)}",
+        _angles(contents.theta_i_deg),
+        f"ScatterAzimuth {len(contents.azimuth_deg)}",
+        _angles(contents.azimuth_deg),
+        f"ScatterRadial {len(contents.radial_deg)}",
+        _angles(contents.radial_deg),
+        "",
+        "Monochrome",
+        "DataBegin",
+    ]
+    for rotation in range(tis.shape[0]):
+        for aoi in range(tis.shape[1]):
+            lines.append("TIS " + _TIS_FORMAT.format(tis[rotation, aoi]))
+            table = np.where(bsdf[rotation, aoi] > 0.0, bsdf[rotation, aoi], 0.0)
+            lines += ("\t".join(_BSDF_FORMAT.format(v) for v in row) for row in table)
+    lines.append("DataEnd")
+    return "\n".join(lines) + "\n"
+
+
+def write_bsdf(path: str | Path, contents: BsdfFile) -> Path:
+    """Write ``contents`` atomically to ``path``."""
+    return atomic_write_bytes(path, format_bsdf(contents).encode("ascii"))
+
+
+# ---------------------------------------------------------------------------- reader
+
+
+class _Lines:
+    """Non-comment, non-blank lines with their 1-based numbers, and the comments."""
+
+    def __init__(self, path: Path, text: str):
+        self.path = path
+        self.comments: list[str] = []
+        self._items: list[tuple[int, str]] = []
+        for number, line in enumerate(text.splitlines(), start=1):
+            stripped = line.strip()
+            if stripped.startswith("#"):
+                self.comments.append(stripped[1:].strip())
+            elif stripped:
+                self._items.append((number, stripped))
+        self._position = 0
+        self.last_line = len(text.splitlines())
+
+    def error(self, problem: str, line: int | None = None) -> BadInputError:
+        return BadInputError(problem, file=self.path, line=line)
+
+    def next(self, expecting: str) -> tuple[int, str]:
+        if self._position >= len(self._items):
+            raise self.error(f"file ends where {expecting} was expected", self.last_line)
+        item = self._items[self._position]
+        self._position += 1
+        return item
+
+    def remaining(self) -> Iterator[tuple[int, str]]:
+        while self._position < len(self._items):
+            yield self.next("")
+
+
+def _numbers(lines: _Lines, number: int, text: str, count: int, what: str) -> np.ndarray:
+    words = text.split()
+    if len(words) != count:
+        raise lines.error(f"{what}: expected {count} values, found {len(words)}", number)
+    try:
+        values = np.array([float(w) for w in words])
+    except ValueError:
+        bad = next(w for w in words if not _is_number(w))
+        raise lines.error(f"{what}: '{bad}' is not a number", number) from None
+    if not np.all(np.isfinite(values)):
+        raise lines.error(f"{what}: values must be finite", number)
+    return values
+
+
+def _is_number(word: str) -> bool:
+    try:
+        float(word)
+    except ValueError:
+        return False
+    return True
+
+
+def _keyword(lines: _Lines, keyword: str) -> tuple[int, str]:
+    """The value after ``keyword`` on the next line."""
+    number, text = lines.next(f"'{keyword}'")
+    name, _, value = text.partition(" ")
+    if name != keyword:
+        raise lines.error(f"expected '{keyword}', found '{text[:40]}'", number)
+    return number, value.strip()
+
+
+def _counted_angles(lines: _Lines, keyword: str) -> np.ndarray:
+    number, value = _keyword(lines, keyword)
+    try:
+        count = int(value)
+    except ValueError:
+        raise lines.error(f"'{keyword}' needs a count, found '{value}'", number) from None
+    if count < 1:
+        raise lines.error(f"'{keyword}' needs a positive count, found {count}", number)
+    number, text = lines.next(f"the {count} values of '{keyword}'")
+    return _numbers(lines, number, text, count, keyword)
+
+
+def read_bsdf(path: str | Path) -> BsdfFile:
+    """Read a tabular BSDF file (plane-symmetric or asymmetric, monochrome).
+
+    Raises:
+        BadInputError: the file is missing, unreadable or malformed; the message names the
+            file and line.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8", errors="strict")
+    except FileNotFoundError:
+        raise BadInputError("no such file", file=path) from None
+    except (OSError, UnicodeDecodeError) as error:
+        raise BadInputError(f"cannot read: {error}", file=path) from None
+    lines = _Lines(path, text)
+    _, source = _keyword(lines, "Source")
+    number, symmetry = _keyword(lines, "Symmetry")
+    if symmetry not in _SYMMETRIES:
+        raise lines.error(f"Symmetry must be one of {', '.join(_SYMMETRIES)}", number)
+    number, spectral = _keyword(lines, "SpectralContent")
+    if spectral != "Monochrome":
+        raise lines.error(f"SpectralContent '{spectral}' is not supported (Monochrome)", number)
+    number, scatter_type = _keyword(lines, "ScatterType")
+    if scatter_type not in ("BRDF", "BTDF"):
+        raise lines.error(f"ScatterType must be BRDF or BTDF, found '{scatter_type}'", number)
+    rotation = _counted_angles(lines, "SampleRotation")
+    theta_i = _counted_angles(lines, "AngleOfIncidence")
+    azimuth = _counted_angles(lines, "ScatterAzimuth")
+    radial = _counted_angles(lines, "ScatterRadial")
+    number, text = lines.next("'Monochrome'")
+    if text != "Monochrome":
+        raise lines.error(f"expected 'Monochrome', found '{text[:40]}'", number)
+    number, text = lines.next("'DataBegin'")
+    if text != "DataBegin":
+        raise lines.error(f"expected 'DataBegin', found '{text[:40]}'", number)
+    tis = np.empty((rotation.size, theta_i.size))
+    bsdf = np.empty((rotation.size, theta_i.size, azimuth.size, radial.size))
+    for r in range(rotation.size):
+        for a in range(theta_i.size):
+            number, text = lines.next(f"'TIS' of angle of incidence {theta_i[a]:g}")
+            name, _, value = text.partition(" ")
+            if name != "TIS":
+                raise lines.error(f"expected 'TIS <value>', found '{text[:40]}'", number)
+            tis[r, a] = _numbers(lines, number, value, 1, "TIS")[0]
+            for k in range(azimuth.size):
+                number, text = lines.next(f"the row of azimuth {azimuth[k]:g}")
+                bsdf[r, a, k] = _numbers(lines, number, text, radial.size, "BSDF row")
+    number, text = lines.next("'DataEnd'")
+    if text != "DataEnd":
+        raise lines.error(f"expected 'DataEnd', found '{text[:40]}'", number)
+    for number, text in lines.remaining():
+        raise lines.error(f"unexpected content after DataEnd: '{text[:40]}'", number)
+    if np.any(bsdf < 0.0) or np.any(tis < 0.0):
+        raise BadInputError("negative BSDF or TIS values", file=path)
+    return BsdfFile(
+        theta_i_deg=theta_i,
+        azimuth_deg=azimuth,
+        radial_deg=radial,
+        tis=tis,
+        bsdf=bsdf,
+        symmetry=symmetry,
+        scatter_type=scatter_type,
+        source=source,
+        sample_rotation_deg=rotation,
+        comments=lines.comments,
+    )
