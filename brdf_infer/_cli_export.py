@@ -86,7 +86,13 @@ def command_export(
     progress: Callable[[str], None],
 ) -> None:
     """Handler of ``brdf-infer export`` (``angles``, ``table``, ``progress`` from ``cli``)."""
-    from brdf_infer.export import DEFAULT_THETA_I_DEG, planned_files, run_export, scatter_grid
+    from brdf_infer.export import (
+        DEFAULT_THETA_I_DEG,
+        planned_files,
+        record_export,
+        run_export,
+        scatter_grid,
+    )
 
     if args.check is not None:
         _check_file(Path(args.check), args.json, table)
@@ -107,6 +113,8 @@ def command_export(
         )
     grid = scatter_grid(np.unique(theta_i), args.azimuth_step, args.radial_step)
     result = run_export(source, args.format, grid, out, args.draws, progress)
+    if source.from_run:
+        record_export(Path(args.run), result)
     for entry in result["files"]:
         if "table_integral" in entry:
             error = np.max(np.abs(np.divide(entry["table_integral"], entry["tis"]) - 1.0))

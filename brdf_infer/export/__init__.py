@@ -12,12 +12,14 @@ from brdf_infer.export._abg import (
 )
 from brdf_infer.export._files import (
     ABG_COLUMNS,
+    EXPORTS_FILE,
     FORMATS,
     Source,
     draw_indices,
     export_abg,
     export_zemax,
     planned_files,
+    record_export,
     run_export,
 )
 from brdf_infer.export._grid import (
@@ -38,6 +40,7 @@ __all__ = [
     "DEFAULT_AZIMUTH_STEP_DEG",
     "DEFAULT_RADIAL_STEP_DEG",
     "DEFAULT_THETA_I_DEG",
+    "EXPORTS_FILE",
     "FORMATS",
     "AbgFit",
     "BsdfFile",
@@ -55,6 +58,7 @@ __all__ = [
     "format_bsdf",
     "planned_files",
     "read_bsdf",
+    "record_export",
     "run_export",
     "scatter_grid",
     "scattered_direction",

@@ -19,6 +19,7 @@ from __future__ import annotations
 import csv
 import datetime as dt
 import io
+import json
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -35,6 +36,7 @@ from brdf_infer.params import HemisphereConstants, Params, params_to_dict
 from brdf_infer.posterior import tis_band
 
 FORMATS = ("zemax-bsdf", "abg")
+EXPORTS_FILE = "exports.json"  # in a run folder: the exports made from it, for the report
 ABG_COLUMNS = ("theta_i_deg", "A", "B", "g", "tis_model", "tis_abg", "rms_log_error")
 _MEANING = {
     "params": "BRDF of one parameter set; TIS lines: its exact Eq. (9) TIS",
@@ -372,3 +374,24 @@ def run_export(
         }
     files = export_zemax(source, grid, out, draws, progress)
     return {"format": export_format, "files": files, "seconds": time.perf_counter() - start}
+
+
+def record_export(run: Path, result: dict) -> Path:
+    """Note an export of ``run`` in ``run/exports.json`` (one entry per format and folder), so
+    that ``brdf-infer report`` can show it."""
+    path = run / EXPORTS_FILE
+    try:
+        entries = json.loads(path.read_text())["exports"] if path.is_file() else []
+    except (OSError, ValueError, KeyError):
+        entries = []
+    folder = str(Path(result["files"][0]["path"]).parent.resolve())
+    entry = {
+        "format": result["format"],
+        "folder": folder,
+        "files": [
+            {"path": str(Path(f["path"]).resolve()), "kind": f["kind"]} for f in result["files"]
+        ],
+        **({"rows": result["rows"]} if "rows" in result else {}),
+    }
+    keep = [e for e in entries if (e["format"], e["folder"]) != (entry["format"], folder)]
+    return atomic_write_json(path, {"exports": [*keep, entry]})
