@@ -21,6 +21,16 @@ settings.register_profile("explore", max_examples=2000, **_PROPERTY_DEFAULTS)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci" if os.environ.get("CI") else "dev"))
 
 
+def pytest_collection_modifyitems(items):
+    """Under pytest-xdist (``--dist loadgroup``), the tests sharing a session run go to one
+    worker, so that run is computed once."""
+    for item in items:
+        for shared in ("nuts_run", "emcee_run"):
+            if shared in getattr(item, "fixturenames", ()):
+                item.add_marker(pytest.mark.xdist_group(shared))
+                break
+
+
 @pytest.fixture(scope="session")
 def lya():
     scene = load_scene("lya")

@@ -159,3 +159,25 @@ def test_deliberately_bad_run_lists_its_failures(lya, tmp_path, capsys):
 def test_report_of_a_folder_without_a_run_is_a_clear_error(tmp_path, capsys):
     code, out, err = run_cli("report", str(tmp_path), capsys=capsys)
     assert code == 2 and out == "" and "no posterior.nc here" in err
+
+
+def test_report_shows_the_exports_of_its_run(nuts_run, tmp_path, capsys):
+    """A copy of the reduced run, exported as .BSDF and ABg, gets an Export section with the
+    table plot and the ABg table."""
+    import shutil
+
+    run = tmp_path / "run"
+    shutil.copytree(nuts_run.out, run)
+    for argv in (
+        ["--theta-i", "0", "30", "60", "80", "--azimuth-step", "15", "--radial-step", "5"],
+        ["--format", "abg", "--theta-i", "20", "70", "--draws", "2"],
+    ):
+        out = tmp_path / argv[1]
+        code, _, err = run_cli("export", "--run", str(run), *argv, "--out", str(out), capsys=capsys)
+        assert code == 0, err
+    entries = json.loads((run / "exports.json").read_text())["exports"]
+    assert [e["format"] for e in entries] == ["zemax-bsdf", "abg"]
+    write_report(run, progress=lambda message: None)
+    text = (run / "report.html").read_text()
+    assert "<h2>Export</h2>" in text and "rms ln error" in text
+    assert (run / "figures" / "export.png").stat().st_size > 0

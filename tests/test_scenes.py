@@ -37,14 +37,9 @@ def json_of(capsys, *argv):
     return json.loads(out)
 
 
-@pytest.mark.parametrize(
-    "scene",
-    [
-        # vis-532 and lya-fixed have their own tests (published fit, fixed parameters)
-        *(pytest.param(s, marks=pytest.mark.slow) for s in BUILTIN_SCENES if s != "lya"),
-        "minimal",
-    ],
-)
+@pytest.mark.slow  # ≈ 60 s per scene; vis-532 and lya-fixed have their own tests (published
+# fit, fixed parameters) and a minimal user scene runs end to end in tests/test_own_data.py
+@pytest.mark.parametrize("scene", [*(s for s in BUILTIN_SCENES if s != "lya"), "minimal"])
 def test_every_scene_runs_through_fit_posterior_and_tis(scene, minimal_scene, tmp_path, capsys):
     name = str(minimal_scene) if scene == "minimal" else scene
     paper = json_of(capsys, "fit", name, "--method", "paper", "--selection", "samples")

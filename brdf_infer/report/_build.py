@@ -15,6 +15,7 @@ from brdf_infer.errors import BadInputError
 from brdf_infer.params import PARAM_NAMES
 from brdf_infer.posterior import BANDS_FILE, POSTERIOR_FILE, SUMMARY_FILE, THRESHOLDS, draws_params
 from brdf_infer.report import _figures, _html, _noise
+from brdf_infer.report._export import abg_table, load_exports, plot_export
 from brdf_infer.report._raytrace import figure_png, plot_detector_images, plot_raytrace
 from brdf_infer.scene import load_scene
 
@@ -124,6 +125,23 @@ def write_report(run: Path, progress=print) -> tuple[Path, list[str]]:
             "Hemisphere maps (cf. Fig. 9): posterior median BRDF on one logarithmic colour scale "
             "(top) and the relative width of its 95 % band (bottom).",
             lambda: _figures.hemisphere_maps(draws_params(idata.posterior), scene.model.constants),
+        )
+    exports = load_exports(run)
+    tables = next(
+        (
+            {f["kind"]: Path(f["path"]) for f in e["files"] if f["kind"] != "draw"}
+            for e in reversed(exports)
+            if e["format"] == "zemax-bsdf"
+        ),
+        None,
+    )
+    if tables:
+        add(
+            "export",
+            "Exported .BSDF tables read back as a ray tracer reads them, cut through the plane "
+            "of incidence (black: median solid, 95 % bounds dotted), against the model's "
+            "posterior median and 95 % band evaluated directly (blue).",
+            lambda: plot_export(tables, draws_params(idata.posterior), scene.model.constants),
         )
     traces = _load_traces(run)
     if traces:
@@ -241,6 +259,7 @@ def write_report(run: Path, progress=print) -> tuple[Path, list[str]]:
             if name in ("tis_band", "hemisphere")
         ),
         _tis_table(bands) if "tis" in bands else "",
+        *_export_section(exports, figures),
         *(
             ["<h2>Ray-tracing validation (Sec. 6)</h2>", _raytrace_table(traces)]
             + [
@@ -257,6 +276,24 @@ def write_report(run: Path, progress=print) -> tuple[Path, list[str]]:
     path = atomic_write_bytes(run / REPORT_FILE, document.encode())
     progress(f"report written in {time.perf_counter() - started:.1f} s")
     return path, failures
+
+
+def _export_section(exports: list[dict], figures) -> list[str]:
+    """The Export section: where the files are, the table plot and the ABg table."""
+    if not exports:
+        return []
+    parts = ["<h2>Export</h2>"]
+    for entry in exports:
+        names = ", ".join(Path(f["path"]).name for f in entry["files"][:6])
+        more = len(entry["files"]) - 6
+        parts.append(
+            f"<p>{_html.escape(entry['format'])} in <code>{_html.escape(entry['folder'])}</code>: "
+            f"{_html.escape(names)}{f' and {more} more' if more > 0 else ''}</p>"
+        )
+        if entry["format"] == "abg" and entry.get("rows"):
+            parts.append(abg_table(entry["rows"]))
+    parts += [_html.figure(png, caption) for name, caption, png in figures if name == "export"]
+    return parts
 
 
 SPREAD_VARIANT = "spread"

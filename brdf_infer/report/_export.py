@@ -87,13 +87,20 @@ def plot_export(
         ax.set_theta_direction(-1)
         ax.set_thetamin(-90)
         ax.set_thetamax(90)
-        ticks = ax.get_yticks()
-        ax.set_yticks(ticks[ticks > 0])
-        ax.set_yticklabels([f"{t + floor:.0f}" for t in ticks[ticks > 0]], fontsize=7)
+        decades = np.arange(np.ceil(floor), np.floor(np.max(high)) + 1.0)
+        decades = decades[:: max(1, int(np.ceil(decades.size / 3)))]  # at most 3 labels
+        ax.set_yticks(decades - floor)
+        ax.set_yticklabels([f"1e{d:.0f}" for d in decades], fontsize=7)
+        ax.set_ylim(0.0, np.max(high) - floor + 0.2)
         ax.set_title(f"θi = {theta_i:g}°", fontsize=10)
-        ax.set_xlabel("θs [deg] (forward to the right); radius: log10 BRDF [sr⁻¹]", fontsize=7)
-    axes[-1].legend(loc="lower right", fontsize=7, bbox_to_anchor=(1.15, -0.25))
-    figure.tight_layout()
+    handles, labels = axes[0].get_legend_handles_labels()
+    figure.legend(handles, labels, loc="lower center", ncol=len(labels), fontsize=8)
+    figure.suptitle(
+        "In-plane cut; angle: θs [deg] from the normal (forward scatter to the right); "
+        "radius: BRDF [sr⁻¹], logarithmic",
+        fontsize=9,
+    )
+    figure.tight_layout(rect=(0, 0.08, 1, 0.95))
     return figure
 
 
