@@ -106,6 +106,9 @@ def command_export(
     out = check_output_dir(args.out)
     source = _source(args, args.scene)
     draws = args.draws if args.format == "zemax-bsdf" else (args.draws or 100)
+    available = int(np.size(source.params.brdf0))
+    if source.from_run and draws > available:
+        raise BadInputError(f"{draws} > the run's {available} draws", field="--draws")
     existing = [name for name in planned_files(source, args.format, draws) if (out / name).exists()]
     if existing and not args.force:
         raise BadInputError(

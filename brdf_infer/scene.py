@@ -1,5 +1,5 @@
 """Scenes: a TOML file naming the measurements, the geometry of each series, the error model
-and the analysis settings (DESIGN.md, "Scene TOML"). Built-in scenes ship in ``data/``.
+and the analysis settings (README, "Your own data"). Built-in scenes ship in ``data/``.
 
 Schema (keys other than these are errors; defaults in brackets)::
 

@@ -1,4 +1,4 @@
-"""The command line's JSON contracts (DESIGN.md) and human output."""
+"""The command line's JSON contracts (README, "Command line") and human output."""
 
 import json
 

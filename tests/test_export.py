@@ -245,6 +245,13 @@ def test_abg_over_posterior_draws_gives_intervals(nuts_run, tmp_path, capsys):
         assert row["tis_abg"] == pytest.approx(row["tis_model"], rel=1e-6)
 
 
+def test_more_draws_than_the_run_has_is_a_clear_error(nuts_run, tmp_path, capsys):
+    out = tmp_path / "out"
+    argv = ["export", "--run", str(nuts_run.out), "--draws", "100000", "--out", str(out)]
+    code, _, err = run_cli(*argv, capsys=capsys)
+    assert code == 2 and "--draws" in err and "2000 draws" in err and not out.exists()
+
+
 def test_existing_files_are_kept_without_force(tmp_path, capsys):
     argv = ["--params", "uv-paper", "--theta-i", "10", *COARSE, "--out", str(tmp_path)]
     export_json(capsys, *argv)

@@ -88,6 +88,10 @@ def draw_indices(count: int, draws: int) -> np.ndarray:
     return np.unique(np.round(np.linspace(0, count - 1, draws)).astype(int))
 
 
+def _parameter_text(params: Params) -> str:
+    return ", ".join(f"{name}={value:.10g}" for name, value in params_to_dict(params).items())
+
+
 def _comments(source: Source, kind: str, grid: ScatterGrid, extra: list[str]) -> list[str]:
     from brdf_infer import __version__
 
@@ -95,7 +99,7 @@ def _comments(source: Source, kind: str, grid: ScatterGrid, extra: list[str]) ->
         f"brdf_infer {__version__} export, {dt.datetime.now(dt.UTC).isoformat(timespec='seconds')}",
         f"scene: {source.scene}",
         f"source: {'posterior run ' if source.from_run else 'parameter set '}{source.label}",
-        f"file: {kind}: {_MEANING[kind.split('_')[0] if kind.startswith('draw') else kind]}",
+        f"file: {kind}: {_MEANING[kind]}",
         "model: Strumik et al. 2024 Eqs. (7), (8)"
         + (", (10)" if source.fold else "")
         + f"; constants {dict(source.constants._asdict())}",
@@ -141,21 +145,17 @@ def _write_table_file(
     path = write_bsdf(out / name, contents)
     return {
         "path": str(path),
-        "kind": kind.split("_")[0] if kind.startswith("draw") else kind,
+        "kind": kind,
         "theta_i_deg": grid.theta_i_deg.tolist(),
         "tis": tis_lines.tolist(),
         "table_integral": integral.tolist(),
     }
 
 
-def _tables(
-    grid: ScatterGrid, params: Params, source: Source, progress: Callable[[str], None]
-) -> np.ndarray:
-    """BRDF tables of every θi: (n_aoi, [draws,] n_azimuth, n_radial)."""
-    tables = []
-    for t in grid.theta_i_deg:
-        progress(f"tables at theta_i = {t:g} deg")
-        tables.append(
+def _tables(grid: ScatterGrid, params: Params, source: Source) -> np.ndarray:
+    """BRDF tables of one parameter set at every θi: (n_aoi, n_azimuth, n_radial)."""
+    return np.stack(
+        [
             np.asarray(
                 brdf_table(
                     float(t),
@@ -166,8 +166,9 @@ def _tables(
                     source.constants,
                 )
             )
-        )
-    return np.stack(tables)
+            for t in grid.theta_i_deg
+        ]
+    )
 
 
 def export_zemax(
@@ -184,9 +185,8 @@ def export_zemax(
     """
     theta_i = grid.theta_i_deg
     if not source.from_run:
-        tables = _tables(grid, source.params, source, progress)
+        tables = _tables(grid, source.params, source)
         tis_lines = np.asarray(tis(theta_i, source.params, source.fold, source.constants))
-        values = ", ".join(f"{k}={v:.10g}" for k, v in params_to_dict(source.params).items())
         return [
             _write_table_file(
                 out,
@@ -196,7 +196,7 @@ def export_zemax(
                 grid,
                 tables,
                 tis_lines,
-                [f"parameters: {values}"],
+                [f"parameters: {_parameter_text(source.params)}"],
             )
         ]
     band = tis_band(source.params, theta_i, source.fold, source.constants)
@@ -234,20 +234,19 @@ def export_zemax(
         )
     for k, index in enumerate(draw_indices(count, draws) if draws else []):
         one = Params(*(float(np.asarray(v)[index]) for v in source.params))
-        tables = _tables(grid, one, source, lambda message: None)
+        tables = _tables(grid, one, source)
         progress(f"draw {k + 1} of {draws}")
         tis_lines = np.asarray(tis(theta_i, one, source.fold, source.constants))
-        values = ", ".join(f"{n}={v:.10g}" for n, v in params_to_dict(one).items())
         files.append(
             _write_table_file(
                 out,
                 f"draw_{k:03d}.bsdf",
-                f"draw_{k:03d}",
+                "draw",
                 source,
                 grid,
                 tables,
                 tis_lines,
-                [f"posterior draw {index} of {count}: {values}"],
+                [f"posterior draw {index} of {count}: {_parameter_text(one)}"],
             )
         )
     return files
