@@ -121,14 +121,15 @@ class _Lines:
         self.path = path
         self.comments: list[str] = []
         self._items: list[tuple[int, str]] = []
-        for number, line in enumerate(text.splitlines(), start=1):
+        lines = text.splitlines()
+        for number, line in enumerate(lines, start=1):
             stripped = line.strip()
             if stripped.startswith("#"):
                 self.comments.append(stripped[1:].strip())
             elif stripped:
                 self._items.append((number, stripped))
         self._position = 0
-        self.last_line = len(text.splitlines())
+        self.last_line = len(lines)
 
     def error(self, problem: str, line: int | None = None) -> BadInputError:
         return BadInputError(problem, file=self.path, line=line)

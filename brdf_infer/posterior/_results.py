@@ -81,11 +81,13 @@ def sample_index(model: PosteriorModel) -> np.ndarray:
     return np.array([names.index(str(s)) for s in model.row_samples], dtype=int)
 
 
-def inference_data(model: PosteriorModel, draws: Draws, seed: int) -> az.InferenceData:
-    """ArviZ InferenceData with posterior, sample_stats, log_likelihood (the leave-one-out
-    conditionals, for PSIS-LOO), posterior_predictive, observed_data and constant_data; the six
-    ``Params`` fields in paper units in the posterior."""
-    log_lik, _ = loo_terms(model, draws.sites)
+def inference_data(
+    model: PosteriorModel, draws: Draws, seed: int, log_lik: np.ndarray
+) -> az.InferenceData:
+    """ArviZ InferenceData with posterior, sample_stats, log_likelihood (``log_lik``: the
+    leave-one-out conditionals of :func:`loo_terms`, for PSIS-LOO), posterior_predictive,
+    observed_data and constant_data; the six ``Params`` fields in paper units in the
+    posterior."""
     rows, noise = model.data.rows, model.data.noise
     idata = az.from_dict(
         posterior=dict(draws.sites),

@@ -88,15 +88,15 @@ def _interval(values: np.ndarray) -> dict[str, float]:
     return {"median": float(median), "lo95": float(low), "hi95": float(high)}
 
 
-def predictive_checks(model: PosteriorModel, idata: az.InferenceData, sites: dict) -> dict:
+def predictive_checks(idata: az.InferenceData, log_lik: np.ndarray, cdf: np.ndarray) -> dict:
     """PSIS-LOO (elpd with its standard error, p_loo, largest Pareto k) and the LOO-PIT of
-    every row with a Kolmogorov–Smirnov test of its uniformity."""
+    every row with a Kolmogorov–Smirnov test of its uniformity, from the leave-one-out terms
+    of :func:`loo_terms` (``idata`` holds the same ``log_lik``)."""
     import warnings
 
     with warnings.catch_warnings():  # high Pareto k are reported in the verdict instead
         warnings.simplefilter("ignore", UserWarning)
         loo = az.loo(idata, pointwise=True)
-    log_lik, cdf = loo_terms(model, sites)
     pit = loo_pit(log_lik.reshape(-1, log_lik.shape[-1]), cdf.reshape(-1, cdf.shape[-1]))
     return {
         "elpd_loo": float(loo.elpd_loo),
@@ -202,7 +202,8 @@ def run_posterior(
             fingerprint=run_fingerprint(model, measurements),
             progress=progress,
         )
-    idata = inference_data(model, result, seed)
+    log_lik, cdf = loo_terms(model, result.sites)  # once: for PSIS-LOO and the LOO-PIT
+    idata = inference_data(model, result, seed, log_lik)
     params = draws_params(result.sites)
     bands = compute_bands(
         params,
@@ -229,7 +230,7 @@ def run_posterior(
             name: _interval(result.sites[name]) for name in NOISE_SITES if name in result.sites
         },
         "diagnostics": checks,
-        "predictive": predictive_checks(model, idata, result.sites),
+        "predictive": predictive_checks(idata, log_lik, cdf),
         "tis_70deg": tis_70,
         "pi_brdf0": {key: bands["pi_brdf0"][key] for key in ("median", "lo95", "hi95")},
         "seconds": {**result.seconds, "total": time.perf_counter() - started},
