@@ -252,6 +252,17 @@ def test_more_draws_than_the_run_has_is_a_clear_error(nuts_run, tmp_path, capsys
     assert code == 2 and "--draws" in err and "2000 draws" in err and not out.exists()
 
 
+def test_a_grid_too_coarse_for_its_tis_is_warned_about(tmp_path, capsys):
+    """Planted fault for the table-integral check: 45° azimuth and 10° radial steps miss the
+    TIS by 17 % at θi = 85°."""
+    argv = ["--params", "uv-paper", "--theta-i", "0", "85", "--azimuth-step", "45"]
+    code, _, err = run_cli("export", *argv, "--radial-step", "10", "--out", str(tmp_path / "a"),
+                           capsys=capsys)  # fmt: skip
+    assert code == 0 and "misses its TIS" in err
+    code, _, err = run_cli("export", *argv[:4], "--out", str(tmp_path / "b"), capsys=capsys)
+    assert code == 0 and "misses its TIS" not in err
+
+
 def test_existing_files_are_kept_without_force(tmp_path, capsys):
     argv = ["--params", "uv-paper", "--theta-i", "10", *COARSE, "--out", str(tmp_path)]
     export_json(capsys, *argv)

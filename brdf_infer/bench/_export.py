@@ -43,7 +43,7 @@ GRID_HEADERS = [
     "parameters",
     "azimuth / radial step [deg]",
     "table values",
-    "max |table integral / TIS − 1|",
+    "max abs(table integral / TIS − 1)",
     "at θi [deg]",
     "tables [s]",
 ]
@@ -106,7 +106,7 @@ class AbgRow:
 
 ABG_HEADERS = [
     "fit (uv-paper, θi = 0, 5, …, 85°)",
-    "max |TIS_ABg / TIS − 1|",
+    "max abs(TIS_ABg / TIS − 1)",
     "rms ln error [-]",
     "time [s]",
     "compile [s]",
