@@ -710,6 +710,7 @@ def _command_sbc(args: argparse.Namespace) -> None:
         seed=args.seed,
         sigma_scale=args.sigma_scale,
         target_accept=args.target_accept,
+        warmup_tree_depth=args.warmup_tree_depth,
     )
     for name in ("replicates", "draws", "thin", "warmup"):
         if getattr(settings, name) < 1:
@@ -718,6 +719,10 @@ def _command_sbc(args: argparse.Namespace) -> None:
             )
     if not settings.sigma_scale > 0:
         raise BadInputError(f"must be > 0, got {settings.sigma_scale}", field="--sigma-scale")
+    if not 1 <= settings.warmup_tree_depth <= 10:
+        raise BadInputError(
+            f"must be 1 … 10, got {settings.warmup_tree_depth}", field="--warmup-tree-depth"
+        )
     out = check_output_dir(args.out or Path("reports") / scene.name / "sbc")
     _progress(
         f"simulation-based calibration of scene '{scene.name}': {settings.replicates} "
@@ -935,6 +940,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="planted fault: scale the likelihood sigma by this in the inference only",
     )
     sbc.add_argument("--target-accept", type=float, default=0.8, help="NUTS target acceptance")
+    sbc.add_argument(
+        "--warmup-tree-depth",
+        type=int,
+        default=6,
+        help="largest NUTS tree depth during the warmup (10 after it)",
+    )
     sbc.add_argument("--out", help="output directory (default: reports/<scene>/sbc)")
     sbc.set_defaults(handler=_command_sbc)
 

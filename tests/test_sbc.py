@@ -71,6 +71,8 @@ def test_sbc_command_json_contract_and_files(tmp_path, capsys):
         "1",
         "--warmup",
         "150",
+        "--warmup-tree-depth",
+        "4",
         "--out",
         str(tmp_path),
         "--json",
@@ -79,6 +81,7 @@ def test_sbc_command_json_contract_and_files(tmp_path, capsys):
     assert code == 0, err
     payload = json.loads(out)
     assert payload["replicates"] == 6 and payload["draws"] == 20
+    assert payload["settings"]["warmup_tree_depth"] == 4
     assert set(QUANTITIES) <= set(payload["quantities"])
     for entry in payload["quantities"].values():
         assert len(entry["ranks"]) == 6 and all(0 <= r <= 20 for r in entry["ranks"])
@@ -92,7 +95,12 @@ def test_sbc_command_json_contract_and_files(tmp_path, capsys):
 
 
 def test_sbc_options_are_checked_before_any_work(tmp_path, capsys):
-    for option, value in (("--replicates", "0"), ("--draws", "0"), ("--sigma-scale", "0")):
+    for option, value in (
+        ("--replicates", "0"),
+        ("--draws", "0"),
+        ("--sigma-scale", "0"),
+        ("--warmup-tree-depth", "11"),
+    ):
         code, out, err = run_cli("sbc", option, value, "--out", str(tmp_path / "x"), capsys=capsys)
         assert code == 2 and out == "" and option in err
         assert not (tmp_path / "x").exists()

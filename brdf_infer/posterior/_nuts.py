@@ -60,6 +60,10 @@ class NutsProgram:
         warmup: warmup iterations per chain (step size and dense mass matrix adapted).
         target_accept: target acceptance probability of the step-size adaptation.
         max_tree_depth: largest NUTS tree depth.
+        warmup_tree_depth: largest tree depth during the warmup (default ``max_tree_depth``).
+            Early in the warmup the step size and mass matrix are still poor and a trajectory
+            can run to 2^10 leapfrog steps; capping it there bounds the cost of adapting
+            without touching the kept draws.
     """
 
     def __init__(
@@ -69,6 +73,7 @@ class NutsProgram:
         warmup: int,
         target_accept: float = 0.8,
         max_tree_depth: int = 10,
+        warmup_tree_depth: int | None = None,
     ):
         self.model = model
         self.flat = FlatPotential(model)
@@ -80,7 +85,7 @@ class NutsProgram:
             "num_warmup": warmup,
             "dense_mass": True,
             "target_accept_prob": target_accept,
-            "max_tree_depth": max_tree_depth,
+            "max_tree_depth": (warmup_tree_depth or max_tree_depth, max_tree_depth),
         }
         self._compiled: dict = {}
         self._lock = threading.Lock()
