@@ -19,6 +19,7 @@ from typing import Any, NoReturn
 
 import numpy as np
 
+from brdf_infer._cli_compare import add_compare_arguments, command_compare
 from brdf_infer._cli_export import add_export_arguments, command_export
 from brdf_infer._outdir import check_output_dir
 from brdf_infer.errors import BadInputError
@@ -420,6 +421,11 @@ def _command_export(args: argparse.Namespace) -> None:
     command_export(args, _angles, _table, _progress)
 
 
+def _command_compare(args: argparse.Namespace) -> None:
+    _headless()
+    command_compare(args, _scene_and_measurements, _table, _progress)
+
+
 def _command_brdf(args: argparse.Namespace) -> None:
     from brdf_infer.model import brdf_hemisphere, brdf_inplane
     from brdf_infer.params import resolve_params
@@ -489,7 +495,7 @@ def _command_run(args: argparse.Namespace) -> None:
     start = time.perf_counter()
     scene, measurements = _scene_and_measurements(args.scene)
     out = check_output_dir(args.out or Path("reports") / scene.name)
-    steps = 5 + (scene.raytrace is not None)
+    steps = 5 + (scene.raytrace is not None) + bool(scene.compare)
     _progress(f"[1/{steps}] paper fit of scene '{scene.name}' ({len(measurements)} measurements)")
     paper = _paper_fit_payload(scene, measurements, None)
     atomic_write_json(out / "fit_paper.json", paper)
@@ -522,6 +528,11 @@ def _command_run(args: argparse.Namespace) -> None:
     if scene.raytrace is not None:
         _progress(f"[5/{steps}] ray tracing series {scene.raytrace.series} (Sec. 6)")
         atomic_write_json(out / "raytrace.json", {"traces": _run_traces(scene, measurements, run)})
+    if scene.compare:
+        from brdf_infer.compare import compare_families, write_comparison
+
+        _progress(f"[{steps - 1}/{steps}] model comparison by PSIS-LOO: {', '.join(scene.compare)}")
+        write_comparison(out, compare_families(scene, measurements, list(scene.compare)))
     _progress(f"[{steps}/{steps}] report")
     from brdf_infer.report import write_report
 
@@ -954,6 +965,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     add_export_arguments(export)
     export.set_defaults(handler=_command_export)
+
+    compare = scene_command(
+        "compare", "rank model families (Eq. 7, ABg, Harvey–Shack, Lambertian, …) by PSIS-LOO"
+    )
+    add_compare_arguments(compare)
+    compare.set_defaults(handler=_command_compare)
 
     report = command("report", "HTML report of a posterior run: the answer, then diagnostics")
     report.add_argument("run_dir", help="directory of a posterior run (posterior.nc, ...)")

@@ -203,6 +203,7 @@ class Scene:
     outputs: OutputSettings = field(default_factory=OutputSettings)
     priors: dict[str, Prior] = field(default_factory=lambda: dict(DEFAULT_PRIORS))
     raytrace: RaytraceSettings | None = None
+    compare: tuple[str, ...] = ()
 
     @property
     def free_parameters(self) -> tuple[str, ...]:
@@ -316,6 +317,26 @@ def _boolean(table: dict, key: str, path: Path, prefix: str, default: bool) -> b
     return value
 
 
+def _compare_families(document: dict, path: Path) -> tuple[str, ...]:
+    """The model families ``run`` compares by PSIS-LOO (``compare = [...]``; none: no step)."""
+    from brdf_infer.model import FAMILY_NAMES
+
+    names = document.get("compare", [])
+    if not isinstance(names, list) or not all(isinstance(name, str) for name in names):
+        raise BadInputError("expected a list of model family names", file=path, field="compare")
+    for name in names:
+        if name not in FAMILY_NAMES:
+            raise BadInputError(
+                f"unknown model family {name!r} (known: {', '.join(FAMILY_NAMES)})",
+                file=path,
+                field="compare",
+            )
+    names = list(dict.fromkeys(names))
+    if len(names) == 1:
+        raise BadInputError("name at least two families to compare", file=path, field="compare")
+    return tuple(names)
+
+
 def _string(document: dict, key: str, path: Path, default: str | None = None) -> str:
     value = document.get(key, default)
     if value is None:
@@ -337,6 +358,7 @@ _TOP_KEYS = {
     "outputs",
     "priors",
     "raytrace",
+    "compare",
 }
 
 
@@ -549,6 +571,7 @@ def parse_scene(document: dict, path: Path) -> Scene:
     priors.update({name: parse_prior(name, table, path) for name, table in prior_table.items()})
     wavelength = document.get("wavelength_nm")
     measurements = _string(document, "measurements", path)
+    compare = _compare_families(document, path)
     return Scene(
         name=_string(document, "name", path),
         path=path,
@@ -576,6 +599,7 @@ def parse_scene(document: dict, path: Path) -> Scene:
         ),
         priors=priors,
         raytrace=_parse_raytrace(document, path, series),
+        compare=compare,
     )
 
 

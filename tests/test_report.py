@@ -182,3 +182,29 @@ def test_report_shows_the_exports_of_its_run(nuts_run, tmp_path, capsys):
     text = (run / "report.html").read_text()
     assert "<h2>Export</h2>" in text and "rms ln error" in text
     assert (run / "figures" / "export.png").stat().st_size > 0
+
+
+def test_report_shows_a_model_comparison_written_into_its_run(nuts_run, tmp_path):
+    """``compare --out RUN`` leaves compare.json in the run; the report then has a model
+    comparison section with the table (best first) and the figure."""
+    import shutil
+
+    from brdf_infer.compare import COMPARE_FILE
+
+    run = tmp_path / "run"
+    shutil.copytree(nuts_run.out, run)
+    band = {"median": 0.06, "lo95": 0.05, "hi95": 0.07}
+    models = [
+        {"name": "strumik2024", "elpd_loo": 33.8, "se": 5.4, "d_elpd": 0.0, "dse": 0.0},
+        {"name": "abg", "elpd_loo": -114.8, "se": 7.7, "d_elpd": 148.6, "dse": 9.8},
+    ]
+    for model, weight in zip(models, (1.0, 0.0), strict=True):
+        model.update(
+            weight=weight, p_loo=6.0, pareto_k_max=0.4, pareto_k_max_after_refit=0.4, tis70=band
+        )
+    (run / COMPARE_FILE).write_text(json.dumps({"models": models, "seconds": 1.0}))
+    write_report(run, progress=lambda message: None)
+    text = (run / "report.html").read_text()
+    assert "<h2>Model comparison (PSIS-LOO)</h2>" in text
+    assert "Best: <b>strumik2024</b>" in text and "148.6 ± 9.8" in text
+    assert text.index("<td>strumik2024</td>") < text.index("<td>abg</td>")

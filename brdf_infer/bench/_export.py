@@ -9,8 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from brdf_infer.export import brdf_table, fit_abg, scatter_grid, table_integral
-from brdf_infer.export._abg import CHECK_QUADRATURE, abg_integral
-from brdf_infer.model import tis
+from brdf_infer.model import CHECK_QUADRATURE, abg_integral, tis
 from brdf_infer.params import PAPER_CONSTANTS, UV_PAPER, VIS_PAPER
 
 GRID_STEPS = ((10.0, 2.0), (5.0, 2.0), (5.0, 1.0), (2.0, 0.5))  # (azimuth, radial) [deg]

@@ -13,11 +13,9 @@ Per angle of incidence, A is fixed by TIS_ABg = TIS of the model (Eq. 9), and (B
 least-squares fit of ln BSDF to ln BRDF of Eqs. (7), (8), (10) over the hemisphere, each
 direction weighted by cos θ sin θ dθ dφ (the share of the scattered power it stands for).
 
-The fit uses a coarse quadrature of I; A is then set with a precise one (relative error
-≈ 1e-10) and ``tis_abg`` recomputed with a finer one, which shows the TIS preserved.
-I is computed in polar coordinates about β₀: ψ ∈ [0, π] (mirror symmetry) by composite
-Gauss–Legendre, and the radial integral ∫₀^R ρ dρ / (B + ρ^g) in s = ln ρ with panels
-packed around the knee s = ln(B)/g, where the integrand turns from e^{2s}/B to e^{(2−g)s}.
+The fit uses a coarse quadrature of I (:func:`brdf_infer.model.abg_integral`); A is then
+set with a precise one (relative error ≈ 1e-10) and ``tis_abg`` recomputed with a finer one,
+which shows the TIS preserved.
 """
 
 from __future__ import annotations
@@ -31,77 +29,15 @@ import numpy as np
 import optimistix as optx
 
 from brdf_infer.model import log_brdf_hemisphere
+from brdf_infer.model._lobes import (
+    CHECK_QUADRATURE,
+    PRECISE_QUADRATURE,
+    Quadrature,
+    abg_integral,
+    abg_log_bsdf,
+    beta_distance,
+)
 from brdf_infer.params import HemisphereConstants, Params
-
-_KNEE_OFFSETS = np.arange(-5.0, 5.5, 1.0)  # panel edges around the knee, in s = ln ρ
-_TAIL = 25.0  # the integrand is e^{2(s − s_knee)} of its knee value below the knee
-_WIDENING = 0.5 * 2.0 ** np.arange(8)  # 0.5, 1, 2, …, 64
-
-
-@dataclass(frozen=True)
-class Quadrature:
-    """Node counts of the I(B, g, b) quadrature."""
-
-    azimuth_panels: int = 8
-    azimuth_nodes: int = 12
-    radial_nodes: int = 8
-
-
-FIT_QUADRATURE = Quadrature()
-PRECISE_QUADRATURE = Quadrature(azimuth_panels=24, azimuth_nodes=16, radial_nodes=16)
-CHECK_QUADRATURE = Quadrature(azimuth_panels=40, azimuth_nodes=20, radial_nodes=24)
-
-
-def _gauss_legendre(lower, upper, nodes: int):
-    """Nodes and weights of Gauss–Legendre on [lower, upper] (arrays broadcast)."""
-    x, w = np.polynomial.legendre.leggauss(nodes)
-    half = (jnp.asarray(upper) - jnp.asarray(lower))[..., None] / 2.0
-    middle = (jnp.asarray(upper) + jnp.asarray(lower))[..., None] / 2.0
-    return middle + half * x, half * w
-
-
-def _radial_integral(log_r, log_b, g, nodes: int):
-    """∫₀^R ρ dρ / (B + ρ^g) for R = e^{log_r} (scalar arguments).
-
-    Panels of width 1 within 5 of the knee, widening geometrically away from the knee and
-    from ln R (where e^{(2−g)s} is largest for g < 2), a last panel 25 below the knee, and
-    ∫ below it as ρ²/(2B).
-    """
-    knee = jnp.minimum(log_b / g, log_r)
-    widening = jnp.asarray(_WIDENING)
-    edges = jnp.concatenate(
-        [
-            jnp.array([knee - _TAIL, log_r]),
-            knee + _KNEE_OFFSETS,
-            knee + _KNEE_OFFSETS[-1] + widening,
-            log_r - widening,
-        ]
-    )
-    edges = jnp.sort(jnp.clip(edges, knee - _TAIL, log_r))
-    s, w = _gauss_legendre(edges[:-1], edges[1:], nodes)
-    # e^{2s} / (B + e^{gs}) in log space
-    log_integrand = 2.0 * s - jnp.logaddexp(log_b, g * s)
-    tail = jnp.exp(2.0 * (knee - _TAIL) - log_b) / 2.0
-    return jnp.sum(w * jnp.exp(log_integrand)) + tail
-
-
-def abg_integral(log_b, g, sin_theta_i, quadrature: Quadrature = FIT_QUADRATURE):
-    """I(B, g, b) = ∫_{|β| ≤ 1} d²β / (B + |β − β₀|^g), |β₀| = b (scalar arguments)."""
-    edges = jnp.linspace(0.0, jnp.pi, quadrature.azimuth_panels + 1)
-    psi, w = _gauss_legendre(edges[:-1], edges[1:], quadrature.azimuth_nodes)
-    psi, w = psi.reshape(-1), w.reshape(-1)
-    b = jnp.asarray(sin_theta_i, float)
-    reach = -b * jnp.cos(psi) + jnp.sqrt(1.0 - (b * jnp.sin(psi)) ** 2)  # |β| = 1 along ψ
-    inner = jax.vmap(lambda r: _radial_integral(jnp.log(r), log_b, g, quadrature.radial_nodes))
-    return 2.0 * jnp.sum(w * inner(reach))
-
-
-def abg_log_bsdf(log_a, log_b, g, beta_distance):
-    """ln BSDF = ln A − ln(B + |β − β₀|^g); |β − β₀|^g = 0 at β = β₀ (g > 0)."""
-    positive = beta_distance > 0.0
-    safe = jnp.where(positive, beta_distance, 1.0)
-    log_power = jnp.where(positive, g * jnp.log(safe), -jnp.inf)
-    return log_a - jnp.logaddexp(log_b, log_power)
 
 
 def abg_bsdf(a, b, g, theta_i_deg, theta_deg, phi_deg):
@@ -109,15 +45,6 @@ def abg_bsdf(a, b, g, theta_i_deg, theta_deg, phi_deg):
     return jnp.exp(
         abg_log_bsdf(jnp.log(a), jnp.log(b), g, beta_distance(theta_i_deg, theta_deg, phi_deg))
     )
-
-
-def beta_distance(theta_i_deg, theta_deg, phi_deg):
-    """|β − β₀|: β = sin θ (cos φ, sin φ), β₀ = (−sin θi, 0) (the specular direction)."""
-    sin_theta = jnp.sin(jnp.radians(theta_deg))
-    phi = jnp.radians(phi_deg)
-    dx = sin_theta * jnp.cos(phi) + jnp.sin(jnp.radians(theta_i_deg))
-    dy = sin_theta * jnp.sin(phi)
-    return jnp.hypot(dx, dy)
 
 
 # ---------------------------------------------------------------------------- fit

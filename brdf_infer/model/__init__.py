@@ -1,4 +1,5 @@
-"""The forward model of Strumik et al. 2024: Eqs. (6)–(10), in JAX, angles in degrees.
+"""The forward models: Strumik et al. 2024, Eqs. (6)–(10), and the ray tracers' scatter lobes
+(ABg, Harvey–Shack, Lambertian) behind one family interface, in JAX, angles in degrees.
 
 Every function is pure and float64, and goes through ``jit``, ``vmap`` and ``grad``.
 """
@@ -9,6 +10,15 @@ from brdf_infer.model._aperture import (
     reflectance_to_brdf,
     solid_angle,
 )
+from brdf_infer.model._families import (
+    FAMILIES,
+    FAMILY_NAMES,
+    REFERENCE_FAMILY,
+    Coordinate,
+    ModelFamily,
+    family,
+    strumik_family,
+)
 from brdf_infer.model._hemisphere import (
     azimuthal_half_width,
     azimuthal_weight,
@@ -17,16 +27,44 @@ from brdf_infer.model._hemisphere import (
     log_brdf_hemisphere,
 )
 from brdf_infer.model._inplane import brdf_inplane, log_brdf_inplane, log_fold, positive_power
+from brdf_infer.model._lobes import (
+    CHECK_QUADRATURE,
+    FIT_QUADRATURE,
+    PRECISE_QUADRATURE,
+    Quadrature,
+    abg_integral,
+    abg_log_bsdf,
+    beta_distance,
+    disk_integral,
+    harvey_shack_integral,
+    harvey_shack_log_bsdf,
+)
 from brdf_infer.model._tis import DEFAULT_NODES, log_tis, tis, tis_with_error
 
 __all__ = [
+    "CHECK_QUADRATURE",
     "DEFAULT_NODES",
+    "FAMILIES",
+    "FAMILY_NAMES",
+    "FIT_QUADRATURE",
+    "PRECISE_QUADRATURE",
+    "REFERENCE_FAMILY",
+    "Coordinate",
+    "ModelFamily",
+    "Quadrature",
+    "abg_integral",
+    "abg_log_bsdf",
     "azimuthal_half_width",
     "azimuthal_weight",
     "azimuthal_weight_integral",
+    "beta_distance",
     "brdf_hemisphere",
     "brdf_inplane",
     "brdf_to_reflectance",
+    "disk_integral",
+    "family",
+    "harvey_shack_integral",
+    "harvey_shack_log_bsdf",
     "log_aperture_factor",
     "log_brdf_hemisphere",
     "log_brdf_inplane",
@@ -35,6 +73,7 @@ __all__ = [
     "positive_power",
     "reflectance_to_brdf",
     "solid_angle",
+    "strumik_family",
     "tis",
     "tis_with_error",
 ]

@@ -41,6 +41,7 @@ import numpyro.distributions as dist
 
 from brdf_infer.coordinates import ANGLE_SCALE_DEG, from_internal
 from brdf_infer.error_model import (
+    ErrorSettings,
     NoiseLayout,
     NoiseScales,
     angle_slopes,
@@ -185,7 +186,7 @@ class PosteriorModel:
                 model of SBC).
         """
         data = self.data if data is None else data
-        scales = self._noise_scales()
+        scales = sample_noise_scales(self.errors)
         params = self._parameters(data, scales, whiten=self.whiten and mode != "simulate")
         rows = data.rows
         if self.errors.angles_on and self.errors.angle_method == "latent":
@@ -284,28 +285,6 @@ class PosteriorModel:
             coefficients[k] = numpyro.deterministic(LINEAR_SITES[k], values[position])
         return coefficients
 
-    def _noise_scales(self) -> NoiseScales:
-        errors = self.errors
-        generative = errors.model == "generative"
-        if generative and errors.hierarchical:
-            sample_sd = numpyro.sample("sample_sd", dist.HalfNormal(errors.sample_sd_prior))
-        else:
-            sample_sd = jnp.zeros(())
-        if generative and errors.learns_repeatability:
-            repeatability = numpyro.sample(
-                "repeatability", dist.HalfNormal(errors.repeatability_sd_prior)
-            )
-        else:
-            repeatability = jnp.asarray(0.0 if not generative else float(errors.repeatability))
-        angles = errors.angles_on
-        return NoiseScales(
-            sample_sd=sample_sd,
-            repeatability=repeatability,
-            calibration=jnp.asarray(errors.calibration_sd if generative else 0.0),
-            rotation_deg=jnp.asarray(errors.rotation_deg if angles else 0.0),
-            camera_deg=jnp.asarray(errors.camera_deg if angles else 0.0),
-        )
-
     def _latent_angles(self, data: ModelData, scales: NoiseScales):
         """Perturbed angles (θi + ε, θs − ε + η) with ε per rotation setting, η per row."""
         members = data.noise.rotation_members
@@ -354,22 +333,48 @@ class PosteriorModel:
     def draw_parts(self, sites: dict) -> LikelihoodParts:
         """:meth:`likelihood_parts` of every draw (leading axis) of a posterior's sites."""
         params = Params(*(jnp.asarray(sites[name]) for name in Params._fields))
-        count = params.brdf0.shape[0]
-        errors = self.errors
-        generative = errors.model == "generative"
-        angles = errors.angles_on
-        scales = NoiseScales(
-            sample_sd=jnp.asarray(sites.get("sample_sd", jnp.zeros(count))),
-            repeatability=jnp.asarray(
-                sites["repeatability"]
-                if "repeatability" in sites
-                else jnp.full(count, float(errors.repeatability) if generative else 0.0)
-            ),
-            calibration=jnp.full(count, errors.calibration_sd if generative else 0.0),
-            rotation_deg=jnp.full(count, errors.rotation_deg if angles else 0.0),
-            camera_deg=jnp.full(count, errors.camera_deg if angles else 0.0),
-        )
+        scales = drawn_noise_scales(self.errors, sites, params.brdf0.shape[0])
         return jax.jit(jax.vmap(lambda p, s: self.likelihood_parts(p, s)))(params, scales)
+
+
+def sample_noise_scales(errors: ErrorSettings) -> NoiseScales:
+    """The noise scales of the error model: NumPyro sites where they are learned."""
+    generative = errors.model == "generative"
+    if generative and errors.hierarchical:
+        sample_sd = numpyro.sample("sample_sd", dist.HalfNormal(errors.sample_sd_prior))
+    else:
+        sample_sd = jnp.zeros(())
+    if generative and errors.learns_repeatability:
+        repeatability = numpyro.sample(
+            "repeatability", dist.HalfNormal(errors.repeatability_sd_prior)
+        )
+    else:
+        repeatability = jnp.asarray(0.0 if not generative else float(errors.repeatability))
+    angles = errors.angles_on
+    return NoiseScales(
+        sample_sd=sample_sd,
+        repeatability=repeatability,
+        calibration=jnp.asarray(errors.calibration_sd if generative else 0.0),
+        rotation_deg=jnp.asarray(errors.rotation_deg if angles else 0.0),
+        camera_deg=jnp.asarray(errors.camera_deg if angles else 0.0),
+    )
+
+
+def drawn_noise_scales(errors: ErrorSettings, sites: dict, count: int) -> NoiseScales:
+    """The noise scales of ``count`` posterior draws (learned ones from ``sites``)."""
+    generative = errors.model == "generative"
+    angles = errors.angles_on
+    return NoiseScales(
+        sample_sd=jnp.asarray(sites.get("sample_sd", jnp.zeros(count))),
+        repeatability=jnp.asarray(
+            sites["repeatability"]
+            if "repeatability" in sites
+            else jnp.full(count, float(errors.repeatability) if generative else 0.0)
+        ),
+        calibration=jnp.full(count, errors.calibration_sd if generative else 0.0),
+        rotation_deg=jnp.full(count, errors.rotation_deg if angles else 0.0),
+        camera_deg=jnp.full(count, errors.camera_deg if angles else 0.0),
+    )
 
 
 def build_model_data(scene: Scene, measurements: Measurements) -> ModelData:

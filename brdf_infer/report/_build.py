@@ -11,10 +11,12 @@ import numpy as np
 
 from brdf_infer._arviz import az
 from brdf_infer._atomic import atomic_write_bytes
+from brdf_infer.compare import COMPARE_FILE
 from brdf_infer.errors import BadInputError
 from brdf_infer.params import PARAM_NAMES
 from brdf_infer.posterior import BANDS_FILE, POSTERIOR_FILE, SUMMARY_FILE, THRESHOLDS, draws_params
 from brdf_infer.report import _figures, _html, _noise
+from brdf_infer.report._compare import compare_figure, compare_table_html
 from brdf_infer.report._export import abg_table, load_exports, plot_export
 from brdf_infer.report._raytrace import figure_png, plot_detector_images, plot_raytrace
 from brdf_infer.scene import load_scene
@@ -260,6 +262,7 @@ def write_report(run: Path, progress=print) -> tuple[Path, list[str]]:
         ),
         _tis_table(bands) if "tis" in bands else "",
         *_export_section(exports, figures),
+        *_compare_section(run),
         *(
             ["<h2>Ray-tracing validation (Sec. 6)</h2>", _raytrace_table(traces)]
             + [
@@ -276,6 +279,26 @@ def write_report(run: Path, progress=print) -> tuple[Path, list[str]]:
     path = atomic_write_bytes(run / REPORT_FILE, document.encode())
     progress(f"report written in {time.perf_counter() - started:.1f} s")
     return path, failures
+
+
+def _compare_section(run: Path) -> list[str]:
+    """The model comparison (``compare.json`` of ``brdf-infer compare --out RUN`` or ``run``)."""
+    path = run / COMPARE_FILE
+    if not path.is_file():
+        return []
+    payload = json.loads(path.read_text())
+    best = payload["models"][0]["name"]
+    return [
+        "<h2>Model comparison (PSIS-LOO)</h2>",
+        f"<p>Every family sampled by NUTS on the same rows and error model; ranked by the "
+        f"leave-one-out log predictive density (higher is better). Best: <b>{best}</b>. A "
+        f"difference is clear when Δelpd is several times its se.</p>",
+        compare_table_html(payload),
+        _html.figure(
+            compare_figure(payload),
+            "PSIS-LOO of each family (elpd_loo ± se, best on top) and its TIS(70°) band.",
+        ),
+    ]
 
 
 def _export_section(exports: list[dict], figures) -> list[str]:

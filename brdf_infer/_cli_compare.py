@@ -1,0 +1,97 @@
+"""``brdf-infer compare``: arguments checked before any work, then the library's comparison."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Callable, Sequence
+
+from brdf_infer._outdir import check_output_dir
+from brdf_infer.errors import BadInputError
+
+DEFAULT_MODELS = ("strumik2024", "abg", "harvey-shack", "lambertian", "lambertian+abg")
+
+
+def add_compare_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options of ``brdf-infer compare``."""
+    parser.add_argument(
+        "--models",
+        nargs="+",
+        default=list(DEFAULT_MODELS),
+        help="model families to compare (default: all)",
+    )
+    parser.add_argument("--chains", type=int, default=4, help="NUTS chains per family")
+    parser.add_argument("--warmup", type=int, default=500, help="NUTS warmup per chain")
+    parser.add_argument("--draws", type=int, default=1000, help="NUTS draws per chain")
+    parser.add_argument("--seed", type=int, default=0, help="random seed")
+    parser.add_argument(
+        "--no-refit", action="store_true", help="no exact refits where Pareto k > 0.7"
+    )
+    parser.add_argument("--out", help="also write compare.json and compare.png here")
+
+
+def command_compare(
+    args: argparse.Namespace,
+    scene_and_measurements: Callable,
+    table: Callable[[Sequence[str], Sequence[Sequence[str]]], str],
+    progress: Callable[[str], None],
+) -> None:
+    """Run ``brdf-infer compare`` (options checked before the scene's work starts)."""
+    from brdf_infer.compare import (
+        COMPARE_FILE,
+        CompareSettings,
+        check_family_names,
+        compare_families,
+        write_comparison,
+    )
+
+    names = check_family_names(args.models)
+    settings = CompareSettings(
+        chains=args.chains,
+        warmup=args.warmup,
+        draws=args.draws,
+        seed=args.seed,
+        refit=not args.no_refit,
+    )
+    for field in ("chains", "warmup", "draws"):
+        if getattr(settings, field) < 1:
+            raise BadInputError(
+                f"must be at least 1, got {getattr(settings, field)}", field=f"--{field}"
+            )
+    scene, measurements = scene_and_measurements(args.scene)
+    out = check_output_dir(args.out) if args.out else None
+    progress(
+        f"comparing {', '.join(names)} on scene '{scene.name}' by PSIS-LOO "
+        f"({settings.chains} chains × {settings.draws} draws each) ..."
+    )
+    result = compare_families(
+        scene, measurements, names, settings, progress=not args.json and sys.stderr.isatty()
+    )
+    payload = result.as_json()
+    if out is not None:
+        write_comparison(out, result)
+        payload["out"] = str(out)
+    for note in result.warnings:
+        progress(f"warning: {note}")
+    if args.json:
+        print(json.dumps(payload))
+        return
+    rows = [
+        [
+            row["name"],
+            f"{row['elpd_loo']:.1f} ± {row['se']:.1f}",
+            f"{row['d_elpd']:.1f} ± {row['dse']:.1f}",
+            f"{row['weight']:.2f}",
+            f"{row['p_loo']:.1f}",
+            f"{row['pareto_k_max']:.2f}",
+            "{median:.4f} ({lo95:.4f}–{hi95:.4f})".format(**row["tis70"]),
+        ]
+        for row in payload["models"]
+    ]
+    headers = ["model", "elpd_loo ± se", "Δelpd ± dse", "weight", "p_loo", "k max", "TIS(70°)"]
+    print(f"PSIS-LOO comparison on scene '{scene.name}' (best first)")
+    print(table(headers, rows))
+    print(f"{result.seconds:.1f} s")
+    if out is not None:
+        print(f"written: {out / COMPARE_FILE}, {out / 'compare.png'}")

@@ -1,0 +1,305 @@
+"""Model comparison by PSIS-LOO: is Eq. (7) better than the ray tracers' own scatter models?
+
+Every family is sampled by NUTS on the same rows, under the same instrument (Eq. 6) and the
+same generative error model; only the BRDF differs (:mod:`brdf_infer.posterior._family_model`).
+Each row's pointwise log predictive density is that of its leave-one-out conditional
+p(yᵢ | y₋ᵢ, θ) (the rows are correlated through the sample, calibration and angle effects;
+:mod:`brdf_infer.posterior._loo`), and ArviZ's ``loo``/``compare`` rank the families: elpd_loo
+with its standard error, the difference to the best with the standard error of the
+difference, stacking weights, p_loo and the largest Pareto k.
+
+Where Pareto k > 0.7 the importance-sampling estimate of a row is unreliable; that row's
+term is then computed exactly by refitting without it (leave-one-out by refit, i.e. K-fold
+with one row per fold for those rows). Refitting needs no new compilation: the row is left
+out by giving its measurement noise a σ of 10⁶ in ln R, which removes its information from
+the likelihood while keeping the data's shape.
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from scipy.special import logsumexp
+
+from brdf_infer._arviz import az
+from brdf_infer.errors import BadInputError
+from brdf_infer.measurements import Measurements
+from brdf_infer.model import FAMILY_NAMES, REFERENCE_FAMILY, family
+from brdf_infer.posterior._family_model import build_family_model
+from brdf_infer.posterior._loo import pointwise_loo_terms
+from brdf_infer.posterior._model import build_posterior_model
+from brdf_infer.posterior._nuts import NutsProgram, chain_keys
+from brdf_infer.posterior._results import flatten_draws
+from brdf_infer.scene import Scene
+
+PARETO_K_LIMIT = 0.7
+LEFT_OUT_SIGMA = 1e6  # σ of ln R that removes a row's information (exact LOO by refit)
+TIS_DRAWS = 400  # posterior draws the TIS band is computed from
+TIS_ANGLE_DEG = 70.0
+COMPARE_FILE = "compare.json"
+
+
+@dataclass(frozen=True)
+class CompareSettings:
+    """How each family is sampled (NUTS)."""
+
+    chains: int = 4
+    warmup: int = 500
+    draws: int = 1000
+    seed: int = 0
+    target_accept: float = 0.9
+    refit: bool = True
+
+
+@dataclass
+class FamilyResult:
+    """One family's posterior summary and its leave-one-out terms.
+
+    Attributes:
+        name: the family.
+        parameters: posterior median and 95 % interval of each physical parameter.
+        tis70: median and 95 % interval of TIS(70°).
+        idata: the physical parameters and noise scales (posterior) and the pointwise
+            leave-one-out log likelihood (log_likelihood ``obs``: chains, draws, rows).
+        r_hat_max, ess_bulk_min, divergences: NUTS diagnostics.
+        refitted_rows: rows whose LOO term was computed by refitting (Pareto k > 0.7).
+        exact_elpd: the refitted rows' exact elpd terms.
+        seconds: wall time of this family (sampling, refits and TIS).
+    """
+
+    name: str
+    parameters: dict[str, dict[str, float]]
+    tis70: dict[str, float]
+    idata: az.InferenceData
+    r_hat_max: float
+    ess_bulk_min: float
+    divergences: int
+    refitted_rows: list[int]
+    exact_elpd: dict[int, float]
+    seconds: float
+
+
+@dataclass
+class ComparisonResult:
+    """The ranking (``as_json`` gives the JSON contract of ``brdf-infer compare``)."""
+
+    families: dict[str, FamilyResult]
+    table: list[dict[str, Any]]
+    warnings: list[str]
+    seconds: float
+
+    def as_json(self) -> dict[str, Any]:
+        models = []
+        for row in self.table:
+            fit = self.families[row["name"]]
+            models.append(
+                {
+                    **row,
+                    "tis70": fit.tis70,
+                    "parameters": fit.parameters,
+                    "r_hat_max": fit.r_hat_max,
+                    "ess_bulk_min": fit.ess_bulk_min,
+                    "divergences": fit.divergences,
+                    "refitted_rows": fit.refitted_rows,
+                }
+            )
+        return {"models": models, "warnings": self.warnings, "seconds": self.seconds}
+
+
+def check_family_names(names: list[str]) -> list[str]:
+    """Validated, de-duplicated family names (at least two).
+
+    Raises:
+        BadInputError: an unknown family, or fewer than two.
+    """
+    unknown = [name for name in names if name not in FAMILY_NAMES]
+    if unknown:
+        raise BadInputError(
+            f"unknown model family {unknown[0]!r} (known: {', '.join(FAMILY_NAMES)})",
+            field="--models",
+        )
+    names = list(dict.fromkeys(names))
+    if len(names) < 2:
+        raise BadInputError("name at least two families to compare", field="--models")
+    return names
+
+
+def _interval(values: np.ndarray) -> dict[str, float]:
+    low, median, high = np.quantile(np.asarray(values, float).reshape(-1), [0.025, 0.5, 0.975])
+    return {"median": float(median), "lo95": float(low), "hi95": float(high)}
+
+
+def _build(scene: Scene, measurements: Measurements, name: str):
+    if name == REFERENCE_FAMILY:
+        return build_posterior_model(scene, measurements)
+    return build_family_model(scene, measurements, family(name))
+
+
+def _loo_log_lik(model, sites: dict) -> np.ndarray:
+    chains, n_draws = next(iter(sites.values())).shape[:2]
+    parts = model.draw_parts(flatten_draws(sites))
+    log_lik, _ = pointwise_loo_terms(
+        model.data.rows.log_reflectance, parts.mean, parts.factor, parts.diagonal
+    )
+    return np.asarray(log_lik).reshape(chains, n_draws, -1)
+
+
+def _without_row(model, row: int):
+    noise = model.data.noise
+    sigma = noise.sigma_row.at[row].set(LEFT_OUT_SIGMA)
+    return model.data._replace(noise=noise._replace(sigma_row=sigma))
+
+
+def _idata(sites: dict, log_lik: np.ndarray, names: tuple[str, ...]) -> az.InferenceData:
+    posterior = {name: sites[name] for name in names if name in sites}
+    return az.from_dict(posterior=posterior, log_likelihood={"obs": log_lik})
+
+
+def fit_family(
+    scene: Scene,
+    measurements: Measurements,
+    name: str,
+    settings: CompareSettings,
+    *,
+    progress: bool = False,
+) -> FamilyResult:
+    """Sample ``name`` on the scene's rows; leave-one-out terms, refits where k > 0.7."""
+    started = time.perf_counter()
+    model = _build(scene, measurements, name)
+    member = family(name, scene.model.fold, scene.model.constants)
+    program = NutsProgram(model, warmup=settings.warmup, target_accept=settings.target_accept)
+    keys = chain_keys(settings.seed, 1, settings.chains)[0]
+    output = program.run(
+        model.data, keys, settings.draws, progress=progress, description=f"NUTS {name}"
+    )
+    sites = output.sites
+    log_lik = _loo_log_lik(model, sites)
+    names = (*member.parameters, "sample_sd", "repeatability")
+    idata = _idata(sites, log_lik, names)
+    summary = az.summary(idata, var_names=[n for n in names if n in sites], kind="diagnostics")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        loo = az.loo(idata, pointwise=True)
+    refitted, exact = [], {}
+    if settings.refit:
+        for row in np.flatnonzero(np.asarray(loo.pareto_k) > PARETO_K_LIMIT):
+            refit = program.run(_without_row(model, int(row)), keys, settings.draws)
+            terms = _loo_log_lik(model, refit.sites)[..., row].reshape(-1)
+            exact[int(row)] = float(logsumexp(terms) - np.log(terms.size))
+            refitted.append(int(row))
+    flat = flatten_draws({k: sites[k] for k in member.parameters})
+    chosen = np.linspace(0, len(next(iter(flat.values()))) - 1, TIS_DRAWS).astype(int)
+    physical = {k: jnp.asarray(v[chosen]) for k, v in flat.items()}
+    tis70 = jax.jit(lambda p: member.tis_curve(jnp.array([TIS_ANGLE_DEG]), p))(physical)
+    return FamilyResult(
+        name=name,
+        parameters={k: _interval(v) for k, v in flat.items()},
+        tis70=_interval(np.asarray(tis70)),
+        idata=idata,
+        r_hat_max=float(np.max(summary["r_hat"])),
+        ess_bulk_min=float(np.min(summary["ess_bulk"])),
+        divergences=int(np.sum(output.stats["diverging"])),
+        refitted_rows=refitted,
+        exact_elpd=exact,
+        seconds=time.perf_counter() - started,
+    )
+
+
+def _elpd(fit: FamilyResult):
+    """ArviZ's PSIS-LOO of ``fit`` with the refitted rows' exact terms put in, and the
+    largest Pareto k before the refits."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        loo = az.loo(fit.idata, pointwise=True)
+    raw_k_max = float(np.max(np.asarray(loo.pareto_k)))
+    if fit.exact_elpd:
+        pointwise = np.asarray(loo.loo_i).copy()
+        for row, value in fit.exact_elpd.items():
+            pointwise[row] = value
+        loo.loo_i.values[:] = pointwise
+        loo["elpd_loo"] = float(pointwise.sum())
+        loo["se"] = float(np.sqrt(pointwise.size * np.var(pointwise)))
+        pareto_k = np.asarray(loo.pareto_k).copy()
+        pareto_k[list(fit.exact_elpd)] = 0.0  # exact now
+        loo.pareto_k.values[:] = pareto_k
+        loo["warning"] = bool(np.any(pareto_k > PARETO_K_LIMIT))
+    return loo, raw_k_max
+
+
+def rank_families(fits: dict[str, FamilyResult]) -> tuple[list[dict[str, Any]], list[str]]:
+    """ArviZ ``compare`` of the families (best first) and the warnings to show."""
+    elpds = {name: _elpd(fit) for name, fit in fits.items()}
+    loos = {name: loo for name, (loo, _) in elpds.items()}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        frame = az.compare(loos, ic="loo", method="stacking")
+    notes = []
+    table = []
+    for name, row in frame.iterrows():
+        fit = fits[name]
+        k_max = float(np.max(np.asarray(loos[name].pareto_k)))
+        if fit.refitted_rows:
+            notes.append(
+                f"{name}: Pareto k > {PARETO_K_LIMIT} for rows {fit.refitted_rows} "
+                "(LOO by refit there)"
+            )
+        if fit.divergences:
+            notes.append(f"{name}: {fit.divergences} divergent transitions")
+        table.append(
+            {
+                "name": name,
+                "elpd_loo": float(row["elpd_loo"]),
+                "se": float(row["se"]),
+                "d_elpd": float(row["elpd_diff"]),
+                "dse": float(row["dse"]),
+                "weight": float(row["weight"]),
+                "p_loo": float(row["p_loo"]),
+                "pareto_k_max": elpds[name][1],
+                "pareto_k_max_after_refit": k_max,
+            }
+        )
+    return table, notes
+
+
+def compare_families(
+    scene: Scene,
+    measurements: Measurements,
+    names: list[str],
+    settings: CompareSettings = CompareSettings(),
+    *,
+    progress: bool = False,
+) -> ComparisonResult:
+    """Fit every family in ``names`` by NUTS and rank them by PSIS-LOO (module docstring).
+
+    Raises:
+        BadInputError: unknown family names, fewer than two, or settings out of range.
+    """
+    names = check_family_names(names)
+    for field in ("chains", "warmup", "draws"):
+        if getattr(settings, field) < 1:
+            raise BadInputError(f"must be at least 1, got {getattr(settings, field)}", field=field)
+    started = time.perf_counter()
+    fits = {
+        name: fit_family(scene, measurements, name, settings, progress=progress) for name in names
+    }
+    table, notes = rank_families(fits)
+    return ComparisonResult(fits, table, notes, time.perf_counter() - started)
+
+
+def write_comparison(out: Path, result: ComparisonResult) -> list[Path]:
+    """compare.json and ArviZ's compare plot (compare.png) into ``out``, atomically."""
+    from brdf_infer._atomic import atomic_write_bytes, atomic_write_json
+    from brdf_infer.report._compare import compare_figure
+
+    out.mkdir(parents=True, exist_ok=True)
+    return [
+        atomic_write_json(out / COMPARE_FILE, result.as_json()),
+        atomic_write_bytes(out / "compare.png", compare_figure(result.as_json())),
+    ]

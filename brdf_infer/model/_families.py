@@ -1,0 +1,279 @@
+"""Model families behind one interface: ln BRDF over the hemisphere, TIS, parameters, priors.
+
+A family is a BRDF written for one point (θi, θ, φ) in the paper's frame (forward-scattering
+plane at φ = 180°, Sec. 4.1) and evaluated on arrays by broadcasting; its parameters are
+sampled in internal coordinates (well conditioned, unbounded or simply bounded) under default
+priors, and mapped to the physical parameters in the units the ray tracers use.
+
+* ``strumik2024``: Eqs. (7), (8), (10) (its posterior has its own whitened model,
+  :mod:`brdf_infer.posterior`; listed here for the shared interface).
+* ``abg``: A / (B + ρ^g), ρ = |β − β₀| (Harvey 1976), sampled as ln(A/B) (the BRDF at the
+  specular direction), ln ρ_k = ln(B)/g (the knee) and g.
+* ``harvey-shack``: b₀ [1 + (ρ/L)²]^(S/2), sampled as ln b₀, ln L and S.
+* ``lambertian``: TIS/π, sampled as ln TIS.
+* ``lambertian+abg``: a diffuse floor ρ_d/π plus an ABg lobe.
+
+TIS: exact for ``lambertian``; by the unit-disk quadrature of :mod:`brdf_infer.model._lobes`
+for the lobes (relative error < 1e-9, benchmark); Eq. (9) for ``strumik2024``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import jax
+import jax.numpy as jnp
+import numpyro.distributions as dist
+
+from brdf_infer._units import DEG
+from brdf_infer.model._hemisphere import log_brdf_hemisphere
+from brdf_infer.model._lobes import (
+    PRECISE_QUADRATURE,
+    abg_integral,
+    abg_log_bsdf,
+    beta_distance,
+    harvey_shack_integral,
+    harvey_shack_log_bsdf,
+)
+from brdf_infer.model._tis import log_tis
+from brdf_infer.params import PAPER_CONSTANTS, PARAM_NAMES, HemisphereConstants, Params
+
+Physical = dict[str, jnp.ndarray]
+
+
+@dataclass(frozen=True)
+class Coordinate:
+    """One internal coordinate: its sample site and default prior."""
+
+    site: str
+    prior: dist.Distribution
+    description: str
+
+
+@dataclass(frozen=True)
+class ModelFamily:
+    """A BRDF family (module docstring).
+
+    Attributes:
+        name: the family's name (``[model] family``, ``--model``).
+        parameters: physical parameter names, in order.
+        units: each parameter's unit.
+        coordinates: the internal coordinates, in order.
+        to_physical: internal coordinates (dict by site) → physical parameters.
+        log_brdf: ln BRDF(θi, θ, φ; physical) [ln sr⁻¹], angles in degrees, broadcasting.
+        tis: TIS(θi; physical) [-] for one scalar θi and scalar parameters.
+        exact_tis: the TIS is closed-form (else a quadrature).
+    """
+
+    name: str
+    parameters: tuple[str, ...]
+    units: dict[str, str]
+    coordinates: tuple[Coordinate, ...]
+    to_physical: Callable[[dict], Physical]
+    log_brdf: Callable[..., jnp.ndarray]
+    tis: Callable[..., jnp.ndarray]
+    exact_tis: bool
+
+    def log_brdf_signed(self, theta_i_deg, theta_s_deg, physical: Physical) -> jnp.ndarray:
+        """ln BRDF in the plane of incidence at a signed θs (forward > 0, Sec. 4.1)."""
+        theta_s = jnp.asarray(theta_s_deg, float)
+        phi = jnp.where(theta_s >= 0.0, 180.0, 0.0)
+        return self.log_brdf(theta_i_deg, jnp.abs(theta_s), phi, physical)
+
+    def tis_curve(self, theta_i_deg, physical: Physical) -> jnp.ndarray:
+        """TIS at every θi of a 1-D array, for every draw of the parameters' leading axis."""
+        theta = jnp.asarray(theta_i_deg, float)
+        per_draw = jax.vmap(lambda p: jax.vmap(lambda t: self.tis(t, p))(theta))
+        return per_draw({k: jnp.atleast_1d(jnp.asarray(v, float)) for k, v in physical.items()})
+
+
+def _rho(theta_i_deg, theta_deg, phi_deg):
+    return beta_distance(theta_i_deg, theta_deg, phi_deg)
+
+
+# ------------------------------------------------------------------------------------ ABg
+
+
+def _abg_physical(z: dict) -> Physical:
+    g = z["g"]
+    log_b = g * z["log_knee"]
+    return {"A": jnp.exp(z["log_peak"] + log_b), "B": jnp.exp(log_b), "g": g}
+
+
+def _abg_log_brdf(theta_i_deg, theta_deg, phi_deg, p: Physical):
+    return abg_log_bsdf(
+        jnp.log(p["A"]), jnp.log(p["B"]), p["g"], _rho(theta_i_deg, theta_deg, phi_deg)
+    )
+
+
+def _abg_tis(theta_i_deg, p: Physical):
+    sin_theta_i = jnp.sin(theta_i_deg * DEG)
+    return p["A"] * abg_integral(jnp.log(p["B"]), p["g"], sin_theta_i, PRECISE_QUADRATURE)
+
+
+_ABG_COORDINATES = (
+    Coordinate("log_peak", dist.Normal(0.0, 5.0), "ln(A/B), the BRDF at specular [ln sr⁻¹]"),
+    Coordinate("log_knee", dist.Normal(-3.0, 3.0), "ln ρ_k = ln(B)/g, where the lobe bends"),
+    Coordinate("g", dist.Uniform(0.05, 6.0), "g, the power of the lobe's tail"),
+)
+
+# --------------------------------------------------------------------------- Harvey–Shack
+
+
+def _hs_physical(z: dict) -> Physical:
+    return {"b0": jnp.exp(z["log_b0"]), "L": jnp.exp(z["log_l"]), "S": z["S"]}
+
+
+def _hs_log_brdf(theta_i_deg, theta_deg, phi_deg, p: Physical):
+    rho = _rho(theta_i_deg, theta_deg, phi_deg)
+    return harvey_shack_log_bsdf(jnp.log(p["b0"]), jnp.log(p["L"]), p["S"], rho)
+
+
+def _hs_tis(theta_i_deg, p: Physical):
+    sin_theta_i = jnp.sin(theta_i_deg * DEG)
+    return p["b0"] * harvey_shack_integral(jnp.log(p["L"]), p["S"], sin_theta_i)
+
+
+_HS_COORDINATES = (
+    Coordinate("log_b0", dist.Normal(0.0, 5.0), "ln b₀, the BRDF at specular [ln sr⁻¹]"),
+    Coordinate("log_l", dist.Normal(-3.0, 3.0), "ln L, the shoulder in |β − β₀|"),
+    Coordinate("S", dist.Uniform(-8.0, 0.0), "S, the slope of the tail in log–log"),
+)
+
+# ----------------------------------------------------------------------------- Lambertian
+
+
+def _lambert_physical(z: dict) -> Physical:
+    return {"tis": jnp.exp(z["log_tis"])}
+
+
+def _lambert_log_brdf(theta_i_deg, theta_deg, phi_deg, p: Physical):
+    shape = jnp.broadcast_shapes(jnp.shape(theta_i_deg), jnp.shape(theta_deg), jnp.shape(phi_deg))
+    return jnp.broadcast_to(jnp.log(p["tis"] / jnp.pi), shape)
+
+
+def _lambert_tis(theta_i_deg, p: Physical):
+    return p["tis"] + 0.0 * theta_i_deg
+
+
+_LAMBERT_COORDINATES = (
+    Coordinate(
+        "log_tis",
+        dist.TruncatedNormal(-4.6, 3.0, high=0.0),
+        "ln TIS (TIS ≤ 1), the BRDF is TIS/π",
+    ),
+)
+
+# ------------------------------------------------------------------------ Lambertian + ABg
+
+
+def _lambert_abg_physical(z: dict) -> Physical:
+    return {"rho_d": jnp.exp(z["log_rho_d"]), **_abg_physical(z)}
+
+
+def _lambert_abg_log_brdf(theta_i_deg, theta_deg, phi_deg, p: Physical):
+    lobe = _abg_log_brdf(theta_i_deg, theta_deg, phi_deg, p)
+    return jnp.logaddexp(jnp.log(p["rho_d"] / jnp.pi), lobe)
+
+
+def _lambert_abg_tis(theta_i_deg, p: Physical):
+    return p["rho_d"] + _abg_tis(theta_i_deg, p)
+
+
+_LAMBERT_ABG_COORDINATES = (
+    Coordinate(
+        "log_rho_d",
+        dist.TruncatedNormal(-6.0, 3.0, high=0.0),
+        "ln ρ_d, the diffuse reflectance (floor ρ_d/π)",
+    ),
+    *_ABG_COORDINATES,
+)
+
+
+FAMILIES: dict[str, ModelFamily] = {
+    "abg": ModelFamily(
+        "abg",
+        ("A", "B", "g"),
+        {"A": "sr⁻¹", "B": "-", "g": "-"},
+        _ABG_COORDINATES,
+        _abg_physical,
+        _abg_log_brdf,
+        _abg_tis,
+        exact_tis=False,
+    ),
+    "harvey-shack": ModelFamily(
+        "harvey-shack",
+        ("b0", "L", "S"),
+        {"b0": "sr⁻¹", "L": "-", "S": "-"},
+        _HS_COORDINATES,
+        _hs_physical,
+        _hs_log_brdf,
+        _hs_tis,
+        exact_tis=False,
+    ),
+    "lambertian": ModelFamily(
+        "lambertian",
+        ("tis",),
+        {"tis": "-"},
+        _LAMBERT_COORDINATES,
+        _lambert_physical,
+        _lambert_log_brdf,
+        _lambert_tis,
+        exact_tis=True,
+    ),
+    "lambertian+abg": ModelFamily(
+        "lambertian+abg",
+        ("rho_d", "A", "B", "g"),
+        {"rho_d": "-", "A": "sr⁻¹", "B": "-", "g": "-"},
+        _LAMBERT_ABG_COORDINATES,
+        _lambert_abg_physical,
+        _lambert_abg_log_brdf,
+        _lambert_abg_tis,
+        exact_tis=False,
+    ),
+}
+REFERENCE_FAMILY = "strumik2024"
+FAMILY_NAMES: tuple[str, ...] = (REFERENCE_FAMILY, *FAMILIES)
+
+
+def strumik_family(
+    fold: bool = True, constants: HemisphereConstants = PAPER_CONSTANTS
+) -> ModelFamily:
+    """``strumik2024``: Eqs. (7), (8), (10) with the scene's folding switch and constants.
+
+    Its coordinates are empty: its posterior samples the whitened coordinates of
+    :mod:`brdf_infer.posterior` under the scene's ``[priors]``.
+    """
+
+    def as_params(p: Physical) -> Params:
+        return Params(*(jnp.asarray(p[name], float) for name in PARAM_NAMES))
+
+    return ModelFamily(
+        REFERENCE_FAMILY,
+        PARAM_NAMES,
+        {
+            "brdf0": "sr⁻¹",
+            "a1": "deg⁻²",
+            "a2": "deg^(−1−α)",
+            "a3": "deg^(−2−α)",
+            "alpha": "-",
+            "theta_s0": "deg",
+        },
+        (),
+        lambda z: z,
+        lambda ti, t, phi, p: log_brdf_hemisphere(ti, t, phi, as_params(p), fold, constants),
+        lambda ti, p: jnp.exp(log_tis(jnp.atleast_1d(ti), as_params(p), fold, constants)[0]),
+        exact_tis=False,
+    )
+
+
+def family(name: str, fold: bool = True, constants: HemisphereConstants = PAPER_CONSTANTS):
+    """The family called ``name`` (``fold`` and ``constants`` serve ``strumik2024`` only).
+
+    Raises:
+        KeyError: no such family.
+    """
+    if name == REFERENCE_FAMILY:
+        return strumik_family(fold, constants)
+    return FAMILIES[name]

@@ -1,0 +1,128 @@
+"""The NumPyro model of a scene under another BRDF family (ABg, Harvey–Shack, Lambertian, …).
+
+The same rows, instrument (Eq. 6: ln R = ln BRDF + ln cos θs + ln Ω) and generative error
+model as the ``strumik2024`` posterior (:mod:`brdf_infer.posterior._model`), so that PSIS-LOO
+compares the BRDF families and nothing else: only the mean of ln R changes. The family's
+internal coordinates are sampled under its default priors
+(:class:`brdf_infer.model.ModelFamily`); the physical parameters are deterministic sites.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import jax
+import jax.numpy as jnp
+import numpyro
+import numpyro.distributions as dist
+
+from brdf_infer._units import DEG
+from brdf_infer.error_model import angle_slopes, covariance_factors
+from brdf_infer.errors import BadInputError
+from brdf_infer.measurements import Measurements
+from brdf_infer.model import ModelFamily
+from brdf_infer.posterior._model import (
+    LikelihoodParts,
+    ModelData,
+    build_model_data,
+    drawn_noise_scales,
+    sample_noise_scales,
+)
+from brdf_infer.scene import Scene
+
+
+@dataclass(frozen=True)
+class FamilyPosteriorModel:
+    """A scene's posterior under ``family``: a NumPyro model function of :class:`ModelData`.
+
+    Attributes:
+        scene: the scene (its error model; its ``[priors]`` are those of ``strumik2024``).
+        family: the BRDF family.
+        data: the scene's own data (the default argument of the model).
+        sigma_scale: multiplies the likelihood's σ in the inference (1; a planted fault only).
+    """
+
+    scene: Scene
+    family: ModelFamily
+    data: ModelData
+    sigma_scale: float = 1.0
+
+    @property
+    def errors(self):
+        return self.scene.errors
+
+    def sample_physical(self) -> dict:
+        """Sample the internal coordinates; the physical parameters as deterministic sites."""
+        internal = {c.site: numpyro.sample(c.site, c.prior) for c in self.family.coordinates}
+        physical = self.family.to_physical(internal)
+        for name in self.family.parameters:
+            if name not in internal:  # a coordinate that is its own parameter (g, S)
+                numpyro.deterministic(name, physical[name])
+        return physical
+
+    def __call__(self, data: ModelData | None = None, mode: str = "fit") -> None:
+        """The NumPyro model; ``mode`` as in :class:`brdf_infer.posterior.PosteriorModel`."""
+        data = self.data if data is None else data
+        scales = sample_noise_scales(self.errors)
+        physical = self.sample_physical()
+        parts = self.likelihood_parts(physical, scales, data)
+        if mode != "simulate" and self.sigma_scale != 1.0:
+            parts = LikelihoodParts(
+                parts.mean, parts.factor * self.sigma_scale, parts.diagonal * self.sigma_scale**2
+            )
+        observed = data.rows.log_reflectance if mode == "fit" else None
+        if self.errors.model == "spread":
+            with numpyro.plate("rows", data.rows.log_reflectance.shape[0]):
+                numpyro.sample("obs", dist.Normal(parts.mean, parts.diagonal**0.5), obs=observed)
+        else:
+            numpyro.sample(
+                "obs",
+                dist.LowRankMultivariateNormal(parts.mean, parts.factor, parts.diagonal),
+                obs=observed,
+            )
+
+    def log_reflectance_at(self, theta_i_deg, theta_s_deg, physical: dict) -> jnp.ndarray:
+        """ln R(θi, θs) up to the constant ln Ω: ln BRDF + ln cos θs (signed in-plane θs)."""
+        log_brdf = self.family.log_brdf_signed(theta_i_deg, theta_s_deg, physical)
+        return log_brdf + jnp.log(jnp.cos(jnp.asarray(theta_s_deg, float) * DEG))
+
+    def likelihood_parts(self, physical: dict, scales, data: ModelData | None = None):
+        """Mean and covariance factors of the rows' ln R for one draw (Eq. 6 in log space)."""
+        data = self.data if data is None else data
+        rows = data.rows
+        mean = self.family.log_brdf_signed(rows.theta_i_deg, rows.theta_s_deg, physical)
+        mean = mean + rows.log_aperture
+        if self.errors.angles_on:
+            g_rot, g_cam = angle_slopes(
+                lambda ti, ts: self.log_reflectance_at(ti, ts, physical),
+                rows.theta_i_deg,
+                rows.theta_s_deg,
+            )
+        else:
+            g_rot = g_cam = jnp.zeros_like(mean)
+        factor, diagonal = covariance_factors(data.noise, scales, g_rot, g_cam)
+        return LikelihoodParts(mean, factor, diagonal)
+
+    def draw_parts(self, sites: dict) -> LikelihoodParts:
+        """:meth:`likelihood_parts` of every draw (leading axis) of a posterior's sites."""
+        physical = {name: jnp.asarray(sites[name]) for name in self.family.parameters}
+        count = next(iter(physical.values())).shape[0]
+        scales = drawn_noise_scales(self.errors, sites, count)
+        return jax.jit(jax.vmap(lambda p, s: self.likelihood_parts(p, s)))(physical, scales)
+
+
+def build_family_model(
+    scene: Scene, measurements: Measurements, family: ModelFamily
+) -> FamilyPosteriorModel:
+    """The posterior model of ``scene`` on ``measurements`` under ``family``.
+
+    Raises:
+        BadInputError: the scene asks for latent angles (only ``strumik2024`` has them).
+    """
+    if scene.errors.angles_on and scene.errors.angle_method == "latent":
+        raise BadInputError(
+            f"angle_method = 'latent' is available for strumik2024 only, not {family.name}",
+            file=scene.path,
+            field="errors.angle_method",
+        )
+    return FamilyPosteriorModel(scene, family, build_model_data(scene, measurements))

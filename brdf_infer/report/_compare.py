@@ -1,0 +1,76 @@
+"""Figures and HTML of a PSIS-LOO model comparison (``compare.json``)."""
+
+from __future__ import annotations
+
+import io
+import warnings
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from matplotlib.figure import Figure
+
+from brdf_infer._arviz import az
+
+
+def compare_frame(payload: dict[str, Any]) -> pd.DataFrame:
+    """The comparison as ArviZ's ``compare`` table (best first)."""
+    rows = payload["models"]
+    return pd.DataFrame(
+        {
+            "rank": list(range(len(rows))),
+            "elpd_loo": [row["elpd_loo"] for row in rows],
+            "p_loo": [row["p_loo"] for row in rows],
+            "elpd_diff": [row["d_elpd"] for row in rows],
+            "weight": [row["weight"] for row in rows],
+            "se": [row["se"] for row in rows],
+            "dse": [row["dse"] for row in rows],
+            "warning": [row["pareto_k_max_after_refit"] > 0.7 for row in rows],
+            "scale": ["log"] * len(rows),
+        },
+        index=[row["name"] for row in rows],
+    )
+
+
+def compare_figure(payload: dict[str, Any], dpi: int = 90) -> bytes:
+    """PNG: ArviZ's compare plot (elpd_loo ± se, Δelpd ± dse) beside each family's TIS(70°)."""
+    figure = Figure(figsize=(10.0, 0.6 * len(payload["models"]) + 1.8))
+    left, right = figure.subplots(1, 2, gridspec_kw={"width_ratios": [3, 2]})
+    with warnings.catch_warnings():  # ArviZ's own use of a deprecated pandas keyword
+        warnings.simplefilter("ignore")
+        az.plot_compare(compare_frame(payload), ax=left, insample_dev=False, legend=False)
+    left.set_xlabel("elpd_loo (log predictive density, higher is better) [nats]")
+    left.set_title("PSIS-LOO, best on top: elpd_loo ± se", fontsize=9)
+    names = [row["name"] for row in payload["models"]]
+    medians = np.array([row["tis70"]["median"] for row in payload["models"]])
+    low = np.array([row["tis70"]["lo95"] for row in payload["models"]])
+    high = np.array([row["tis70"]["hi95"] for row in payload["models"]])
+    positions = np.arange(len(names))[::-1]
+    right.errorbar(
+        100 * medians, positions, xerr=100 * np.stack([medians - low, high - medians]), fmt="o"
+    )
+    right.set_yticks(positions, names)
+    right.set_xscale("log")
+    right.set_xlabel("TIS(70°) [%], median and 95 % interval")
+    right.grid(alpha=0.3)
+    figure.tight_layout()
+    buffer = io.BytesIO()
+    figure.savefig(buffer, format="png", dpi=dpi)
+    return buffer.getvalue()
+
+
+def compare_table_html(payload: dict[str, Any]) -> str:
+    """The comparison as an HTML table (best first)."""
+    head = (
+        "<tr><th>model</th><th>elpd_loo ± se</th><th>Δelpd ± dse</th><th>weight</th>"
+        "<th>p_loo</th><th>Pareto k max</th><th>TIS(70°) [%] (95 %)</th></tr>"
+    )
+    body = "".join(
+        f"<tr><td>{row['name']}</td><td>{row['elpd_loo']:.1f} ± {row['se']:.1f}</td>"
+        f"<td>{row['d_elpd']:.1f} ± {row['dse']:.1f}</td><td>{row['weight']:.2f}</td>"
+        f"<td>{row['p_loo']:.1f}</td><td>{row['pareto_k_max']:.2f}</td>"
+        f"<td>{100 * row['tis70']['median']:.2f} ({100 * row['tis70']['lo95']:.2f}–"
+        f"{100 * row['tis70']['hi95']:.2f})</td></tr>"
+        for row in payload["models"]
+    )
+    return f"<table>{head}{body}</table>"

@@ -1,0 +1,150 @@
+"""``brdf-infer compare``: PSIS-LOO picks the family that made the data; the CLI contract."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from brdf_infer.compare import CompareSettings, compare_families
+from brdf_infer.error_model import NoiseScales
+from brdf_infer.model import family
+from brdf_infer.params import UV_PAPER
+from brdf_infer.posterior._family_model import build_family_model
+from brdf_infer.posterior._model import build_posterior_model
+from tests.helpers import run_cli
+
+SMALL = CompareSettings(chains=2, warmup=300, draws=300, seed=1)
+ABG_TRUTH = {"A": 2.0e-3, "B": 5.0e-3, "g": 1.8}
+
+
+def synthetic(scene, measurements, truth: str, seed: int):
+    """The bundled geometry with ln R drawn from ``truth`` under the scene's error model
+    (sample and repeatability scales 0.05)."""
+    if truth == "abg":
+        model = build_family_model(scene, measurements, family("abg"))
+        params = {k: jnp.asarray(v) for k, v in ABG_TRUTH.items()}
+    else:
+        model = build_posterior_model(scene, measurements)
+        params = UV_PAPER
+    errors = scene.errors
+    scales = NoiseScales(
+        sample_sd=jnp.asarray(0.05),
+        repeatability=jnp.asarray(0.05),
+        calibration=jnp.asarray(errors.calibration_sd),
+        rotation_deg=jnp.asarray(errors.rotation_deg if errors.angles_on else 0.0),
+        camera_deg=jnp.asarray(errors.camera_deg if errors.angles_on else 0.0),
+    )
+    parts = model.likelihood_parts(params, scales)
+    first, second = jax.random.split(jax.random.PRNGKey(seed))
+    draw = (
+        parts.mean
+        + parts.factor @ jax.random.normal(first, (parts.factor.shape[1],))
+        + jnp.sqrt(parts.diagonal) * jax.random.normal(second, parts.mean.shape)
+    )
+    reflectance = np.exp(np.asarray(draw))
+    ratio = reflectance / measurements.reflectance
+    errors_column = (
+        None if measurements.reflectance_err is None else measurements.reflectance_err * ratio
+    )
+    return dataclasses.replace(measurements, reflectance=reflectance, reflectance_err=errors_column)
+
+
+@pytest.mark.parametrize("truth", ["abg", "strumik2024"])
+def test_compare_ranks_the_family_that_generated_the_data_first(lya, truth):
+    scene, measurements = lya
+    data = synthetic(scene, measurements, truth, seed=4)
+    result = compare_families(scene, data, ["strumik2024", "abg"], SMALL)
+    best, other = result.table
+    assert best["name"] == truth, result.table
+    assert best["d_elpd"] == 0.0 and other["d_elpd"] > 3.0 * other["dse"], result.table
+    if truth == "abg":
+        parameters = result.families["abg"].parameters
+        for name, value in ABG_TRUTH.items():
+            assert parameters[name]["lo95"] <= value <= parameters[name]["hi95"], name
+
+
+def test_compare_command_json_contract_and_files(tmp_path, capsys):
+    code, out, err = run_cli(
+        "compare",
+        "lya",
+        "--models",
+        "lambertian",
+        "harvey-shack",
+        "--chains",
+        "1",
+        "--warmup",
+        "100",
+        "--draws",
+        "100",
+        "--out",
+        str(tmp_path / "cmp"),
+        "--json",
+        capsys=capsys,
+    )
+    assert code == 0, err
+    payload = json.loads(out)
+    assert [m["name"] for m in payload["models"]] in (
+        ["lambertian", "harvey-shack"],
+        ["harvey-shack", "lambertian"],
+    )
+    for entry in payload["models"]:
+        for key in ("elpd_loo", "se", "d_elpd", "dse", "weight", "p_loo", "pareto_k_max"):
+            assert np.isfinite(entry[key]), key
+        assert entry["tis70"]["lo95"] <= entry["tis70"]["median"] <= entry["tis70"]["hi95"]
+    assert payload["models"][0]["d_elpd"] == 0.0
+    assert sum(m["weight"] for m in payload["models"]) == pytest.approx(1.0)
+    assert payload["seconds"] > 0
+    assert json.loads((tmp_path / "cmp" / "compare.json").read_text())["models"]
+    assert (tmp_path / "cmp" / "compare.png").stat().st_size > 0
+
+
+@pytest.mark.parametrize(
+    ("models", "message"),
+    [(["strumik2024", "phong"], "unknown model family 'phong'"), (["abg"], "at least two")],
+)
+def test_compare_refuses_bad_model_lists_before_any_work(tmp_path, capsys, models, message):
+    code, out, err = run_cli(
+        "compare", "--models", *models, "--out", str(tmp_path / "x"), capsys=capsys
+    )
+    assert code == 2 and out == "" and message in err and "--models" in err
+    assert "Traceback" not in err and not (tmp_path / "x").exists()
+
+
+@pytest.mark.parametrize(
+    ("value", "message"),
+    [('["strumik2024", "phong"]', "unknown model family 'phong'"), ('["abg"]', "at least two")],
+)
+def test_scene_compare_key_is_checked_when_the_scene_loads(lya, tmp_path, value, message):
+    from brdf_infer.errors import BadInputError
+    from brdf_infer.scene import load_scene
+
+    scene, _ = lya
+    path = tmp_path / "scene.toml"
+    path.write_text(
+        f'name = "x"\nmeasurements = "{scene.measurements_path.as_posix()}"\n'
+        f"compare = {value}\n"
+        "[series.I]\naperture_diameter_mm = 7.2\naperture_distance_mm = 103.8\n"
+        "[series.II]\naperture_diameter_mm = 7.5\naperture_distance_mm = 106.0\n"
+    )
+    with pytest.raises(BadInputError, match=message) as error:
+        load_scene(path)
+    assert error.value.field == "compare"
+
+
+def test_scene_lists_the_families_run_compares(lya, tmp_path):
+    from brdf_infer.scene import load_scene
+
+    scene, _ = lya
+    path = tmp_path / "scene.toml"
+    path.write_text(
+        f'name = "x"\nmeasurements = "{scene.measurements_path.as_posix()}"\n'
+        'compare = ["strumik2024", "abg", "abg"]\n'
+        "[series.I]\naperture_diameter_mm = 7.2\naperture_distance_mm = 103.8\n"
+        "[series.II]\naperture_diameter_mm = 7.5\naperture_distance_mm = 106.0\n"
+    )
+    assert load_scene(path).compare == ("strumik2024", "abg")
