@@ -148,3 +148,34 @@ def test_scene_lists_the_families_run_compares(lya, tmp_path):
         "[series.II]\naperture_diameter_mm = 7.5\naperture_distance_mm = 106.0\n"
     )
     assert load_scene(path).compare == ("strumik2024", "abg")
+
+
+def test_a_row_with_the_left_out_sigma_carries_no_information(lya):
+    """The exact-refit device: with σ = LEFT_OUT_SIGMA on row i the likelihood of all rows
+    differs from that of the other rows alone by a constant in the parameters, so the refit
+    posterior is the posterior without row i."""
+    import numpyro.distributions as dist
+
+    from brdf_infer.compare import LEFT_OUT_SIGMA
+
+    scene, measurements = lya
+    model = build_family_model(scene, measurements, family("abg"))
+    row = 7
+    noise = model.data.noise
+    left_out = model.data._replace(
+        noise=noise._replace(sigma_row=noise.sigma_row.at[row].set(LEFT_OUT_SIGMA))
+    )
+    y = model.data.rows.log_reflectance
+    keep = np.arange(y.shape[0]) != row
+    differences = []
+    for a, b, g, sd in ((2e-3, 5e-3, 1.8, 0.05), (1e-2, 1e-1, 2.5, 0.2), (5e-4, 1e-3, 1.2, 0.01)):
+        params = {"A": jnp.asarray(a), "B": jnp.asarray(b), "g": jnp.asarray(g)}
+        scales = NoiseScales(*(jnp.asarray(v) for v in (sd, 0.05, 0.0, 0.3, 0.3)))
+        full = model.likelihood_parts(params, scales, left_out)
+        dropped = model.likelihood_parts(params, scales)
+        whole = dist.LowRankMultivariateNormal(full.mean, full.factor, full.diagonal).log_prob(y)
+        rest = dist.LowRankMultivariateNormal(
+            dropped.mean[keep], dropped.factor[keep], dropped.diagonal[keep]
+        ).log_prob(y[keep])
+        differences.append(float(whole - rest))
+    assert np.ptp(differences) < 1e-6, differences

@@ -24,7 +24,6 @@ from dataclasses import dataclass
 
 import jax
 import jax.numpy as jnp
-import numpyro.distributions as dist
 
 from brdf_infer._units import DEG
 from brdf_infer.model._hemisphere import log_brdf_hemisphere
@@ -38,16 +37,17 @@ from brdf_infer.model._lobes import (
 )
 from brdf_infer.model._tis import log_tis
 from brdf_infer.params import PAPER_CONSTANTS, PARAM_NAMES, HemisphereConstants, Params
+from brdf_infer.priors import Prior
 
 Physical = dict[str, jnp.ndarray]
 
 
 @dataclass(frozen=True)
 class Coordinate:
-    """One internal coordinate: its sample site and default prior."""
+    """One internal coordinate: its sample site and default prior (on the coordinate)."""
 
     site: str
-    prior: dist.Distribution
+    prior: Prior
     description: str
 
 
@@ -113,9 +113,13 @@ def _abg_tis(theta_i_deg, p: Physical):
 
 
 _ABG_COORDINATES = (
-    Coordinate("log_peak", dist.Normal(0.0, 5.0), "ln(A/B), the BRDF at specular [ln sr⁻¹]"),
-    Coordinate("log_knee", dist.Normal(-3.0, 3.0), "ln ρ_k = ln(B)/g, where the lobe bends"),
-    Coordinate("g", dist.Uniform(0.05, 6.0), "g, the power of the lobe's tail"),
+    Coordinate(
+        "log_peak", Prior("normal", loc=0.0, scale=5.0), "ln(A/B), the BRDF at specular [ln sr⁻¹]"
+    ),
+    Coordinate(
+        "log_knee", Prior("normal", loc=-3.0, scale=3.0), "ln ρ_k = ln(B)/g, where the lobe bends"
+    ),
+    Coordinate("g", Prior("uniform", lower=0.05, upper=6.0), "g, the power of the lobe's tail"),
 )
 
 # --------------------------------------------------------------------------- Harvey–Shack
@@ -136,9 +140,11 @@ def _hs_tis(theta_i_deg, p: Physical):
 
 
 _HS_COORDINATES = (
-    Coordinate("log_b0", dist.Normal(0.0, 5.0), "ln b₀, the BRDF at specular [ln sr⁻¹]"),
-    Coordinate("log_l", dist.Normal(-3.0, 3.0), "ln L, the shoulder in |β − β₀|"),
-    Coordinate("S", dist.Uniform(-8.0, 0.0), "S, the slope of the tail in log–log"),
+    Coordinate(
+        "log_b0", Prior("normal", loc=0.0, scale=5.0), "ln b₀, the BRDF at specular [ln sr⁻¹]"
+    ),
+    Coordinate("log_l", Prior("normal", loc=-3.0, scale=3.0), "ln L, the shoulder in |β − β₀|"),
+    Coordinate("S", Prior("uniform", lower=-8.0, upper=0.0), "S, the slope of the tail in log–log"),
 )
 
 # ----------------------------------------------------------------------------- Lambertian
@@ -160,7 +166,7 @@ def _lambert_tis(theta_i_deg, p: Physical):
 _LAMBERT_COORDINATES = (
     Coordinate(
         "log_tis",
-        dist.TruncatedNormal(-4.6, 3.0, high=0.0),
+        Prior("truncated_normal", loc=-4.6, scale=3.0, upper=0.0),
         "ln TIS (TIS ≤ 1), the BRDF is TIS/π",
     ),
 )
@@ -184,7 +190,7 @@ def _lambert_abg_tis(theta_i_deg, p: Physical):
 _LAMBERT_ABG_COORDINATES = (
     Coordinate(
         "log_rho_d",
-        dist.TruncatedNormal(-6.0, 3.0, high=0.0),
+        Prior("truncated_normal", loc=-6.0, scale=3.0, upper=0.0),
         "ln ρ_d, the diffuse reflectance (floor ρ_d/π)",
     ),
     *_ABG_COORDINATES,

@@ -14,7 +14,6 @@ from dataclasses import dataclass
 import jax
 import jax.numpy as jnp
 import numpyro
-import numpyro.distributions as dist
 
 from brdf_infer._units import DEG
 from brdf_infer.error_model import angle_slopes, covariance_factors
@@ -26,6 +25,8 @@ from brdf_infer.posterior._model import (
     ModelData,
     build_model_data,
     drawn_noise_scales,
+    observe,
+    prior_distribution,
     sample_noise_scales,
 )
 from brdf_infer.scene import Scene
@@ -53,7 +54,10 @@ class FamilyPosteriorModel:
 
     def sample_physical(self) -> dict:
         """Sample the internal coordinates; the physical parameters as deterministic sites."""
-        internal = {c.site: numpyro.sample(c.site, c.prior) for c in self.family.coordinates}
+        internal = {
+            c.site: numpyro.sample(c.site, prior_distribution(c.prior))
+            for c in self.family.coordinates
+        }
         physical = self.family.to_physical(internal)
         for name in self.family.parameters:
             if name not in internal:  # a coordinate that is its own parameter (g, S)
@@ -66,20 +70,7 @@ class FamilyPosteriorModel:
         scales = sample_noise_scales(self.errors)
         physical = self.sample_physical()
         parts = self.likelihood_parts(physical, scales, data)
-        if mode != "simulate" and self.sigma_scale != 1.0:
-            parts = LikelihoodParts(
-                parts.mean, parts.factor * self.sigma_scale, parts.diagonal * self.sigma_scale**2
-            )
-        observed = data.rows.log_reflectance if mode == "fit" else None
-        if self.errors.model == "spread":
-            with numpyro.plate("rows", data.rows.log_reflectance.shape[0]):
-                numpyro.sample("obs", dist.Normal(parts.mean, parts.diagonal**0.5), obs=observed)
-        else:
-            numpyro.sample(
-                "obs",
-                dist.LowRankMultivariateNormal(parts.mean, parts.factor, parts.diagonal),
-                obs=observed,
-            )
+        observe(parts, data, mode, self.sigma_scale, spread=self.errors.model == "spread")
 
     def log_reflectance_at(self, theta_i_deg, theta_s_deg, physical: dict) -> jnp.ndarray:
         """ln R(θi, θs) up to the constant ln Ω: ln BRDF + ln cos θs (signed in-plane θs)."""

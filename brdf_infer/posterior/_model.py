@@ -30,6 +30,7 @@ the scene fixes stay fixed; ``reparametrise=False`` samples the c directly.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -76,7 +77,12 @@ def prior_distribution(prior: Prior, scale: float = 1.0) -> dist.Distribution:
     if prior.kind == "normal":
         return dist.Normal(loc, sd)
     if prior.kind == "truncated_normal":
-        return dist.TruncatedNormal(loc, sd, low=low, high=high)
+        return dist.TruncatedNormal(  # an infinite bound is no bound (None keeps it finite)
+            loc,
+            sd,
+            low=low if math.isfinite(low) else None,
+            high=high if math.isfinite(high) else None,
+        )
     if prior.kind == "uniform":
         return dist.Uniform(low, high)
     raise ValueError(f"no distribution for a {prior.kind} prior")
@@ -199,20 +205,7 @@ class PosteriorModel:
             parts = self.likelihood_parts(params, scales, data, mean=mean, angles=False)
         else:
             parts = self.likelihood_parts(params, scales, data)
-        observed = rows.log_reflectance if mode == "fit" else None
-        if mode != "simulate" and self.sigma_scale != 1.0:
-            parts = LikelihoodParts(
-                parts.mean, parts.factor * self.sigma_scale, parts.diagonal * self.sigma_scale**2
-            )
-        if self.errors.model == "spread":
-            with numpyro.plate("rows", rows.log_reflectance.shape[0]):
-                numpyro.sample("obs", dist.Normal(parts.mean, parts.diagonal**0.5), obs=observed)
-        else:
-            numpyro.sample(
-                "obs",
-                dist.LowRankMultivariateNormal(parts.mean, parts.factor, parts.diagonal),
-                obs=observed,
-            )
+        observe(parts, data, mode, self.sigma_scale, spread=self.errors.model == "spread")
 
     @property
     def _components(self) -> tuple:
@@ -335,6 +328,27 @@ class PosteriorModel:
         params = Params(*(jnp.asarray(sites[name]) for name in Params._fields))
         scales = drawn_noise_scales(self.errors, sites, params.brdf0.shape[0])
         return jax.jit(jax.vmap(lambda p, s: self.likelihood_parts(p, s)))(params, scales)
+
+
+def observe(
+    parts: LikelihoodParts, data: ModelData, mode: str, sigma_scale: float, *, spread: bool
+) -> None:
+    """The ``obs`` site: the rows' ln R under mean and covariance ``parts`` (observed in
+    ``fit`` mode, drawn otherwise); σ scaled by ``sigma_scale`` except when simulating."""
+    observed = data.rows.log_reflectance if mode == "fit" else None
+    if mode != "simulate" and sigma_scale != 1.0:
+        parts = LikelihoodParts(
+            parts.mean, parts.factor * sigma_scale, parts.diagonal * sigma_scale**2
+        )
+    if spread:
+        with numpyro.plate("rows", data.rows.log_reflectance.shape[0]):
+            numpyro.sample("obs", dist.Normal(parts.mean, parts.diagonal**0.5), obs=observed)
+    else:
+        numpyro.sample(
+            "obs",
+            dist.LowRankMultivariateNormal(parts.mean, parts.factor, parts.diagonal),
+            obs=observed,
+        )
 
 
 def sample_noise_scales(errors: ErrorSettings) -> NoiseScales:
