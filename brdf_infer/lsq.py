@@ -387,7 +387,7 @@ class _Reweighting:
         if errors.angles_on:
             g_rot, g_cam = angle_slopes(
                 lambda ti, ts: log_reflectance_at(
-                    ti, ts, params, self.model.fold, self.model.constants
+                    ti, ts, params, self.model.fold, self.model.constants, data
                 ),
                 data.theta_i_deg,
                 data.theta_s_deg,

@@ -1,8 +1,15 @@
-"""Measurement table: one validated row per raw-reflectance measurement.
+"""Measurement table: one validated row per measurement.
 
 Columns (header required, extra named columns ignored):
 ``series,sample,theta_i_deg,theta_s_deg,reflectance`` and, optionally, ``reflectance_err``
-(the 1σ of each value; without it the scene's ``errors.reflectance_rel`` stands in).
+(the 1σ of each value; without it the scene's ``errors.reflectance_rel`` stands in) for raw
+reflectance through an aperture (Eq. 2); ``brdf`` and ``brdf_err`` [sr⁻¹] in place of the last
+two for BRDF values (a scatterometer's output, no aperture to convert through).
+
+An optional ``phi_s_deg`` column places a row out of the plane of incidence: θs is then the
+polar angle θ ∈ [0°, 90°] and φs the azimuth in the paper's frame (forward-scattering plane at
+180°, Sec. 4.1). A row with an empty ``phi_s_deg`` cell is in the plane with a signed θs as
+always; a row at φs = 180° (0°) is the in-plane row at +θ (−θ).
 """
 
 from __future__ import annotations
@@ -26,6 +33,8 @@ COLUMNS: tuple[str, ...] = (
     "reflectance_err",
 )
 REQUIRED_COLUMNS: tuple[str, ...] = COLUMNS[:5]
+BRDF_COLUMNS: tuple[str, ...] = (*COLUMNS[:4], "brdf", "brdf_err")
+QUANTITIES: tuple[str, ...] = ("raw_reflectance", "brdf")
 
 
 @dataclass(frozen=True)
@@ -38,8 +47,12 @@ class Measurements:
         sample: name of the physical sample of each row.
         theta_i_deg: incidence angle θi [deg].
         theta_s_deg: in-plane scattering angle θs [deg] (> 0: forward side).
-        reflectance: raw reflectance R of Eq. (2) [-].
-        reflectance_err: 1σ uncertainty of R [-], or None when the file has no such column.
+        reflectance: the measured value: raw reflectance R of Eq. (2) [-] or, for a
+            ``brdf`` table, BRDF [sr⁻¹].
+        reflectance_err: 1σ uncertainty of the value, or None when the file has no such column.
+        quantity: ``raw_reflectance`` or ``brdf`` (from the columns of the file).
+        phi_s_deg: azimuth of each out-of-plane row [deg] (NaN for in-plane rows), or None
+            when every row is in the plane.
     """
 
     path: Path
@@ -49,6 +62,15 @@ class Measurements:
     theta_s_deg: np.ndarray
     reflectance: np.ndarray
     reflectance_err: np.ndarray | None
+    quantity: str = "raw_reflectance"
+    phi_s_deg: np.ndarray | None = None
+
+    @property
+    def out_of_plane(self) -> np.ndarray:
+        """True for the rows out of the plane of incidence."""
+        if self.phi_s_deg is None:
+            return np.zeros(len(self.series), bool)
+        return np.isfinite(self.phi_s_deg)
 
     def __len__(self) -> int:
         return len(self.series)
@@ -63,13 +85,17 @@ class Measurements:
             theta_s_deg=self.theta_s_deg[mask],
             reflectance=self.reflectance[mask],
             reflectance_err=None if self.reflectance_err is None else self.reflectance_err[mask],
+            quantity=self.quantity,
+            phi_s_deg=None if self.phi_s_deg is None else self.phi_s_deg[mask],
         )
 
 
 def _check_range(value: float, field: str, where: dict) -> None:
     if field == "reflectance" and not 0.0 < value < 1.0:
         raise BadInputError(f"raw reflectance must lie in (0, 1), got {value}", **where)
-    if field == "reflectance_err" and value < 0.0:
+    if field == "brdf" and not value > 0.0:
+        raise BadInputError(f"BRDF must be > 0 sr^-1, got {value}", **where)
+    if field in ("reflectance_err", "brdf_err") and value < 0.0:
         raise BadInputError(f"uncertainty must be >= 0, got {value}", **where)
     if field == "theta_i_deg" and not 0.0 <= value < 90.0:
         raise BadInputError(f"incidence angle must lie in [0, 90) deg, got {value}", **where)
@@ -106,12 +132,61 @@ def _read_rows(path: Path) -> tuple[list[str], list[tuple[int, list[str]]]]:
     return [name.strip() for name in header], rows[1:]
 
 
-def load_measurements(path: str | Path, known_series: Iterable[str] | None = None) -> Measurements:
+def _table_columns(header: list[str], path: Path) -> tuple[str, tuple[str, ...]]:
+    """The table's quantity and its value columns, from the header."""
+    if "reflectance" in header and "brdf" in header:
+        raise BadInputError(
+            "a table holds one quantity: both reflectance and brdf columns", file=path, field="brdf"
+        )
+    quantity = "brdf" if "brdf" in header else "raw_reflectance"
+    columns = BRDF_COLUMNS if quantity == "brdf" else COLUMNS
+    for name in columns[:5]:
+        if name not in header:
+            raise BadInputError(
+                "missing header column (expected " + ",".join(REQUIRED_COLUMNS) + " and "
+                "optionally reflectance_err, or brdf,brdf_err for BRDF values; optionally "
+                "phi_s_deg)" + _delimiter_hint(header),
+                file=path,
+                field=name,
+            )
+    return quantity, columns
+
+
+def _cell(cells: list[str], position: int) -> str:
+    return cells[position].strip() if position < len(cells) else ""
+
+
+def _azimuth(text: str, theta_s: float, where: dict) -> tuple[float, float]:
+    """(θs, φs) of a row with a ``phi_s_deg`` cell: in-plane rows (empty cell, φ = 0° or 180°)
+    get a signed θs and φs = NaN."""
+    if not text:
+        return theta_s, math.nan
+    phi = _parse_number(text, "phi_s_deg", where)
+    if not 0.0 <= theta_s <= 90.0:
+        raise BadInputError(
+            f"with phi_s_deg, theta_s_deg is the polar angle in [0, 90] deg, got {theta_s}",
+            **{**where, "field": "theta_s_deg"},
+        )
+    phi = phi % 360.0
+    if phi == 180.0:
+        return theta_s, math.nan
+    if phi == 0.0:
+        return -theta_s, math.nan
+    return theta_s, phi
+
+
+def load_measurements(
+    path: str | Path,
+    known_series: Iterable[str] | None = None,
+    series_quantity: dict[str, str] | None = None,
+) -> Measurements:
     """Read and validate a measurement CSV.
 
     Args:
         path: the CSV file.
         known_series: the series the scene defines; rows naming others are rejected.
+        series_quantity: each series' measured quantity; rows of a series whose quantity is
+            not the table's are rejected.
 
     Returns:
         The validated table.
@@ -119,8 +194,9 @@ def load_measurements(path: str | Path, known_series: Iterable[str] | None = Non
     Raises:
         BadInputError: unreadable or empty file, missing or duplicated header columns, a row
             with more cells than the header, an empty or non-numeric cell, NaN/inf, R outside
-            (0, 1), negative σ, θi outside [0, 90), θs outside [−90, 90], an unknown series,
-            or a duplicated (series, sample, θi, θs) row. The message names file, row, field.
+            (0, 1), BRDF ≤ 0, negative σ, θi outside [0, 90), θs outside [−90, 90] (or
+            [0, 90] with an azimuth), an unknown series or one of another quantity, or a
+            duplicated row. The message names file, row, field.
     """
     path = Path(path)
     header, rows = _read_rows(path)
@@ -129,20 +205,14 @@ def load_measurements(path: str | Path, known_series: Iterable[str] | None = Non
             raise BadInputError(f"header column {position + 1} has no name", file=path, line=1)
         if header.count(name) > 1:
             raise BadInputError("column appears twice in the header", file=path, field=name)
-    for name in REQUIRED_COLUMNS:
-        if name not in header:
-            raise BadInputError(
-                "missing header column (expected " + ",".join(REQUIRED_COLUMNS) + " and "
-                "optionally reflectance_err)" + _delimiter_hint(header),
-                file=path,
-                field=name,
-            )
+    quantity, table_columns = _table_columns(header, path)
     if not rows:
         raise BadInputError("no measurement rows after the header", file=path)
-    columns = [name for name in COLUMNS if name in header]
-    index = {name: header.index(name) for name in columns}
+    columns = [name for name in table_columns if name in header]
+    value, error = table_columns[4], table_columns[5]
+    index = {name: header.index(name) for name in (*columns, "phi_s_deg") if name in header}
     known = None if known_series is None else set(known_series)
-    parsed: dict[str, list] = {name: [] for name in columns}
+    parsed: dict[str, list] = {name: [] for name in (*columns, "phi_s_deg")}
     seen: dict[tuple, int] = {}
     for row_number, (line, cells) in enumerate(rows, start=1):
         if len(cells) > len(header):
@@ -152,16 +222,22 @@ def load_measurements(path: str | Path, known_series: Iterable[str] | None = Non
                 row=row_number,
                 line=line,
             )
+
         record = {}
         for name in columns:
             where = {"file": path, "row": row_number, "line": line, "field": name}
-            position = index[name]
-            text = cells[position].strip() if position < len(cells) else ""
+            text = _cell(cells, index[name])
             if not text:
                 raise BadInputError("empty cell", **where)
             record[name] = (
                 text if name in ("series", "sample") else _parse_number(text, name, where)
             )
+        where = {"file": path, "row": row_number, "line": line, "field": "phi_s_deg"}
+        record["theta_s_deg"], record["phi_s_deg"] = _azimuth(
+            _cell(cells, index["phi_s_deg"]) if "phi_s_deg" in index else "",
+            record["theta_s_deg"],
+            where,
+        )
         if known is not None and record["series"] not in known:
             raise BadInputError(
                 f"series {record['series']!r} is not defined in the scene "
@@ -171,29 +247,41 @@ def load_measurements(path: str | Path, known_series: Iterable[str] | None = Non
                 line=line,
                 field="series",
             )
-        key = tuple(record[name] for name in COLUMNS[:4])
+        expected = (series_quantity or {}).get(record["series"], quantity)
+        if expected != quantity:
+            raise BadInputError(
+                f"series {record['series']!r} measures {expected} but this table holds "
+                f"{quantity} values",
+                file=path,
+                row=row_number,
+                line=line,
+                field=value,
+            )
+        key = (*(record[name] for name in COLUMNS[:4]), record["phi_s_deg"])
+        key = tuple("in-plane" if isinstance(k, float) and math.isnan(k) else k for k in key)
         if key in seen:
             raise BadInputError(
-                f"duplicate of row {seen[key]} (same series, sample, theta_i_deg, theta_s_deg)",
+                f"duplicate of row {seen[key]} (same series, sample, theta_i_deg, theta_s_deg"
+                + (", phi_s_deg)" if "phi_s_deg" in index else ")"),
                 file=path,
                 row=row_number,
                 line=line,
             )
         seen[key] = row_number
-        for name in columns:
-            parsed[name].append(record[name])
+        for name in (*columns, "phi_s_deg"):
+            if name in record:
+                parsed[name].append(record[name])
+    phi = np.asarray(parsed["phi_s_deg"], dtype=float)
     return Measurements(
         path=path,
         series=np.asarray(parsed["series"], dtype=str),
         sample=np.asarray(parsed["sample"], dtype=str),
         theta_i_deg=np.asarray(parsed["theta_i_deg"], dtype=float),
         theta_s_deg=np.asarray(parsed["theta_s_deg"], dtype=float),
-        reflectance=np.asarray(parsed["reflectance"], dtype=float),
-        reflectance_err=(
-            np.asarray(parsed["reflectance_err"], dtype=float)
-            if "reflectance_err" in parsed
-            else None
-        ),
+        reflectance=np.asarray(parsed[value], dtype=float),
+        reflectance_err=np.asarray(parsed[error], dtype=float) if error in parsed else None,
+        quantity=quantity,
+        phi_s_deg=phi if np.any(np.isfinite(phi)) else None,
     )
 
 

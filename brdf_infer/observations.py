@@ -15,7 +15,7 @@ import numpy as np
 from brdf_infer._units import DEG
 from brdf_infer.error_model import noise_layout
 from brdf_infer.measurements import Measurements
-from brdf_infer.model import log_aperture_factor, log_brdf_inplane
+from brdf_infer.model import log_brdf_hemisphere, log_brdf_inplane
 from brdf_infer.params import HemisphereConstants, Params
 from brdf_infer.scene import Scene
 
@@ -26,9 +26,15 @@ class Observations(NamedTuple):
     Attributes:
         theta_i_deg: θi [deg].
         theta_s_deg: θs [deg].
-        log_aperture: ln(Ω cos θs) of the row's series [ln sr].
-        log_reflectance: measured ln R.
+        theta_s_deg: θs [deg]: signed in the plane of incidence, the polar angle for rows out
+            of it.
+        log_aperture: ln(measured value / BRDF): ln(Ω cos θs) of the row's series for raw
+            reflectance, 0 for BRDF rows [ln sr].
+        log_reflectance: measured ln R (ln BRDF for BRDF rows).
         sigma: 1σ of ln R that weights the row in least squares (``brdf_infer.lsq``).
+        cos_weight: 1 where the measured value carries cos θs (raw reflectance), 0 for BRDF.
+        phi_s_deg: azimuth of out-of-plane rows [deg], NaN in the plane; None when every row
+            is in the plane (nothing out of plane is computed then).
     """
 
     theta_i_deg: jnp.ndarray
@@ -36,22 +42,55 @@ class Observations(NamedTuple):
     log_aperture: jnp.ndarray
     log_reflectance: jnp.ndarray
     sigma: jnp.ndarray
+    cos_weight: jnp.ndarray
+    phi_s_deg: jnp.ndarray | None = None
+
+
+def row_log_brdf(
+    theta_i_deg,
+    theta_s_deg,
+    params: Params,
+    fold: bool,
+    constants: HemisphereConstants,
+    phi_s_deg=None,
+) -> jnp.ndarray:
+    """ln BRDF of each row: Eq. (7) (+ Eq. 10) in the plane at a signed θs, Eq. (8) out of it
+    (``phi_s_deg`` finite)."""
+    log_brdf = log_brdf_inplane(theta_i_deg, theta_s_deg, params, fold, constants)
+    if phi_s_deg is None:
+        return log_brdf
+    outside = jnp.isfinite(phi_s_deg)
+    phi = jnp.where(outside, phi_s_deg, 180.0)
+    log_hemisphere = log_brdf_hemisphere(theta_i_deg, theta_s_deg, phi, params, fold, constants)
+    return jnp.where(outside, log_hemisphere, log_brdf)
 
 
 def predicted_log_reflectance(
     params: Params, data: Observations, fold: bool, constants: HemisphereConstants
 ) -> jnp.ndarray:
-    """ln R of every row: ln BRDF(θi, θs) of Eq. (7) (+ Eq. 10) + ln(Ω cos θs), Eq. (6)."""
-    log_brdf = log_brdf_inplane(data.theta_i_deg, data.theta_s_deg, params, fold, constants)
+    """ln R of every row: ln BRDF of Eq. (7) (+ Eq. 10; Eq. 8 out of the plane) + ln(Ω cos θs),
+    Eq. (6); ln BRDF itself for BRDF rows."""
+    log_brdf = row_log_brdf(
+        data.theta_i_deg, data.theta_s_deg, params, fold, constants, data.phi_s_deg
+    )
     return log_brdf + data.log_aperture
 
 
 def log_reflectance_at(
-    theta_i_deg, theta_s_deg, params: Params, fold: bool, constants: HemisphereConstants
+    theta_i_deg,
+    theta_s_deg,
+    params: Params,
+    fold: bool,
+    constants: HemisphereConstants,
+    rows: Observations | None = None,
 ) -> jnp.ndarray:
-    """ln R(θi, θs) up to the constant ln Ω: ln BRDF + ln cos θs (for the angle slopes)."""
-    log_brdf = log_brdf_inplane(theta_i_deg, theta_s_deg, params, fold, constants)
-    return log_brdf + jnp.log(jnp.cos(jnp.asarray(theta_s_deg, float) * DEG))
+    """ln R(θi, θs) up to the constant ln Ω: ln BRDF + ln cos θs (for the angle slopes); with
+    ``rows``, each row's own kind (no cos θs for BRDF rows, Eq. 8 out of the plane)."""
+    log_cos = jnp.log(jnp.cos(jnp.asarray(theta_s_deg, float) * DEG))
+    if rows is None:
+        return log_brdf_inplane(theta_i_deg, theta_s_deg, params, fold, constants) + log_cos
+    log_brdf = row_log_brdf(theta_i_deg, theta_s_deg, params, fold, constants, rows.phi_s_deg)
+    return log_brdf + rows.cos_weight * log_cos
 
 
 def standardized_residuals(
@@ -106,11 +145,17 @@ def build_observation_model(scene: Scene, measurements: Measurements) -> Observa
     ``sigma`` is each row's fixed noise under the scene's error model (for ``generative``, the
     value's own σ_i; ``brdf_infer.lsq`` adds the per-row scatter and the angle terms).
     """
-    d, r = scene.apertures(measurements)
     data = Observations(
         theta_i_deg=jnp.asarray(measurements.theta_i_deg),
         theta_s_deg=jnp.asarray(measurements.theta_s_deg),
-        log_aperture=log_aperture_factor(measurements.theta_s_deg, d, r),
+        log_aperture=jnp.asarray(scene.log_conversion(measurements)),
+        cos_weight=jnp.asarray(
+            [
+                float(scene.series[name].quantity == "raw_reflectance")
+                for name in measurements.series
+            ]
+        ),
+        phi_s_deg=None if measurements.phi_s_deg is None else jnp.asarray(measurements.phi_s_deg),
         log_reflectance=jnp.asarray(np.log(measurements.reflectance)),
         sigma=noise_layout(scene.errors, measurements).sigma_row,
     )

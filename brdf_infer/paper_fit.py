@@ -15,7 +15,7 @@ import numpy as np
 
 from brdf_infer.errors import BadInputError
 from brdf_infer.measurements import Measurements
-from brdf_infer.model import log_brdf_inplane, reflectance_to_brdf
+from brdf_infer.model import log_brdf_inplane
 from brdf_infer.params import Params
 from brdf_infer.scene import Scene
 
@@ -85,7 +85,7 @@ def select_points(scene: Scene, measurements: Measurements, selection: str) -> M
             field="selection",
         )
     rule = SELECTIONS[selection]
-    rows = measurements
+    rows = measurements.subset(~measurements.out_of_plane)  # Eq. (7) is the in-plane model
     if rule.drop_repeated_geometry:
         keep = np.ones(len(rows), bool)
         seen: set[tuple[float, float]] = set()
@@ -125,9 +125,8 @@ def _average_samples(rows: Measurements) -> Measurements:
 
 
 def measured_log_brdf(scene: Scene, rows: Measurements) -> np.ndarray:
-    """ln BRDF of each row from its raw reflectance through Eq. (6)."""
-    d, r = scene.apertures(rows)
-    return np.log(np.asarray(reflectance_to_brdf(rows.reflectance, rows.theta_s_deg, d, r)))
+    """ln BRDF of each row from its raw reflectance through Eq. (6) (BRDF rows as they are)."""
+    return scene.measured_log_brdf(rows)
 
 
 def regression_basis(
@@ -222,9 +221,10 @@ def paper_grid_search(
 ) -> GridSearchResult:
     """Regress at every (α, θs0) and keep the one of least total relative error σTRE.
 
-    σTRE is evaluated over every row of ``measurements`` (each sample individually), the
-    analogue of the paper's "all available data points".
+    σTRE is evaluated over every in-plane row of ``measurements`` (each sample individually),
+    the analogue of the paper's "all available data points".
     """
+    measurements = measurements.subset(~measurements.out_of_plane)
     all_log_brdf = measured_log_brdf(scene, measurements)
     table = np.empty((len(alphas), len(theta_s0s_deg)))
     best, best_value = None, np.inf

@@ -73,6 +73,7 @@ from typing import Any
 import numpy as np
 
 from brdf_infer._resources import data_path
+from brdf_infer.bsdf_measurements import BSDF_SERIES, is_bsdf_path, measurements_from_bsdf
 from brdf_infer.error_model import (
     ANGLE_METHODS,
     ERROR_MODELS,
@@ -81,7 +82,7 @@ from brdf_infer.error_model import (
     ErrorSettings,
 )
 from brdf_infer.errors import BadInputError
-from brdf_infer.measurements import Measurements, load_measurements
+from brdf_infer.measurements import QUANTITIES, Measurements, load_measurements
 from brdf_infer.params import PAPER_CONSTANTS, PARAM_NAMES, PARAMETER_SETS, HemisphereConstants
 from brdf_infer.priors import DEFAULT_PRIORS, Prior, parse_prior
 
@@ -93,15 +94,17 @@ _SCENE_SUFFIX = ".scene.toml"
 
 @dataclass(frozen=True)
 class SeriesGeometry:
-    """Detector aperture of one measurement series (Eq. 6).
+    """What one measurement series measured, and its detector aperture (Eq. 6).
 
     Attributes:
-        aperture_diameter_mm: diameter d [mm].
-        aperture_distance_mm: aperture–sample distance r [mm].
+        aperture_diameter_mm: diameter d [mm] (None for a ``brdf`` series).
+        aperture_distance_mm: aperture–sample distance r [mm] (None for a ``brdf`` series).
+        quantity: ``raw_reflectance`` (through the aperture, Eq. 2) or ``brdf`` [sr⁻¹].
     """
 
-    aperture_diameter_mm: float
-    aperture_distance_mm: float
+    aperture_diameter_mm: float | None
+    aperture_distance_mm: float | None
+    quantity: str = "raw_reflectance"
 
 
 @dataclass(frozen=True)
@@ -204,6 +207,7 @@ class Scene:
     priors: dict[str, Prior] = field(default_factory=lambda: dict(DEFAULT_PRIORS))
     raytrace: RaytraceSettings | None = None
     compare: tuple[str, ...] = ()
+    bsdf_thinning: tuple[int, int] = (1, 1)
 
     @property
     def free_parameters(self) -> tuple[str, ...]:
@@ -253,8 +257,15 @@ class Scene:
         return points
 
     def load_measurements(self) -> Measurements:
-        """The scene's measurement table, validated against its series."""
-        return load_measurements(self.measurements_path, known_series=self.series)
+        """The scene's measurement table, validated against its series (a .BSDF table: its
+        BRDF values, thinned as ``[bsdf]`` says)."""
+        if is_bsdf_path(self.measurements_path):
+            return measurements_from_bsdf(self.measurements_path, *self.bsdf_thinning)
+        return load_measurements(
+            self.measurements_path,
+            known_series=self.series,
+            series_quantity={name: g.quantity for name, g in self.series.items()},
+        )
 
     def check_files(self) -> None:
         """Resolve and read every file the scene names, before any work.
@@ -278,10 +289,29 @@ class Scene:
         self.load_tis_reference()
 
     def apertures(self, measurements: Measurements) -> tuple[np.ndarray, np.ndarray]:
-        """Aperture diameter d and distance r [mm] of each measurement row's series."""
-        d = np.array([self.series[s].aperture_diameter_mm for s in measurements.series])
-        r = np.array([self.series[s].aperture_distance_mm for s in measurements.series])
-        return d, r
+        """Aperture diameter d and distance r [mm] of each measurement row's series (NaN for
+        the rows of a ``brdf`` series)."""
+        d = [self.series[s].aperture_diameter_mm for s in measurements.series]
+        r = [self.series[s].aperture_distance_mm for s in measurements.series]
+        return (
+            np.array([np.nan if v is None else v for v in d]),
+            np.array([np.nan if v is None else v for v in r]),
+        )
+
+    def log_conversion(self, measurements: Measurements) -> np.ndarray:
+        """ln(measured value / BRDF) of each row: ln(Ω cos θs) of Eq. (6) for raw reflectance
+        through an aperture, 0 for BRDF rows."""
+        from brdf_infer.model import log_aperture_factor
+
+        d, r = self.apertures(measurements)
+        brdf_rows = ~np.isfinite(d)
+        safe_d, safe_r = np.where(brdf_rows, 1.0, d), np.where(brdf_rows, 1.0, r)
+        factor = np.asarray(log_aperture_factor(measurements.theta_s_deg, safe_d, safe_r))
+        return np.where(brdf_rows, 0.0, factor)
+
+    def measured_log_brdf(self, measurements: Measurements) -> np.ndarray:
+        """ln BRDF of each row: the measured value converted through Eq. (6) where needed."""
+        return np.log(measurements.reflectance) - self.log_conversion(measurements)
 
 
 def _number(table: dict, key: str, path: Path, *, default: Any = None, positive=False) -> Any:
@@ -314,6 +344,16 @@ def _boolean(table: dict, key: str, path: Path, prefix: str, default: bool) -> b
     value = table.get(key, default)
     if not isinstance(value, bool):
         raise BadInputError(f"expected true or false, got {value!r}", file=path, field=prefix + key)
+    return value
+
+
+def _count(table: dict, key: str, path: Path) -> int:
+    """A positive integer key of the ``[bsdf]`` table (default 1)."""
+    value = table.get(key, 1)
+    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+        raise BadInputError(
+            f"expected an integer >= 1, got {value!r}", file=path, field=f"bsdf.{key}"
+        )
     return value
 
 
@@ -359,6 +399,7 @@ _TOP_KEYS = {
     "priors",
     "raytrace",
     "compare",
+    "bsdf",
 }
 
 
@@ -449,11 +490,18 @@ def _prefixed_number(
         raise BadInputError(error.problem, file=path, field=prefix + key) from None
 
 
-def _choice(table: dict, key: str, path: Path, choices: tuple[str, ...], default: str) -> str:
+def _choice(
+    table: dict,
+    key: str,
+    path: Path,
+    choices: tuple[str, ...],
+    default: str,
+    prefix: str = "errors.",
+) -> str:
     value = table.get(key, default)
     if value not in choices:
         raise BadInputError(
-            f"expected one of {', '.join(choices)}, got {value!r}", file=path, field="errors." + key
+            f"expected one of {', '.join(choices)}, got {value!r}", file=path, field=prefix + key
         )
     return value
 
@@ -517,21 +565,40 @@ def parse_scene(document: dict, path: Path) -> Scene:
             raise BadInputError(
                 f"unknown key (allowed: {', '.join(sorted(_TOP_KEYS))})", file=path, field=key
             )
-    series_table = document.get("series")
+    measurements = _string(document, "measurements", path)
+    from_bsdf = is_bsdf_path(Path(measurements))
+    series_table = document.get(
+        "series", {BSDF_SERIES: {"quantity": "brdf"}} if from_bsdf else None
+    )
     if not isinstance(series_table, dict) or not series_table:
         raise BadInputError(
             "at least one [series.NAME] table is required", file=path, field="series"
         )
+    if from_bsdf and set(series_table) != {BSDF_SERIES}:
+        raise BadInputError(
+            f"a .BSDF table is one series, '{BSDF_SERIES}' (quantity = \"brdf\")",
+            file=path,
+            field="series",
+        )
+    bsdf = _table(document, "bsdf", path, {"keep_every_radial", "keep_every_azimuth"})
+    thinning = tuple(_count(bsdf, key, path) for key in ("keep_every_radial", "keep_every_azimuth"))
     series = {}
     for name in series_table:
         table = _table(
-            series_table, name, path, {"aperture_diameter_mm", "aperture_distance_mm"}, "series."
+            series_table,
+            name,
+            path,
+            {"aperture_diameter_mm", "aperture_distance_mm", "quantity"},
+            "series.",
         )
         prefix = f"series.{name}."
         try:
+            quantity = _choice(table, "quantity", path, QUANTITIES, "raw_reflectance", "")
+            aperture = quantity == "raw_reflectance" or "aperture_diameter_mm" in table
             series[name] = SeriesGeometry(
-                _number(table, "aperture_diameter_mm", path, positive=True),
-                _number(table, "aperture_distance_mm", path, positive=True),
+                _number(table, "aperture_diameter_mm", path, positive=True) if aperture else None,
+                _number(table, "aperture_distance_mm", path, positive=True) if aperture else None,
+                quantity,
             )
         except BadInputError as error:
             raise BadInputError(error.problem, file=path, field=prefix + str(error.field)) from None
@@ -570,7 +637,6 @@ def parse_scene(document: dict, path: Path) -> Scene:
     priors = dict(DEFAULT_PRIORS)
     priors.update({name: parse_prior(name, table, path) for name, table in prior_table.items()})
     wavelength = document.get("wavelength_nm")
-    measurements = _string(document, "measurements", path)
     compare = _compare_families(document, path)
     return Scene(
         name=_string(document, "name", path),
@@ -600,6 +666,7 @@ def parse_scene(document: dict, path: Path) -> Scene:
         priors=priors,
         raytrace=_parse_raytrace(document, path, series),
         compare=compare,
+        bsdf_thinning=thinning,
     )
 
 

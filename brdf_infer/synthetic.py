@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from brdf_infer.measurements import Measurements
-from brdf_infer.model import brdf_inplane, brdf_to_reflectance
+from brdf_infer.model import brdf_inplane
 from brdf_infer.params import Params
 from brdf_infer.scene import Scene
 
@@ -33,11 +33,10 @@ def synthetic_measurements(
     Returns:
         A table like ``template`` with new ``reflectance`` and ``reflectance_err = noise_rel·R``.
     """
-    d, r = scene.apertures(template)
     brdf = brdf_inplane(
         template.theta_i_deg, template.theta_s_deg, params, scene.model.fold, scene.model.constants
     )
-    clean = np.asarray(brdf_to_reflectance(brdf, template.theta_s_deg, d, r))
+    clean = np.asarray(brdf) * np.exp(scene.log_conversion(template))
     noise = np.random.default_rng(seed).normal(0.0, noise_rel, clean.shape) if noise_rel else 0.0
     reflectance = clean * np.exp(noise)
     return replace(template, reflectance=reflectance, reflectance_err=noise_rel * reflectance)

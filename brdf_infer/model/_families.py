@@ -81,6 +81,16 @@ class ModelFamily:
         phi = jnp.where(theta_s >= 0.0, 180.0, 0.0)
         return self.log_brdf(theta_i_deg, jnp.abs(theta_s), phi, physical)
 
+    def log_brdf_rows(self, theta_i_deg, theta_s_deg, physical: Physical, phi_s_deg=None):
+        """ln BRDF of measurement rows: in-plane at a signed θs, out of the plane (finite
+        ``phi_s_deg``) at the polar angle θs and azimuth φs."""
+        in_plane = self.log_brdf_signed(theta_i_deg, theta_s_deg, physical)
+        if phi_s_deg is None:
+            return in_plane
+        outside = jnp.isfinite(phi_s_deg)
+        phi = jnp.where(outside, phi_s_deg, 180.0)
+        return jnp.where(outside, self.log_brdf(theta_i_deg, theta_s_deg, phi, physical), in_plane)
+
     def tis_curve(self, theta_i_deg, physical: Physical) -> jnp.ndarray:
         """TIS at every θi of a 1-D array, for every draw of the parameters' leading axis."""
         theta = jnp.asarray(theta_i_deg, float)

@@ -72,20 +72,23 @@ class FamilyPosteriorModel:
         parts = self.likelihood_parts(physical, scales, data)
         observe(parts, data, mode, self.sigma_scale, spread=self.errors.model == "spread")
 
-    def log_reflectance_at(self, theta_i_deg, theta_s_deg, physical: dict) -> jnp.ndarray:
-        """ln R(θi, θs) up to the constant ln Ω: ln BRDF + ln cos θs (signed in-plane θs)."""
-        log_brdf = self.family.log_brdf_signed(theta_i_deg, theta_s_deg, physical)
-        return log_brdf + jnp.log(jnp.cos(jnp.asarray(theta_s_deg, float) * DEG))
+    def log_reflectance_at(self, theta_i_deg, theta_s_deg, physical: dict, rows) -> jnp.ndarray:
+        """ln R(θi, θs) up to the constant ln Ω: ln BRDF + ln cos θs (no cos θs for BRDF rows)."""
+        log_brdf = self.family.log_brdf_rows(theta_i_deg, theta_s_deg, physical, rows.phi_s_deg)
+        log_cos = jnp.log(jnp.cos(jnp.asarray(theta_s_deg, float) * DEG))
+        return log_brdf + rows.cos_weight * log_cos
 
     def likelihood_parts(self, physical: dict, scales, data: ModelData | None = None):
         """Mean and covariance factors of the rows' ln R for one draw (Eq. 6 in log space)."""
         data = self.data if data is None else data
         rows = data.rows
-        mean = self.family.log_brdf_signed(rows.theta_i_deg, rows.theta_s_deg, physical)
+        mean = self.family.log_brdf_rows(
+            rows.theta_i_deg, rows.theta_s_deg, physical, rows.phi_s_deg
+        )
         mean = mean + rows.log_aperture
         if self.errors.angles_on:
             g_rot, g_cam = angle_slopes(
-                lambda ti, ts: self.log_reflectance_at(ti, ts, physical),
+                lambda ti, ts: self.log_reflectance_at(ti, ts, physical, rows),
                 rows.theta_i_deg,
                 rows.theta_s_deg,
             )

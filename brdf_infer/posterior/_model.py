@@ -20,7 +20,9 @@ measured. The sampler therefore moves whitened coefficients u with
 m and L Lᵀ the mean and precision of c in the linear-Gaussian regression of the measured ln R
 on the design at (α, θs0) — with the scene's priors on c (as normals) and the rows' covariance
 without its angle terms (generalised least squares, so that shared sample and calibration
-effects widen the level as they should). That is a smooth bijection for every
+effects widen the level as they should). Rows out of the plane of incidence, where Eq. (8)
+blends two branches and c no longer enters linearly, are left out of this regression (they stay
+in the likelihood). That is a smooth bijection for every
 (α, θs0, scales), so with its log-Jacobian −Σ ln Lᵢᵢ and the exact prior of c the target
 stays exactly the scene's posterior; but u is close to N(0, I) and nearly independent of
 (α, θs0) for *any* measurement geometry, where the earlier anchor reparametrisation depended
@@ -64,6 +66,7 @@ from brdf_infer.scene import Scene
 LINEAR = ("brdf0", "a1", "a2", "a3")  # priors of c = (ln BRDF0, b1, b2, b3)
 LINEAR_SITES = ("log_brdf0", "b1", "b2", "b3")
 NOISE_SITES = ("sample_sd", "repeatability")
+OUT_OF_PLANE_VARIANCE = 1e12  # the whitening regression leaves out-of-plane rows out
 
 
 def prior_distribution(prior: Prior, scale: float = 1.0) -> dist.Distribution:
@@ -198,8 +201,10 @@ class PosteriorModel:
         if self.errors.angles_on and self.errors.angle_method == "latent":
             theta_i, theta_s = self._latent_angles(data, scales)
             mean = (
-                log_reflectance_at(theta_i, theta_s, params, *self._components)
-                - log_reflectance_at(rows.theta_i_deg, rows.theta_s_deg, params, *self._components)
+                log_reflectance_at(theta_i, theta_s, params, *self._components, rows)
+                - log_reflectance_at(
+                    rows.theta_i_deg, rows.theta_s_deg, params, *self._components, rows
+                )
                 + predicted_log_reflectance(params, rows, *self._components)
             )
             parts = self.likelihood_parts(params, scales, data, mean=mean, angles=False)
@@ -255,6 +260,10 @@ class PosteriorModel:
             )
         zero = jnp.zeros_like(rows.theta_i_deg)
         factor, diagonal = covariance_factors(noise, scales, zero, zero)  # no angle terms
+        if rows.phi_s_deg is not None:  # Eq. (7)'s linearity holds in the plane only
+            outside = jnp.isfinite(rows.phi_s_deg)
+            factor = jnp.where(outside[:, None], 0.0, factor)
+            diagonal = jnp.where(outside, OUT_OF_PLANE_VARIANCE, diagonal)
         moments = np.array([gaussian_moments(priors[LINEAR[k]]) for k in free])
         standard = numpyro.sample(
             "linear_std", dist.ImproperUniform(dist.constraints.real, (), (len(free),))
@@ -314,7 +323,7 @@ class PosteriorModel:
             mean = predicted_log_reflectance(params, rows, *self._components)
         if angles and self.errors.angles_on:
             g_rot, g_cam = angle_slopes(
-                lambda ti, ts: log_reflectance_at(ti, ts, params, *self._components),
+                lambda ti, ts: log_reflectance_at(ti, ts, params, *self._components, rows),
                 rows.theta_i_deg,
                 rows.theta_s_deg,
             )

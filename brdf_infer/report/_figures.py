@@ -8,7 +8,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from brdf_infer._arviz import az
-from brdf_infer.model import brdf_hemisphere, brdf_inplane, reflectance_to_brdf
+from brdf_infer.model import brdf_hemisphere, brdf_inplane
 from brdf_infer.params import PARAM_NAMES, PARAMETER_SETS, HemisphereConstants, Params
 from brdf_infer.scene import Scene
 
@@ -195,8 +195,7 @@ def brdf_bands(bands: dict, scene: Scene, rows) -> plt.Figure:
     band = bands["brdf_inplane"]
     theta_s = np.asarray(band["theta_s_deg"])
     angles = band["theta_i_deg"]
-    d, r = scene.apertures(rows)
-    measured = np.asarray(reflectance_to_brdf(rows.reflectance, rows.theta_s_deg, d, r))
+    measured = np.exp(scene.measured_log_brdf(rows))
     columns = min(3, len(angles))
     lines = int(np.ceil(len(angles) / columns))
     figure, axes = plt.subplots(lines, columns, figsize=(5 * columns, 3.8 * lines), squeeze=False)

@@ -1,0 +1,194 @@
+"""Other data shapes: BRDF rows (no aperture), out-of-plane rows (φs), and a tabular .BSDF file
+as the measurements; fits and posteriors recover the parameters that made the data."""
+
+from __future__ import annotations
+
+import json
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from brdf_infer.compare import CompareSettings, fit_family
+from brdf_infer.errors import BadInputError
+from brdf_infer.lsq import fit_lsq
+from brdf_infer.model import brdf_hemisphere, family
+from brdf_infer.params import UV_PAPER
+from brdf_infer.posterior import run_posterior
+from brdf_infer.scene import load_scene
+from tests.helpers import run_cli
+
+ERRORS = (
+    "[errors]\nreflectance_rel = 0.05\npropagate_angles = false\nhierarchical = false\n"
+    "repeatability = 0.0\n"
+)
+ABG_TRUTH = {"A": 3.0e-3, "B": 4.0e-2, "g": 1.6}
+
+
+def _geometry():
+    """θi ∈ {10, 30, 50, 70}; θ ∈ {5, 25, 45, 65, 80}; φ ∈ {0, 60, 120, 150, 180, 210, 300}."""
+    grid = np.array(
+        [
+            (ti, th, ph)
+            for ti in (10.0, 30.0, 50.0, 70.0)
+            for th in (5.0, 25.0, 45.0, 65.0, 80.0)
+            for ph in (0.0, 60.0, 120.0, 150.0, 180.0, 210.0, 300.0)
+        ]
+    )
+    return grid[:, 0], grid[:, 1], grid[:, 2]
+
+
+def write_brdf_scene(tmp_path, brdf: np.ndarray, extra: str = "") -> object:
+    """A scene of BRDF rows (one sample) with 5 % log-normal noise on ``brdf``."""
+    theta_i, theta, phi = _geometry()
+    noisy = brdf * np.exp(np.random.default_rng(11).normal(0.0, 0.05, brdf.shape))
+    lines = ["series,sample,theta_i_deg,theta_s_deg,phi_s_deg,brdf"]
+    lines += [
+        f"S,a,{ti:g},{th:g},{ph:g},{value:.8e}"
+        for ti, th, ph, value in zip(theta_i, theta, phi, noisy, strict=True)
+    ]
+    (tmp_path / "rows.csv").write_text("\n".join(lines) + "\n")
+    (tmp_path / "brdf.toml").write_text(
+        f'name = "brdf-rows"\nmeasurements = "rows.csv"\n{extra}[series.S]\n'
+        f'quantity = "brdf"\n[model]\nfold = true\n{ERRORS}'
+    )
+    return load_scene(tmp_path / "brdf.toml")
+
+
+def test_brdf_rows_out_of_plane_are_read_with_their_azimuth(tmp_path):
+    theta_i, theta, phi = _geometry()
+    scene = write_brdf_scene(tmp_path, np.full(theta_i.shape, 0.02))
+    rows = scene.load_measurements()
+    assert rows.quantity == "brdf" and len(rows) == theta_i.size
+    in_plane = (phi == 0.0) | (phi == 180.0)
+    assert np.array_equal(rows.out_of_plane, ~in_plane)
+    assert np.array_equal(rows.theta_s_deg[phi == 0.0], -theta[phi == 0.0])  # backward: −θ
+    assert np.array_equal(rows.theta_s_deg[phi == 180.0], theta[phi == 180.0])
+    assert np.all(scene.log_conversion(rows) == 0.0)  # BRDF rows: no aperture, no cos θs
+
+
+def test_lsq_and_posterior_recover_strumik2024_from_out_of_plane_brdf_rows(tmp_path):
+    theta_i, theta, phi = _geometry()
+    truth = np.asarray(brdf_hemisphere(theta_i, theta, phi, UV_PAPER, True))
+    scene = write_brdf_scene(tmp_path, truth)
+    rows = scene.load_measurements()
+    fit = fit_lsq(scene, rows, starts=8)
+    for name in ("brdf0", "alpha", "theta_s0", "a1"):
+        error = getattr(fit.params, name) - getattr(UV_PAPER, name)
+        assert abs(error) < 4.0 * fit.sigma[name], (name, error, fit.sigma[name])
+    run = run_posterior(scene, rows, chains=2, draws=300, warmup=300, seed=2)
+    posterior = run.idata.posterior
+    for name in ("brdf0", "alpha", "theta_s0"):
+        low, high = np.quantile(np.asarray(posterior[name]), [0.005, 0.995])
+        assert low <= getattr(UV_PAPER, name) <= high, name
+
+
+def test_posterior_of_another_family_covers_its_truth_on_out_of_plane_brdf_rows(tmp_path):
+    theta_i, theta, phi = _geometry()
+    member = family("abg")
+    truth = np.exp(
+        np.asarray(
+            member.log_brdf(theta_i, theta, phi, {k: jnp.asarray(v) for k, v in ABG_TRUTH.items()})
+        )
+    )
+    scene = write_brdf_scene(tmp_path, truth)
+    result = fit_family(
+        scene, scene.load_measurements(), "abg", CompareSettings(chains=2, warmup=300, draws=300)
+    )
+    for name, value in ABG_TRUTH.items():
+        assert result.parameters[name]["lo95"] <= value <= result.parameters[name]["hi95"], name
+
+
+def test_a_bsdf_table_as_measurements_returns_the_parameters_that_made_it(tmp_path, capsys):
+    """Export a parameter set as .BSDF, read it back as a scene's measurements (with trailing
+    tabs on header lines, as vendor files have them) and fit: the parameters come back to the
+    file's 7 significant digits."""
+    code, _, err = run_cli(
+        "export",
+        "--params",
+        "uv-paper",
+        "--theta-i",
+        "0",
+        "20",
+        "40",
+        "60",
+        "80",
+        "--azimuth-step",
+        "15",
+        "--radial-step",
+        "5",
+        "--out",
+        str(tmp_path / "exp"),
+        capsys=capsys,
+    )
+    assert code == 0, err
+    text = (tmp_path / "exp" / "params.bsdf").read_text()
+    untidy = "\n".join(
+        line + "\t" if line.split(" ")[0] in ("Symmetry", "AngleOfIncidence") else line
+        for line in text.splitlines()
+    )
+    (tmp_path / "vendor.bsdf").write_text(untidy + "\n")
+    (tmp_path / "s.toml").write_text(
+        f'name = "vendor"\nmeasurements = "vendor.bsdf"\n[model]\nfold = true\n{ERRORS}'
+    )
+    scene = load_scene(tmp_path / "s.toml")
+    rows = scene.load_measurements()
+    assert set(rows.series) == {"bsdf"} and rows.quantity == "brdf"
+    assert np.all(rows.theta_s_deg[~rows.out_of_plane] >= -90.0)
+    assert np.all((rows.theta_s_deg >= 0.0) | ~rows.out_of_plane)
+    fit = fit_lsq(scene, rows, starts=4)
+    for name in ("brdf0", "a1", "alpha", "theta_s0"):
+        assert getattr(fit.params, name) == pytest.approx(getattr(UV_PAPER, name), rel=1e-5)
+    (tmp_path / "thin.toml").write_text(
+        f'name = "thin"\nmeasurements = "vendor.bsdf"\n[bsdf]\nkeep_every_radial = 3\n'
+        f"keep_every_azimuth = 2\n{ERRORS}"
+    )
+    assert len(load_scene(tmp_path / "thin.toml").load_measurements()) < len(rows) / 4
+
+
+@pytest.mark.parametrize(
+    ("header", "row", "field", "message"),
+    [
+        (
+            "series,sample,theta_i_deg,theta_s_deg,reflectance,brdf",
+            "S,a,10,20,0.1,0.1",
+            "brdf",
+            "one quantity",
+        ),
+        ("series,sample,theta_i_deg,theta_s_deg,brdf", "S,a,10,20,-0.1", "brdf", "> 0"),
+        (
+            "series,sample,theta_i_deg,theta_s_deg,phi_s_deg,brdf",
+            "S,a,10,-20,90,0.1",
+            "theta_s_deg",
+            "polar angle",
+        ),
+        (
+            "series,sample,theta_i_deg,theta_s_deg,reflectance",
+            "S,a,10,20,0.01",
+            "reflectance",
+            "measures brdf",
+        ),
+    ],
+)
+def test_bad_measurement_kinds_are_named_by_file_row_and_field(
+    tmp_path, capsys, header, row, field, message
+):
+    (tmp_path / "rows.csv").write_text(f"{header}\n{row}\n")
+    (tmp_path / "s.toml").write_text(
+        'name = "x"\nmeasurements = "rows.csv"\n[series.S]\nquantity = "brdf"\n'
+    )
+    with pytest.raises(BadInputError, match=message) as error:
+        load_scene(tmp_path / "s.toml")
+    assert error.value.field == field
+    code, out, err = run_cli("fit", str(tmp_path / "s.toml"), "--method", "lsq", capsys=capsys)
+    assert code == 2 and out == "" and "rows.csv" in err and "Traceback" not in err
+
+
+def test_bsdf_scene_keys_are_checked(tmp_path):
+    (tmp_path / "s.toml").write_text(
+        'name = "x"\nmeasurements = "t.bsdf"\n[bsdf]\nkeep_every_radial = 0\n'
+    )
+    with pytest.raises(BadInputError, match="integer >= 1") as error:
+        load_scene(tmp_path / "s.toml", check_files=False)
+    assert error.value.field == "bsdf.keep_every_radial"
+    assert json.dumps(str(error.value))
