@@ -63,15 +63,6 @@ def _scene_and_measurements(name: str):
     return scene, measurements
 
 
-def _fit_warnings(scene, measurements, params, what: str) -> list[str]:
-    from brdf_infer.plausibility import parameter_warnings
-
-    if not scene.model.out_of_plane:
-        return []
-    angles = scene.band_theta_i_deg(measurements)
-    return parameter_warnings(params, angles, scene.model.constants, what)
-
-
 def _table(headers: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
     widths = [max(len(h), *(len(r[i]) for r in rows)) for i, h in enumerate(headers)]
     lines = ["  ".join(h.rjust(w) for h, w in zip(headers, widths, strict=True))]
@@ -81,25 +72,6 @@ def _table(headers: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
 
 
 # --------------------------------------------------------------------------- fit
-
-
-def _paper_fit_payload(scene, measurements, selection: str | None) -> dict[str, Any]:
-    from brdf_infer.paper_fit import paper_fit
-    from brdf_infer.params import params_to_dict
-
-    start = time.perf_counter()
-    result = paper_fit(scene, measurements, selection=selection)
-    seconds = time.perf_counter() - start
-    return {
-        "method": "paper",
-        "scene": scene.name,
-        "selection": selection or scene.paper_fit.selection,
-        "params": params_to_dict(result.params),
-        "sigma_e": result.sigma_e,
-        "sigma_re": result.sigma_re,
-        "n_points": result.n_points,
-        "seconds": seconds,
-    }
 
 
 def _print_params_table(params: dict[str, float]) -> None:
@@ -116,58 +88,6 @@ def _print_params_table(params: dict[str, float]) -> None:
             ["parameter", "value", "unit"], [[k, f"{v:.4g}", units[k]] for k, v in params.items()]
         )
     )
-
-
-def _lsq_payload(scene, measurements, args: argparse.Namespace) -> dict[str, Any]:
-    from brdf_infer.lsq import fit_lsq
-    from brdf_infer.observations import build_observation_model
-    from brdf_infer.paper_fit import paper_fit
-    from brdf_infer.params import PARAM_NAMES, params_to_dict
-
-    _progress(f"least squares: {args.starts} starts, solver {args.solver} ...")
-    result = fit_lsq(
-        scene,
-        measurements,
-        starts=args.starts,
-        solver=args.solver,
-        seed=args.seed,
-        scale_covariance=args.scale_covariance,
-    )
-    for warning in result.warnings + _fit_warnings(
-        scene, measurements, result.params, "the least-squares optimum"
-    ):
-        _progress(f"warning: {warning}")
-    model = build_observation_model(scene, measurements).with_sigma(result.row_sigma)
-    paper_cost = float(model.chi2(paper_fit(scene, measurements).params))
-    return {
-        "method": "lsq",
-        "scene": scene.name,
-        "params": params_to_dict(result.params),
-        "cost": result.cost,
-        "reduced_chi2": result.reduced_chi2,
-        "paper_fit_cost": paper_cost,
-        "sigma": result.sigma,
-        "correlation": result.correlation.tolist(),
-        "correlation_names": list(PARAM_NAMES),
-        "internal": result.internal,
-        "sigma_internal": result.sigma_internal,
-        "condition_number": result.condition_number,
-        "covariance_scaled": result.covariance_scaled,
-        "n_points": result.n_points,
-        "free": list(result.free),
-        "starts": result.starts,
-        "starts_converged": result.starts_converged,
-        "start_costs": result.start_costs.tolist(),
-        "start_status": result.start_status,
-        "solver": result.solver,
-        "seconds": result.seconds,
-        "compile_seconds": result.compile_seconds,
-        "row_sigma": result.row_sigma.tolist(),
-        "repeatability": result.repeatability,
-        "reweightings": result.reweightings,
-        "warnings": result.warnings
-        + _fit_warnings(scene, measurements, result.params, "the least-squares optimum"),
-    }
 
 
 def _print_lsq(payload: dict[str, Any]) -> None:
@@ -207,7 +127,17 @@ def _command_fit(args: argparse.Namespace) -> None:
 
     scene, measurements = _scene_and_measurements(args.scene)
     if args.method == "lsq":
-        payload = _lsq_payload(scene, measurements, args)
+        from brdf_infer.workflow import lsq_summary
+
+        payload = lsq_summary(
+            scene,
+            measurements,
+            starts=args.starts,
+            solver=args.solver,
+            seed=args.seed,
+            scale_covariance=args.scale_covariance,
+            progress=_progress,
+        )
         if args.json:
             _emit_json(payload)
         else:
@@ -216,7 +146,9 @@ def _command_fit(args: argparse.Namespace) -> None:
     if args.grid:
         payload = _grid_payload(scene, measurements, args.selection)
     else:
-        payload = _paper_fit_payload(scene, measurements, args.selection)
+        from brdf_infer.workflow import paper_fit_summary
+
+        payload = paper_fit_summary(scene, measurements, args.selection)
     if args.json:
         _emit_json(payload)
         return
@@ -484,76 +416,27 @@ def _command_scenes(args: argparse.Namespace) -> None:
 
 def _command_run(args: argparse.Namespace) -> None:
     _headless()
-    from brdf_infer._atomic import atomic_write_json
-    from brdf_infer.posterior import run_posterior
+    from brdf_infer.workflow import RunSettings, run
 
     for option, value in (("--chains", args.chains), ("--draws", args.draws)):
         if value < 1:
             raise BadInputError(f"must be at least 1, got {value}", field=option)
     if args.warmup < 0:
         raise BadInputError(f"must be >= 0, got {args.warmup}", field="--warmup")
-    start = time.perf_counter()
     scene, measurements = _scene_and_measurements(args.scene)
     out = check_output_dir(args.out or Path("reports") / scene.name)
-    steps = 5 + (scene.raytrace is not None) + bool(scene.compare)
-    _progress(f"[1/{steps}] paper fit of scene '{scene.name}' ({len(measurements)} measurements)")
-    paper = _paper_fit_payload(scene, measurements, None)
-    atomic_write_json(out / "fit_paper.json", paper)
-    _progress(f"[2/{steps}] least-squares fit of all free parameters")
-    lsq_options = argparse.Namespace(starts=16, solver="lm", seed=args.seed, scale_covariance=False)
-    lsq = _lsq_payload(scene, measurements, lsq_options)
-    atomic_write_json(out / "fit_lsq.json", lsq)
-    _progress(f"[3/{steps}] NUTS posterior ({args.chains} chains x {args.draws} draws)")
-    run = run_posterior(
+    result = run(
         scene,
         measurements,
-        chains=args.chains,
-        draws=args.draws,
-        warmup=args.warmup,
-        seed=args.seed,
-        out=out,
+        out,
+        RunSettings(chains=args.chains, draws=args.draws, warmup=args.warmup, seed=args.seed),
+        example=Path(args.example) if args.example else None,
+        progress=_progress,
     )
-    if scene.errors.model != "spread":
-        _progress(f"[4/{steps}] NUTS posterior with the earlier spread error model (comparison)")
-        run_posterior(
-            scene,
-            measurements,
-            chains=args.chains,
-            draws=args.draws,
-            warmup=args.warmup,
-            seed=args.seed,
-            error_model="spread",
-            out=out / "variants" / "spread",
-        )
-    if scene.raytrace is not None:
-        _progress(f"[5/{steps}] ray tracing series {scene.raytrace.series} (Sec. 6)")
-        atomic_write_json(out / "raytrace.json", {"traces": _run_traces(scene, measurements, run)})
-    if scene.compare:
-        from brdf_infer.compare import compare_families, write_comparison
-
-        _progress(f"[{steps - 1}/{steps}] model comparison by PSIS-LOO: {', '.join(scene.compare)}")
-        write_comparison(out, compare_families(scene, measurements, list(scene.compare)))
-    _progress(f"[{steps}/{steps}] report")
-    from brdf_infer.report import write_report
-
-    report, failures = write_report(out, progress=lambda message: None)
-    if args.example:
-        from brdf_infer.report import write_example
-
-        write_example(out, Path(args.example), failures)
-    seconds = time.perf_counter() - start
-    result = {
-        "out": str(out),
-        "report": str(report),
-        "verdict": failures,
-        "paper_fit": paper,
-        "lsq": lsq,
-        "posterior": run.summary,
-        "seconds": seconds,
-    }
     if args.json:
-        _emit_json(result)
+        _emit_json(result.as_json())
         return
+    paper, lsq = result.paper_fit, result.lsq
     print(f"scene '{scene.name}': {len(measurements)} measurements")
     print(
         f"paper fit: sigma_E = {100 * paper['sigma_e']:.2f} % on {paper['n_points']} points "
@@ -563,10 +446,13 @@ def _command_run(args: argparse.Namespace) -> None:
         f"least squares: chi2 = {lsq['cost']:.2f} for {lsq['n_points']} points "
         f"({lsq['starts_converged']}/{lsq['starts']} starts at the optimum)"
     )
-    _print_posterior_summary(run.summary, out)
-    print(f"verdict: {'; '.join(failures) or 'every diagnostic passes'}")
-    print(f"report: {report}")
-    print(f"done in {seconds:.1f} s")
+    _print_posterior_summary(result.posterior, out)
+    if result.comparison is not None:
+        best = result.comparison["models"][0]
+        print(f"model comparison: {best['name']} first (PSIS-LOO, see the report)")
+    print(f"verdict: {'; '.join(result.verdict) or 'every diagnostic passes'}")
+    print(f"report: {result.report}")
+    print(f"done in {result.seconds:.1f} s")
 
 
 def _require_raytrace(scene) -> None:
@@ -582,6 +468,7 @@ def _command_raytrace(args: argparse.Namespace) -> None:
     _headless()
     from brdf_infer.raytrace import raytrace_payload, raytrace_posterior_payload, thin_draws
     from brdf_infer.scene import load_scene
+    from brdf_infer.workflow import RUN_TRACE_BAND_RAYS
 
     scene = load_scene(args.scene)
     _require_raytrace(scene)
@@ -680,32 +567,6 @@ def _print_raytrace(payload: dict) -> None:
         "over the signal rectangle"
     )
     print(f"time: {payload['seconds']:.2f} s (+{payload['compile_seconds']:.2f} s compile)")
-
-
-RUN_TRACE_RAYS = 2**18  # ~0.05 % MC error per configuration (NEE)
-RUN_TRACE_DRAWS = 64
-RUN_TRACE_BAND_RAYS = 16_384  # per draw and configuration
-
-
-def _run_traces(scene, measurements, run) -> list[dict]:
-    """The main job's ray traces: the posterior (band over draws), and the scene's reference
-    parameter set (e.g. ``uv-paper``) where it names one."""
-    from brdf_infer.params import PARAMETER_SETS
-    from brdf_infer.posterior import draws_params
-    from brdf_infer.raytrace import raytrace_payload, raytrace_posterior_payload, thin_draws
-
-    draws = thin_draws(draws_params(run.idata.posterior), RUN_TRACE_DRAWS)
-    traces = [
-        raytrace_posterior_payload(
-            scene, measurements, draws, "posterior", rays=RUN_TRACE_BAND_RAYS
-        )
-    ]
-    name = scene.outputs.reference_params
-    if name is not None:
-        traces.append(
-            raytrace_payload(scene, measurements, PARAMETER_SETS[name], name, rays=RUN_TRACE_RAYS)
-        )
-    return traces
 
 
 def _command_sbc(args: argparse.Namespace) -> None:

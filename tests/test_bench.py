@@ -22,6 +22,7 @@ def test_quick_benchmark_report(tmp_path, capsys):
     ):
         assert method in text, method
     assert "max rel. error" in text and "final χ²" in text
+    assert "## Model families" in text and "harvey-shack" in text and "elpd_loo" in text
     assert (tmp_path / "benchmarks_tis.png").stat().st_size > 10_000
 
 

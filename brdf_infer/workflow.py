@@ -1,0 +1,277 @@
+"""The main job as one library call: paper fit, least squares, NUTS posterior (and the earlier
+error model beside it), ray traces, model comparison and the report, into one run folder.
+
+``brdf-infer run`` parses its options and calls :func:`run`; a notebook calls it the same way:
+
+    from brdf_infer.scene import load_scene
+    from brdf_infer.workflow import run
+    scene = load_scene("lya")
+    result = run(scene, scene.load_measurements(), Path("reports/lya"))
+    result.verdict, result.posterior["tis"]
+
+The fit summaries (:func:`paper_fit_summary`, :func:`lsq_summary`) are the JSON objects of
+``brdf-infer fit --json``.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from brdf_infer.measurements import Measurements
+from brdf_infer.scene import Scene
+
+RUN_TRACE_RAYS = 2**18  # ~0.05 % MC error per configuration (NEE)
+RUN_TRACE_DRAWS = 64
+RUN_TRACE_BAND_RAYS = 16_384  # per draw and configuration
+
+
+def _silent(message: str) -> None:
+    del message
+
+
+@dataclass(frozen=True)
+class RunSettings:
+    """NUTS settings of the main job (and the least-squares starts)."""
+
+    chains: int = 4
+    draws: int = 1000
+    warmup: int = 500
+    seed: int = 0
+    lsq_starts: int = 16
+
+
+@dataclass
+class RunResult:
+    """What :func:`run` made (``as_json`` is the JSON of ``brdf-infer run --json``).
+
+    Attributes:
+        out: the run folder.
+        report: the HTML report.
+        verdict: the diagnostics that failed (empty: every one passes).
+        paper_fit, lsq: the fit summaries.
+        posterior: the posterior summary (``summary.json``).
+        comparison: the PSIS-LOO comparison (``compare.json``), where the scene asks for one.
+        seconds: wall time.
+    """
+
+    out: Path
+    report: Path
+    verdict: list[str]
+    paper_fit: dict[str, Any]
+    lsq: dict[str, Any]
+    posterior: dict[str, Any]
+    comparison: dict[str, Any] | None
+    seconds: float
+
+    def as_json(self) -> dict[str, Any]:
+        payload = {
+            "out": str(self.out),
+            "report": str(self.report),
+            "verdict": self.verdict,
+            "paper_fit": self.paper_fit,
+            "lsq": self.lsq,
+            "posterior": self.posterior,
+            "seconds": self.seconds,
+        }
+        if self.comparison is not None:
+            payload["comparison"] = self.comparison
+        return payload
+
+
+def fit_warnings(scene: Scene, measurements: Measurements, params, what: str) -> list[str]:
+    """Unit-plausibility warnings about a fitted parameter set (π·BRDF0, TIS above 1)."""
+    from brdf_infer.plausibility import parameter_warnings
+
+    if not scene.model.out_of_plane:
+        return []
+    angles = scene.band_theta_i_deg(measurements)
+    return parameter_warnings(params, angles, scene.model.constants, what)
+
+
+def paper_fit_summary(
+    scene: Scene, measurements: Measurements, selection: str | None = None
+) -> dict[str, Any]:
+    """The paper's regression (Sec. 4.2) as the JSON of ``fit --method paper``."""
+    from brdf_infer.paper_fit import paper_fit
+    from brdf_infer.params import params_to_dict
+
+    start = time.perf_counter()
+    result = paper_fit(scene, measurements, selection=selection)
+    seconds = time.perf_counter() - start
+    return {
+        "method": "paper",
+        "scene": scene.name,
+        "selection": selection or scene.paper_fit.selection,
+        "params": params_to_dict(result.params),
+        "sigma_e": result.sigma_e,
+        "sigma_re": result.sigma_re,
+        "n_points": result.n_points,
+        "seconds": seconds,
+    }
+
+
+def lsq_summary(
+    scene: Scene,
+    measurements: Measurements,
+    *,
+    starts: int = 16,
+    solver: str = "lm",
+    seed: int = 0,
+    scale_covariance: bool = False,
+    progress: Callable[[str], None] = _silent,
+) -> dict[str, Any]:
+    """The least-squares fit as the JSON of ``fit --method lsq`` (warnings also to
+    ``progress``)."""
+    from brdf_infer.lsq import fit_lsq
+    from brdf_infer.observations import build_observation_model
+    from brdf_infer.paper_fit import paper_fit
+    from brdf_infer.params import PARAM_NAMES, params_to_dict
+
+    progress(f"least squares: {starts} starts, solver {solver} ...")
+    result = fit_lsq(
+        scene,
+        measurements,
+        starts=starts,
+        solver=solver,
+        seed=seed,
+        scale_covariance=scale_covariance,
+    )
+    warnings = result.warnings + fit_warnings(
+        scene, measurements, result.params, "the least-squares optimum"
+    )
+    for warning in warnings:
+        progress(f"warning: {warning}")
+    model = build_observation_model(scene, measurements).with_sigma(result.row_sigma)
+    paper_cost = float(model.chi2(paper_fit(scene, measurements).params))
+    return {
+        "method": "lsq",
+        "scene": scene.name,
+        "params": params_to_dict(result.params),
+        "cost": result.cost,
+        "reduced_chi2": result.reduced_chi2,
+        "paper_fit_cost": paper_cost,
+        "sigma": result.sigma,
+        "correlation": result.correlation.tolist(),
+        "correlation_names": list(PARAM_NAMES),
+        "internal": result.internal,
+        "sigma_internal": result.sigma_internal,
+        "condition_number": result.condition_number,
+        "covariance_scaled": result.covariance_scaled,
+        "n_points": result.n_points,
+        "free": list(result.free),
+        "starts": result.starts,
+        "starts_converged": result.starts_converged,
+        "start_costs": result.start_costs.tolist(),
+        "start_status": result.start_status,
+        "solver": result.solver,
+        "seconds": result.seconds,
+        "compile_seconds": result.compile_seconds,
+        "row_sigma": result.row_sigma.tolist(),
+        "repeatability": result.repeatability,
+        "reweightings": result.reweightings,
+        "warnings": warnings,
+    }
+
+
+def run_traces(scene: Scene, measurements: Measurements, posterior_run) -> list[dict]:
+    """The main job's ray traces: the posterior (band over draws), and the scene's reference
+    parameter set (e.g. ``uv-paper``) where it names one."""
+    from brdf_infer.params import PARAMETER_SETS
+    from brdf_infer.posterior import draws_params
+    from brdf_infer.raytrace import raytrace_payload, raytrace_posterior_payload, thin_draws
+
+    draws = thin_draws(draws_params(posterior_run.idata.posterior), RUN_TRACE_DRAWS)
+    traces = [
+        raytrace_posterior_payload(
+            scene, measurements, draws, "posterior", rays=RUN_TRACE_BAND_RAYS
+        )
+    ]
+    name = scene.outputs.reference_params
+    if name is not None:
+        traces.append(
+            raytrace_payload(scene, measurements, PARAMETER_SETS[name], name, rays=RUN_TRACE_RAYS)
+        )
+    return traces
+
+
+def run(
+    scene: Scene,
+    measurements: Measurements,
+    out: Path,
+    settings: RunSettings = RunSettings(),
+    *,
+    example: Path | None = None,
+    progress: Callable[[str], None] = _silent,
+) -> RunResult:
+    """The main job on ``scene`` into the folder ``out`` (module docstring).
+
+    Args:
+        scene: the scene.
+        measurements: its rows.
+        out: the run folder (created; result files are written atomically).
+        settings: NUTS and least-squares settings.
+        example: also write the small committed example report here.
+        progress: called with one line per step.
+    """
+    from brdf_infer._atomic import atomic_write_json
+    from brdf_infer.posterior import run_posterior
+    from brdf_infer.report import write_example, write_report
+
+    start = time.perf_counter()
+    out.mkdir(parents=True, exist_ok=True)
+    steps = 5 + (scene.raytrace is not None) + bool(scene.compare)
+    step = iter(range(1, steps + 1))
+    progress(f"[{next(step)}/{steps}] paper fit of scene '{scene.name}' ({len(measurements)} rows)")
+    paper = paper_fit_summary(scene, measurements)
+    atomic_write_json(out / "fit_paper.json", paper)
+    progress(f"[{next(step)}/{steps}] least-squares fit of all free parameters")
+    lsq = lsq_summary(
+        scene, measurements, starts=settings.lsq_starts, seed=settings.seed, progress=progress
+    )
+    atomic_write_json(out / "fit_lsq.json", lsq)
+    progress(f"[{next(step)}/{steps}] NUTS posterior ({settings.chains} chains x {settings.draws})")
+    options = {
+        "chains": settings.chains,
+        "draws": settings.draws,
+        "warmup": settings.warmup,
+        "seed": settings.seed,
+    }
+    posterior = run_posterior(scene, measurements, out=out, **options)
+    if scene.errors.model != "spread":
+        progress(f"[{next(step)}/{steps}] NUTS posterior with the earlier spread error model")
+        run_posterior(
+            scene, measurements, error_model="spread", out=out / "variants" / "spread", **options
+        )
+    else:
+        next(step)
+    if scene.raytrace is not None:
+        progress(f"[{next(step)}/{steps}] ray tracing series {scene.raytrace.series} (Sec. 6)")
+        atomic_write_json(
+            out / "raytrace.json", {"traces": run_traces(scene, measurements, posterior)}
+        )
+    comparison = None
+    if scene.compare:
+        from brdf_infer.compare import compare_families, write_comparison
+
+        progress(f"[{next(step)}/{steps}] model comparison by PSIS-LOO: {', '.join(scene.compare)}")
+        result = compare_families(scene, measurements, list(scene.compare))
+        write_comparison(out, result)
+        comparison = result.as_json()
+    progress(f"[{next(step)}/{steps}] report")
+    report, failures = write_report(out, progress=_silent)
+    if example is not None:
+        write_example(out, example, failures)
+    return RunResult(
+        out=out,
+        report=report,
+        verdict=failures,
+        paper_fit=paper,
+        lsq=lsq,
+        posterior=posterior.summary,
+        comparison=comparison,
+        seconds=time.perf_counter() - start,
+    )
