@@ -124,8 +124,39 @@ def _print_lsq(payload: dict[str, Any]) -> None:
 
 
 def _command_fit(args: argparse.Namespace) -> None:
+    from brdf_infer.model import FAMILY_NAMES, REFERENCE_FAMILY, family
 
+    if args.model not in FAMILY_NAMES:
+        raise BadInputError(
+            f"unknown model family {args.model!r} (known: {', '.join(FAMILY_NAMES)})",
+            field="--model",
+        )
+    if args.model != REFERENCE_FAMILY and args.method != "lsq":
+        raise BadInputError(
+            f"the paper's regression is Eq. (7)'s; fit {args.model} with --method lsq",
+            field="--model",
+        )
     scene, measurements = _scene_and_measurements(args.scene)
+    if args.model != REFERENCE_FAMILY:
+        from brdf_infer.family_fit import fit_family_lsq
+
+        _progress(f"least squares of {args.model}: {args.starts} starts ...")
+        result = fit_family_lsq(
+            scene, measurements, family(args.model), starts=args.starts, seed=args.seed
+        )
+        payload = result.as_json(scene.name)
+        if args.json:
+            _emit_json(payload)
+            return
+        print(f"least-squares fit of {args.model} to scene '{scene.name}'")
+        print(
+            _table(
+                ["parameter", "value", "1 sigma"],
+                [[n, f"{v:.6g}", f"{result.sigma[n]:.2g}"] for n, v in result.params.items()],
+            )
+        )
+        print(f"chi2 = {result.cost:.2f} for {result.n_points} points in {result.seconds:.1f} s")
+        return
     if args.method == "lsq":
         from brdf_infer.workflow import lsq_summary
 
@@ -518,7 +549,7 @@ def _write_raytrace(out: Path, scene, measurements, payload: dict) -> None:
     from brdf_infer._atomic import atomic_write_bytes, atomic_write_json
     from brdf_infer.params import Params
     from brdf_infer.raytrace import simulate_images
-    from brdf_infer.report._raytrace import figure_png, plot_detector_images, plot_raytrace
+    from brdf_infer.report import figure_png, plot_detector_images, plot_raytrace
 
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_json(out / "raytrace.json", {"traces": [payload]})
@@ -705,6 +736,11 @@ def build_parser() -> argparse.ArgumentParser:
         "fit", "fit Eq. (7): the paper's regression or least squares over all six parameters"
     )
     fit.add_argument("--method", choices=["paper", "lsq"], default="paper", help="fit method")
+    fit.add_argument(
+        "--model",
+        default="strumik2024",
+        help="model family (strumik2024, abg, harvey-shack, lambertian, lambertian+abg)",
+    )
     fit.add_argument("--starts", type=int, default=16, help="lsq: number of starts")
     fit.add_argument(
         "--solver", choices=["lm", "gauss-newton", "dogleg"], default="lm", help="lsq: solver"

@@ -32,11 +32,14 @@ from brdf_infer._arviz import az
 from brdf_infer.errors import BadInputError
 from brdf_infer.measurements import Measurements
 from brdf_infer.model import FAMILY_NAMES, REFERENCE_FAMILY, family
-from brdf_infer.posterior._family_model import build_family_model
-from brdf_infer.posterior._loo import pointwise_loo_terms
-from brdf_infer.posterior._model import build_posterior_model
-from brdf_infer.posterior._nuts import NutsProgram, chain_keys
-from brdf_infer.posterior._results import flatten_draws
+from brdf_infer.posterior import (
+    NutsProgram,
+    build_family_model,
+    build_posterior_model,
+    chain_keys,
+    flatten_draws,
+    pointwise_loo_terms,
+)
 from brdf_infer.scene import Scene
 
 PARETO_K_LIMIT = 0.7
@@ -296,7 +299,7 @@ def compare_families(
 def write_comparison(out: Path, result: ComparisonResult) -> list[Path]:
     """compare.json and ArviZ's compare plot (compare.png) into ``out``, atomically."""
     from brdf_infer._atomic import atomic_write_bytes, atomic_write_json
-    from brdf_infer.report._compare import compare_figure
+    from brdf_infer.report import compare_figure
 
     out.mkdir(parents=True, exist_ok=True)
     return [

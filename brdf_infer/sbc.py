@@ -36,8 +36,13 @@ from brdf_infer.errors import BadInputError
 from brdf_infer.measurements import Measurements
 from brdf_infer.model import log_tis
 from brdf_infer.params import PARAM_NAMES, Params
-from brdf_infer.posterior._model import NOISE_SITES, PosteriorModel, build_posterior_model
-from brdf_infer.posterior._nuts import NutsProgram, chain_keys
+from brdf_infer.posterior import (
+    NOISE_SITES,
+    NutsProgram,
+    PosteriorModel,
+    build_posterior_model,
+    chain_keys,
+)
 from brdf_infer.scene import Scene
 
 QUANTITIES: tuple[str, ...] = (*PARAM_NAMES, "tis70")
@@ -287,7 +292,7 @@ def ecdf_band(
 def write_sbc(out: Path, result: SbcResult) -> list[Path]:
     """sbc.json, the figures (PNG) and sbc.html into ``out``, atomically."""
     from brdf_infer._atomic import atomic_write_bytes, atomic_write_json
-    from brdf_infer.report._sbc import sbc_figures, sbc_page
+    from brdf_infer.report import sbc_figures, sbc_page
 
     out.mkdir(parents=True, exist_ok=True)
     paths = [atomic_write_json(out / SBC_FILE, result.as_json())]

@@ -14,8 +14,7 @@ from brdf_infer.compare import CompareSettings, compare_families
 from brdf_infer.error_model import NoiseScales
 from brdf_infer.model import family
 from brdf_infer.params import UV_PAPER
-from brdf_infer.posterior._family_model import build_family_model
-from brdf_infer.posterior._model import build_posterior_model
+from brdf_infer.posterior import build_family_model, build_posterior_model
 from tests.helpers import run_cli
 
 SMALL = CompareSettings(chains=2, warmup=300, draws=300, seed=1)
@@ -179,3 +178,21 @@ def test_a_row_with_the_left_out_sigma_carries_no_information(lya):
         ).log_prob(y[keep])
         differences.append(float(whole - rest))
     assert np.ptp(differences) < 1e-6, differences
+
+
+def test_fit_lsq_of_another_family_gives_its_parameters_in_json(capsys):
+    code, out, err = run_cli("fit", "--method", "lsq", "--model", "abg", "--json", capsys=capsys)
+    assert code == 0, err
+    payload = json.loads(out)
+    assert set(payload["params"]) == {"A", "B", "g"} and payload["model"] == "abg"
+    assert all(np.isfinite(v) and v > 0 for v in payload["params"].values())
+    assert payload["n_points"] == 42
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [(["--model", "phong"], "unknown model family"), (["--model", "abg"], "--method lsq")],
+)
+def test_fit_refuses_unknown_families_and_the_paper_method_for_others(capsys, argv, message):
+    code, out, err = run_cli("fit", *argv, capsys=capsys)
+    assert code == 2 and out == "" and message in err and "--model" in err

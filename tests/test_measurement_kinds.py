@@ -11,6 +11,7 @@ import pytest
 
 from brdf_infer.compare import CompareSettings, fit_family
 from brdf_infer.errors import BadInputError
+from brdf_infer.family_fit import fit_family_lsq
 from brdf_infer.lsq import fit_lsq
 from brdf_infer.model import brdf_hemisphere, family
 from brdf_infer.params import UV_PAPER
@@ -83,20 +84,33 @@ def test_lsq_and_posterior_recover_strumik2024_from_out_of_plane_brdf_rows(tmp_p
         assert low <= getattr(UV_PAPER, name) <= high, name
 
 
-def test_posterior_of_another_family_covers_its_truth_on_out_of_plane_brdf_rows(tmp_path):
+FAMILY_TRUTHS = {
+    "abg": ABG_TRUTH,
+    "harvey-shack": {"b0": 0.3, "L": 0.1, "S": -2.0},
+    "lambertian": {"tis": 0.05},
+    "lambertian+abg": {"rho_d": 0.02, **ABG_TRUTH},
+}
+
+
+@pytest.mark.parametrize("name", list(FAMILY_TRUTHS))
+def test_every_family_is_recovered_from_out_of_plane_brdf_rows_by_lsq_and_nuts(tmp_path, name):
     theta_i, theta, phi = _geometry()
-    member = family("abg")
-    truth = np.exp(
-        np.asarray(
-            member.log_brdf(theta_i, theta, phi, {k: jnp.asarray(v) for k, v in ABG_TRUTH.items()})
-        )
+    member = family(name)
+    truth = FAMILY_TRUTHS[name]
+    physical = {k: jnp.asarray(v) for k, v in truth.items()}
+    scene = write_brdf_scene(
+        tmp_path, np.exp(np.asarray(member.log_brdf(theta_i, theta, phi, physical)))
     )
-    scene = write_brdf_scene(tmp_path, truth)
-    result = fit_family(
-        scene, scene.load_measurements(), "abg", CompareSettings(chains=2, warmup=300, draws=300)
-    )
-    for name, value in ABG_TRUTH.items():
-        assert result.parameters[name]["lo95"] <= value <= result.parameters[name]["hi95"], name
+    rows = scene.load_measurements()
+    fit = fit_family_lsq(scene, rows, member, starts=8)
+    for parameter, value in truth.items():
+        error = fit.params[parameter] - value
+        assert abs(error) < 4.0 * fit.sigma[parameter], (parameter, fit.params, fit.sigma)
+    result = fit_family(scene, rows, name, CompareSettings(chains=2, warmup=300, draws=300))
+    posterior = result.idata.posterior
+    for parameter, value in truth.items():
+        low, high = np.quantile(np.asarray(posterior[parameter]), [0.001, 0.999])
+        assert low <= value <= high, (parameter, low, high)
 
 
 def test_a_bsdf_table_as_measurements_returns_the_parameters_that_made_it(tmp_path, capsys):

@@ -8,8 +8,13 @@ from dataclasses import dataclass
 import jax
 
 from brdf_infer.params import UV_PAPER
-from brdf_infer.raytrace import build_setup, configurations, trace_configuration
-from brdf_infer.raytrace._series import CHUNK_RAYS, _compile
+from brdf_infer.raytrace import (
+    CHUNK_RAYS,
+    build_setup,
+    compile_tallies,
+    configurations,
+    trace_configuration,
+)
 from brdf_infer.scene import Scene
 
 BENCH_CONFIGURATIONS = ((45.0, 0.0), (80.0, 5.0))  # a flat BRDF, and the steepest grazing case
@@ -54,7 +59,7 @@ def raytrace_rows(scene: Scene, quick: bool) -> tuple[list[RaytraceRow], int]:
         ).simulated
         for estimator in ("nee", "naive"):
             for rays in ray_counts:
-                compile_seconds = _compile(
+                compile_seconds = compile_tallies(
                     UV_PAPER, setup, constants, min(rays, CHUNK_RAYS), estimator, limiting, False
                 )
                 started = time.perf_counter()

@@ -17,9 +17,8 @@ from brdf_infer.bench._sbc import HEADERS as SBC_HEADERS
 from brdf_infer.bench._sbc import sbc_rows
 from brdf_infer.bench._timing import machine_description
 from brdf_infer.bench._tis import batched_throughput, tis_rows
-from brdf_infer.raytrace._series import CHUNK_RAYS
-from brdf_infer.report._raytrace import figure_png
-from brdf_infer.report._sbc import ecdf_differences, png
+from brdf_infer.raytrace import CHUNK_RAYS
+from brdf_infer.report import ecdf_differences, figure_png, png
 from brdf_infer.scene import load_scene
 
 

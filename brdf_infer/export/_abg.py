@@ -28,14 +28,14 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from brdf_infer.model import log_brdf_hemisphere
-from brdf_infer.model._lobes import (
+from brdf_infer.model import (
     CHECK_QUADRATURE,
     PRECISE_QUADRATURE,
     Quadrature,
     abg_integral,
     abg_log_bsdf,
     beta_distance,
+    log_brdf_hemisphere,
 )
 from brdf_infer.params import HemisphereConstants, Params
 

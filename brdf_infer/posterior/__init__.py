@@ -2,13 +2,17 @@
 with ArviZ diagnostics and credible bands for the BRDF and the TIS."""
 
 from brdf_infer.posterior._bands import QUANTILES, compute_bands, draws_params, tis_band
-from brdf_infer.posterior._model import PosteriorModel, build_posterior_model
+from brdf_infer.posterior._family_model import FamilyPosteriorModel, build_family_model
+from brdf_infer.posterior._loo import pointwise_loo_terms
+from brdf_infer.posterior._model import NOISE_SITES, PosteriorModel, build_posterior_model
+from brdf_infer.posterior._nuts import NutsProgram, chain_keys
 from brdf_infer.posterior._results import (
     BANDS_FILE,
     POSTERIOR_FILE,
     SUMMARY_FILE,
     THRESHOLDS,
     diagnostics,
+    flatten_draws,
     inference_data,
     load_run_draws,
 )
@@ -18,19 +22,26 @@ from brdf_infer.posterior._samplers import Draws, run_emcee, run_nuts
 __all__ = [
     "BANDS_FILE",
     "CHECKPOINT_FILE",
+    "NOISE_SITES",
     "POSTERIOR_FILE",
     "QUANTILES",
     "SUMMARY_FILE",
     "THRESHOLDS",
     "Draws",
+    "FamilyPosteriorModel",
+    "NutsProgram",
     "PosteriorModel",
     "PosteriorRun",
+    "build_family_model",
     "build_posterior_model",
+    "chain_keys",
     "compute_bands",
     "diagnostics",
     "draws_params",
+    "flatten_draws",
     "inference_data",
     "load_run_draws",
+    "pointwise_loo_terms",
     "run_emcee",
     "run_nuts",
     "run_posterior",

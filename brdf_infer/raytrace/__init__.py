@@ -1,10 +1,12 @@
 """Ray-tracing validation of the series II measurement setup (Sec. 6, Figs. 12–14)."""
 
 from brdf_infer.raytrace._series import (
+    CHUNK_RAYS,
     Configuration,
     Estimate,
     RaytraceResult,
     build_setup,
+    compile_tallies,
     configurations,
     point_estimate,
     raytrace_payload,
@@ -19,6 +21,7 @@ from brdf_infer.raytrace._series import (
 from brdf_infer.raytrace._trace import ESTIMATORS, TALLIES, Setup
 
 __all__ = [
+    "CHUNK_RAYS",
     "ESTIMATORS",
     "TALLIES",
     "Configuration",
@@ -26,6 +29,7 @@ __all__ = [
     "RaytraceResult",
     "Setup",
     "build_setup",
+    "compile_tallies",
     "configurations",
     "point_estimate",
     "raytrace_payload",

@@ -218,7 +218,9 @@ def point_estimate(configuration: Configuration, params: Params, scene: Scene) -
     return float(brdf) * _aperture_factor(configuration, scene)
 
 
-def _compile(params: Params, setup, constants, rays: int, estimator, limiting, batched: bool):
+def compile_tallies(
+    params: Params, setup, constants, rays: int, estimator, limiting, batched: bool
+):
     """Compile every chunk size once, outside the timing; returns the seconds it took."""
     started = time.perf_counter()
     function = _over_draws if batched else tally_moments
@@ -298,7 +300,7 @@ def raytrace_series(
     rays = rays or scene.raytrace.rays
     setup, limiting = build_setup(scene)
     constants = scene.model.constants
-    compile_seconds = _compile(params, setup, constants, rays, estimator, limiting, False)
+    compile_seconds = compile_tallies(params, setup, constants, rays, estimator, limiting, False)
     key = jax.random.PRNGKey(seed)
     started = time.perf_counter()
     rows = []
@@ -342,7 +344,7 @@ def raytrace_posterior(
     constants = scene.model.constants
     count = int(np.size(draws.brdf0))
     draws = Params(*(jnp.asarray(np.asarray(v, float).reshape(-1)) for v in draws))
-    compile_seconds = _compile(
+    compile_seconds = compile_tallies(
         Params(*(v[:16] for v in draws)), setup, constants, rays, "nee", limiting, True
     )
     key = jax.random.PRNGKey(seed)

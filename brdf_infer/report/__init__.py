@@ -1,15 +1,20 @@
 """The HTML diagnostic report of a posterior run, and its figures (imports matplotlib)."""
 
 from brdf_infer.report._build import FIGURE_DIR, REPORT_FILE, verdict, write_example, write_report
+from brdf_infer.report._compare import compare_figure, compare_table_html
 from brdf_infer.report._figures import brdf_bands as plot_brdf_bands
 from brdf_infer.report._figures import hemisphere_maps as plot_hemisphere_maps
 from brdf_infer.report._figures import posterior_predictive as plot_posterior_predictive
 from brdf_infer.report._figures import tis_band as plot_tis_band
 from brdf_infer.report._raytrace import figure_png, plot_detector_images, plot_raytrace
+from brdf_infer.report._sbc import ecdf_differences, png, sbc_figures, sbc_page
 
 __all__ = [
     "FIGURE_DIR",
     "REPORT_FILE",
+    "compare_figure",
+    "compare_table_html",
+    "ecdf_differences",
     "figure_png",
     "plot_brdf_bands",
     "plot_detector_images",
@@ -17,6 +22,9 @@ __all__ = [
     "plot_posterior_predictive",
     "plot_raytrace",
     "plot_tis_band",
+    "png",
+    "sbc_figures",
+    "sbc_page",
     "verdict",
     "write_example",
     "write_report",

@@ -9,8 +9,7 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 
-from brdf_infer.export import read_bsdf
-from brdf_infer.export._files import EXPORTS_FILE
+from brdf_infer.export import EXPORTS_FILE, read_bsdf
 from brdf_infer.model import brdf_hemisphere
 from brdf_infer.params import HemisphereConstants, Params
 from brdf_infer.report import _html
