@@ -63,6 +63,18 @@ def _scene_and_measurements(name: str):
     return scene, measurements
 
 
+def _require_reference_family(scene, command: str) -> None:
+    """``posterior``, ``run`` and ``sbc`` sample Eqs. (7), (8), (10); other families are
+    fitted by ``fit --method lsq`` and sampled and ranked by ``compare``."""
+    if scene.model.family != "strumik2024":
+        raise BadInputError(
+            f"'{command}' samples strumik2024 only; for {scene.model.family} use "
+            f"'fit --method lsq' and 'compare'",
+            file=scene.path,
+            field="model.family",
+        )
+
+
 def _table(headers: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
     widths = [max(len(h), *(len(r[i]) for r in rows)) for i, h in enumerate(headers)]
     lines = ["  ".join(h.rjust(w) for h, w in zip(headers, widths, strict=True))]
@@ -126,17 +138,18 @@ def _print_lsq(payload: dict[str, Any]) -> None:
 def _command_fit(args: argparse.Namespace) -> None:
     from brdf_infer.model import FAMILY_NAMES, REFERENCE_FAMILY, family
 
-    if args.model not in FAMILY_NAMES:
+    if args.model is not None and args.model not in FAMILY_NAMES:
         raise BadInputError(
             f"unknown model family {args.model!r} (known: {', '.join(FAMILY_NAMES)})",
             field="--model",
         )
+    scene, measurements = _scene_and_measurements(args.scene)
+    args.model = args.model or scene.model.family
     if args.model != REFERENCE_FAMILY and args.method != "lsq":
         raise BadInputError(
             f"the paper's regression is Eq. (7)'s; fit {args.model} with --method lsq",
             field="--model",
         )
-    scene, measurements = _scene_and_measurements(args.scene)
     if args.model != REFERENCE_FAMILY:
         from brdf_infer.family_fit import fit_family_lsq
 
@@ -314,6 +327,7 @@ def _command_posterior(args: argparse.Namespace) -> None:
     from brdf_infer.posterior import run_posterior
 
     scene, measurements = _scene_and_measurements(args.scene)
+    _require_reference_family(scene, "posterior")
     out = check_output_dir(args.out or Path("reports") / scene.name / args.sampler)
     if args.warmup is None:
         args.warmup = 1000 if args.sampler == "nuts" else 4000
@@ -455,6 +469,7 @@ def _command_run(args: argparse.Namespace) -> None:
     if args.warmup < 0:
         raise BadInputError(f"must be >= 0, got {args.warmup}", field="--warmup")
     scene, measurements = _scene_and_measurements(args.scene)
+    _require_reference_family(scene, "run")
     out = check_output_dir(args.out or Path("reports") / scene.name)
     result = run(
         scene,
@@ -605,6 +620,7 @@ def _command_sbc(args: argparse.Namespace) -> None:
     from brdf_infer.sbc import COVERAGE_LEVELS, SbcSettings, run_sbc, write_sbc
 
     scene, measurements = _scene_and_measurements(args.scene)
+    _require_reference_family(scene, "sbc")
     settings = SbcSettings(
         replicates=args.replicates,
         draws=args.draws,
@@ -738,8 +754,8 @@ def build_parser() -> argparse.ArgumentParser:
     fit.add_argument("--method", choices=["paper", "lsq"], default="paper", help="fit method")
     fit.add_argument(
         "--model",
-        default="strumik2024",
-        help="model family (strumik2024, abg, harvey-shack, lambertian, lambertian+abg)",
+        help="model family: strumik2024, abg, harvey-shack, lambertian, lambertian+abg "
+        "(default: the scene's [model] family)",
     )
     fit.add_argument("--starts", type=int, default=16, help="lsq: number of starts")
     fit.add_argument(

@@ -116,11 +116,14 @@ class ModelSettings:
         out_of_plane: the full-hemisphere extension of Eq. (8) is on; without it no
             hemisphere product (TIS, maps) is built.
         constants: out-of-plane and folding constants.
+        family: the model family ``fit`` uses (``strumik2024``: Eqs. 7, 8, 10; the others
+            are fitted by ``fit --method lsq`` and ranked by ``compare``).
     """
 
     fold: bool = False
     out_of_plane: bool = True
     constants: HemisphereConstants = PAPER_CONSTANTS
+    family: str = "strumik2024"
 
 
 @dataclass(frozen=True)
@@ -345,6 +348,20 @@ def _boolean(table: dict, key: str, path: Path, prefix: str, default: bool) -> b
     if not isinstance(value, bool):
         raise BadInputError(f"expected true or false, got {value!r}", file=path, field=prefix + key)
     return value
+
+
+def _model_family(model: dict, path: Path) -> str:
+    """``[model] family``, one of the model families (default ``strumik2024``)."""
+    from brdf_infer.model import FAMILY_NAMES
+
+    name = model.get("family", "strumik2024")
+    if name not in FAMILY_NAMES:
+        raise BadInputError(
+            f"unknown model family {name!r} (known: {', '.join(FAMILY_NAMES)})",
+            file=path,
+            field="model.family",
+        )
+    return name
 
 
 def _count(table: dict, key: str, path: Path) -> int:
@@ -603,7 +620,10 @@ def parse_scene(document: dict, path: Path) -> Scene:
         except BadInputError as error:
             raise BadInputError(error.problem, file=path, field=prefix + str(error.field)) from None
     errors = _parse_errors(document, path)
-    model = _table(document, "model", path, {"fold", "out_of_plane", *HemisphereConstants._fields})
+    model = _table(
+        document, "model", path, {"fold", "out_of_plane", "family", *HemisphereConstants._fields}
+    )
+    family = _model_family(model, path)
     paper = _table(document, "paper_fit", path, {"alpha", "theta_s0_deg", "selection"})
     outputs = _table(
         document,
@@ -646,7 +666,9 @@ def parse_scene(document: dict, path: Path) -> Scene:
         measurements_path=(path.parent / measurements),
         series=series,
         errors=errors,
-        model=ModelSettings(fold=fold, out_of_plane=out_of_plane, constants=constants),
+        model=ModelSettings(
+            fold=fold, out_of_plane=out_of_plane, constants=constants, family=family
+        ),
         paper_fit=PaperFitSettings(
             alpha=_number(paper, "alpha", path, default=4.5, positive=True),
             theta_s0_deg=_number(paper, "theta_s0_deg", path, default=-12.0),

@@ -196,3 +196,35 @@ def test_fit_lsq_of_another_family_gives_its_parameters_in_json(capsys):
 def test_fit_refuses_unknown_families_and_the_paper_method_for_others(capsys, argv, message):
     code, out, err = run_cli("fit", *argv, capsys=capsys)
     assert code == 2 and out == "" and message in err and "--model" in err
+
+
+def _family_scene(lya, tmp_path, family_name: str):
+    scene, _ = lya
+    path = tmp_path / "scene.toml"
+    path.write_text(
+        f'name = "x"\nmeasurements = "{scene.measurements_path.as_posix()}"\n'
+        "[series.I]\naperture_diameter_mm = 7.2\naperture_distance_mm = 103.8\n"
+        "[series.II]\naperture_diameter_mm = 7.5\naperture_distance_mm = 106.0\n"
+        f'[model]\nfamily = "{family_name}"\n'
+    )
+    return path
+
+
+def test_scene_model_family_is_what_fit_uses_and_samplers_refuse_it_clearly(lya, tmp_path, capsys):
+    path = _family_scene(lya, tmp_path, "lambertian")
+    code, out, err = run_cli("fit", str(path), "--method", "lsq", "--json", capsys=capsys)
+    assert code == 0, err
+    assert json.loads(out)["model"] == "lambertian"
+    for command in ("posterior", "sbc"):
+        code, out, err = run_cli(command, str(path), "--out", str(tmp_path / "x"), capsys=capsys)
+        assert code == 2 and out == "" and "model.family" in err and "compare" in err
+        assert not (tmp_path / "x").exists()
+
+
+def test_unknown_scene_model_family_is_named(lya, tmp_path):
+    from brdf_infer.errors import BadInputError
+    from brdf_infer.scene import load_scene
+
+    with pytest.raises(BadInputError, match="unknown model family 'phong'") as error:
+        load_scene(_family_scene(lya, tmp_path, "phong"))
+    assert error.value.field == "model.family"

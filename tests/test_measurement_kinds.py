@@ -206,3 +206,40 @@ def test_bsdf_scene_keys_are_checked(tmp_path):
         load_scene(tmp_path / "s.toml", check_files=False)
     assert error.value.field == "bsdf.keep_every_radial"
     assert json.dumps(str(error.value))
+
+
+@pytest.mark.parametrize("name", ["abg", "lambertian+abg"])
+def test_a_bsdf_table_of_another_family_is_fitted_and_sampled_back(tmp_path, name):
+    """A .BSDF file tabulating a family's BRDF (a vendor's ABg table, say), read as a scene's
+    measurements (thinned): lsq returns its parameters, NUTS covers them."""
+    from brdf_infer.export import BsdfFile, specular_frame_to_model, write_bsdf
+
+    member = family(name)
+    truth = FAMILY_TRUTHS[name]
+    physical = {k: jnp.asarray(v) for k, v in truth.items()}
+    aoi = np.array([0.0, 30.0, 60.0])
+    azimuth = np.arange(0.0, 181.0, 15.0)
+    radial = np.arange(0.0, 91.0, 5.0)
+    grid_azimuth, grid_radial = np.meshgrid(azimuth, radial, indexing="ij")
+    tables = []
+    for theta_i in aoi:
+        theta, phi, z = specular_frame_to_model(theta_i, grid_azimuth, grid_radial)
+        values = np.exp(np.asarray(member.log_brdf(theta_i, theta, phi, physical)))
+        tables.append(np.where(np.asarray(z) > 0, values, 0.0))
+    tis = [float(member.tis(jnp.asarray(t), physical)) for t in aoi]
+    write_bsdf(
+        tmp_path / "vendor.bsdf",
+        BsdfFile(aoi, azimuth, radial, np.array([tis]), np.array([tables])),
+    )
+    (tmp_path / "s.toml").write_text(
+        f'name = "vendor"\nmeasurements = "vendor.bsdf"\n[bsdf]\nkeep_every_radial = 2\n{ERRORS}'
+    )
+    scene = load_scene(tmp_path / "s.toml")
+    rows = scene.load_measurements()
+    fit = fit_family_lsq(scene, rows, member, starts=8)
+    for parameter, value in truth.items():
+        assert fit.params[parameter] == pytest.approx(value, rel=1e-4), parameter
+    result = fit_family(scene, rows, name, CompareSettings(chains=1, warmup=200, draws=200))
+    for parameter, value in truth.items():
+        low, high = np.quantile(np.asarray(result.idata.posterior[parameter]), [0.001, 0.999])
+        assert low <= value * (1 + 1e-4) and value * (1 - 1e-4) <= high, parameter
