@@ -92,7 +92,16 @@ FAMILY_TRUTHS = {
 }
 
 
-@pytest.mark.parametrize("name", list(FAMILY_TRUTHS))
+@pytest.mark.parametrize(
+    "name",
+    [
+        "abg",
+        "lambertian",
+        # ≈ 30 s each with a cold compilation cache: with the slow tests
+        pytest.param("harvey-shack", marks=pytest.mark.slow),
+        pytest.param("lambertian+abg", marks=pytest.mark.slow),
+    ],
+)
 def test_every_family_is_recovered_from_out_of_plane_brdf_rows_by_lsq_and_nuts(tmp_path, name):
     theta_i, theta, phi = _geometry()
     member = family(name)
@@ -208,7 +217,7 @@ def test_bsdf_scene_keys_are_checked(tmp_path):
     assert json.dumps(str(error.value))
 
 
-@pytest.mark.parametrize("name", ["abg", "lambertian+abg"])
+@pytest.mark.parametrize("name", [pytest.param("abg", marks=pytest.mark.slow), "lambertian+abg"])
 def test_a_bsdf_table_of_another_family_is_fitted_and_sampled_back(tmp_path, name):
     """A .BSDF file tabulating a family's BRDF (a vendor's ABg table, say), read as a scene's
     measurements (thinned): lsq returns its parameters, NUTS covers them."""
