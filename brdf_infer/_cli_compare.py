@@ -19,7 +19,7 @@ def add_compare_arguments(parser: argparse.ArgumentParser) -> None:
         "--models",
         nargs="+",
         default=list(DEFAULT_MODELS),
-        help="model families to compare (default: all)",
+        help="model families to compare",
     )
     parser.add_argument("--chains", type=int, default=4, help="NUTS chains per family")
     parser.add_argument("--warmup", type=int, default=500, help="NUTS warmup per chain")

@@ -38,7 +38,7 @@ from brdf_infer.posterior import (
     build_posterior_model,
     chain_keys,
     flatten_draws,
-    pointwise_loo_terms,
+    loo_terms,
 )
 from brdf_infer.scene import Scene
 
@@ -145,15 +145,6 @@ def _build(scene: Scene, measurements: Measurements, name: str):
     return build_family_model(scene, measurements, family(name))
 
 
-def _loo_log_lik(model, sites: dict) -> np.ndarray:
-    chains, n_draws = next(iter(sites.values())).shape[:2]
-    parts = model.draw_parts(flatten_draws(sites))
-    log_lik, _ = pointwise_loo_terms(
-        model.data.rows.log_reflectance, parts.mean, parts.factor, parts.diagonal
-    )
-    return np.asarray(log_lik).reshape(chains, n_draws, -1)
-
-
 def _without_row(model, row: int):
     noise = model.data.noise
     sigma = noise.sigma_row.at[row].set(LEFT_OUT_SIGMA)
@@ -183,7 +174,7 @@ def fit_family(
         model.data, keys, settings.draws, progress=progress, description=f"NUTS {name}"
     )
     sites = output.sites
-    log_lik = _loo_log_lik(model, sites)
+    log_lik = loo_terms(model, sites)[0]
     names = (*member.parameters, "sample_sd", "repeatability")
     idata = _idata(sites, log_lik, names)
     summary = az.summary(idata, var_names=[n for n in names if n in sites], kind="diagnostics")
@@ -194,7 +185,7 @@ def fit_family(
     if settings.refit:
         for row in np.flatnonzero(np.asarray(loo.pareto_k) > PARETO_K_LIMIT):
             refit = program.run(_without_row(model, int(row)), keys, settings.draws)
-            terms = _loo_log_lik(model, refit.sites)[..., row].reshape(-1)
+            terms = loo_terms(model, refit.sites)[0][..., row].reshape(-1)
             exact[int(row)] = float(logsumexp(terms) - np.log(terms.size))
             refitted.append(int(row))
     flat = flatten_draws({k: sites[k] for k in member.parameters})

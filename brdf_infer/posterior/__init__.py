@@ -15,6 +15,7 @@ from brdf_infer.posterior._results import (
     flatten_draws,
     inference_data,
     load_run_draws,
+    loo_terms,
 )
 from brdf_infer.posterior._run import CHECKPOINT_FILE, PosteriorRun, run_posterior
 from brdf_infer.posterior._samplers import Draws, run_emcee, run_nuts
@@ -41,6 +42,7 @@ __all__ = [
     "flatten_draws",
     "inference_data",
     "load_run_draws",
+    "loo_terms",
     "pointwise_loo_terms",
     "run_emcee",
     "run_nuts",

@@ -47,8 +47,9 @@ def flatten_draws(sites: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     return {k: v.reshape(v.shape[0] * v.shape[1], *v.shape[2:]) for k, v in sites.items()}
 
 
-def loo_terms(model: PosteriorModel, sites: dict[str, np.ndarray]):
-    """(log p(yᵢ | y₋ᵢ, θ), P(ỹᵢ ≤ yᵢ | y₋ᵢ, θ)) of every draw and row, each (chain, draw, row).
+def loo_terms(model, sites: dict[str, np.ndarray]):
+    """(log p(yᵢ | y₋ᵢ, θ), P(ỹᵢ ≤ yᵢ | y₋ᵢ, θ)) of every draw and row, each (chain, draw, row),
+    for any posterior model with ``draw_parts`` and ``data`` (every family's).
 
     The leave-one-out conditionals of the model's (possibly correlated) normal likelihood
     (:mod:`brdf_infer.posterior._loo`); for independent rows the ordinary pointwise terms.
