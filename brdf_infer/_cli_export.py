@@ -57,14 +57,26 @@ def _checked_options(args: argparse.Namespace) -> None:
 
 def _source(args: argparse.Namespace, scene_name: str):
     from brdf_infer.export import Source
+    from brdf_infer.model import REFERENCE_FAMILY
     from brdf_infer.params import resolve_params
-    from brdf_infer.posterior import load_run_draws
+    from brdf_infer.posterior import load_run_draws, load_run_family
 
     if args.run is not None:
         run = Path(args.run)
-        params, fold, constants = load_run_draws(run)
+        member, physical = load_run_family(run)
         with contextlib.suppress(OSError, ValueError, KeyError):
             scene_name = json.loads((run / "summary.json").read_text())["scene"]
+        if member.name != REFERENCE_FAMILY:
+            if args.no_fold:
+                raise BadInputError(f"a run of {member.name} has no Eq. (10)", field="--no-fold")
+            if args.format == "abg" and member.name != "abg":
+                raise BadInputError(
+                    f"ABg rows are fitted to Eq. (7) or read from an abg run, not a run of "
+                    f"{member.name} (export it with --format zemax-bsdf)",
+                    field="--format",
+                )
+            return Source(str(run), None, True, False, None, scene_name, member, physical)
+        params, fold, constants = load_run_draws(run)
         return Source(str(run), params, True, fold and not args.no_fold, constants, scene_name)
     from brdf_infer.scene import load_scene
 
@@ -106,7 +118,7 @@ def command_export(
     out = check_output_dir(args.out)
     source = _source(args, args.scene)
     draws = args.draws if args.format == "zemax-bsdf" else (args.draws or 100)
-    available = int(np.size(source.params.brdf0))
+    available = source.count
     if source.from_run and draws > available:
         raise BadInputError(f"{draws} > the run's {available} draws", field="--draws")
     existing = [name for name in planned_files(source, args.format, draws) if (out / name).exists()]

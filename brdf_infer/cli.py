@@ -63,16 +63,22 @@ def _scene_and_measurements(name: str):
     return scene, measurements
 
 
-def _require_reference_family(scene, command: str) -> None:
-    """``posterior``, ``run`` and ``sbc`` sample Eqs. (7), (8), (10); other families are
-    fitted by ``fit --method lsq`` and sampled and ranked by ``compare``."""
-    if scene.model.family != "strumik2024":
+def _checked_model(name: str | None) -> None:
+    """``--model``: a known family (checked before the scene is read)."""
+    from brdf_infer.model import FAMILY_NAMES
+
+    if name is not None and name not in FAMILY_NAMES:
         raise BadInputError(
-            f"'{command}' samples strumik2024 only; for {scene.model.family} use "
-            f"'fit --method lsq' and 'compare'",
-            file=scene.path,
-            field="model.family",
+            f"unknown model family {name!r} (known: {', '.join(FAMILY_NAMES)})", field="--model"
         )
+
+
+def _model_argument(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--model",
+        help="model family: strumik2024, abg, harvey-shack, lambertian, lambertian+abg "
+        "(default: the scene's [model] family)",
+    )
 
 
 def _table(headers: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
@@ -303,17 +309,32 @@ def _tis_warnings(theta_i: np.ndarray, values: np.ndarray) -> list[str]:
     return [f"TIS > 1 at theta_i = {angles} deg: these parameters are not physical"]
 
 
+TIS_RUN_FAMILY_DRAWS = 1000  # a lobe family's TIS is a 2-D quadrature (≈ 1 ms each)
+
+
 def _tis_from_run(args: argparse.Namespace, theta_i: np.ndarray) -> None:
-    from brdf_infer.posterior import load_run_draws, tis_band
+    from brdf_infer.model import REFERENCE_FAMILY
+    from brdf_infer.posterior import family_tis_band, load_run_draws, load_run_family, tis_band
 
     start = time.perf_counter()
-    params, fold, constants = load_run_draws(Path(args.run))
-    band = tis_band(params, theta_i, fold and not args.no_fold, constants)
+    member, physical = load_run_family(Path(args.run))
+    if member.name == REFERENCE_FAMILY:
+        params, fold, constants = load_run_draws(Path(args.run))
+        band = {
+            **tis_band(params, theta_i, fold and not args.no_fold, constants),
+            "draws": int(np.size(params.brdf0)),
+        }
+        what = "Eq. (9)"
+    else:
+        if args.no_fold:
+            raise BadInputError(f"a run of {member.name} has no Eq. (10)", field="--no-fold")
+        band = family_tis_band(member, physical, theta_i, TIS_RUN_FAMILY_DRAWS)
+        what = member.name
     seconds = time.perf_counter() - start
     if args.json:
-        _emit_json({**band, "draws": int(np.size(params.brdf0)), "seconds": seconds})
+        _emit_json({**band, "model": member.name, "seconds": seconds})
         return
-    print(f"TIS, Eq. (9), over {np.size(params.brdf0)} posterior draws of {args.run}")
+    print(f"TIS, {what}, over {band['draws']} posterior draws of {args.run}")
     rows = [
         [f"{t:g}", *(f"{100 * band[k][i]:.3f}" for k in ("median", "lo68", "hi68", "lo95", "hi95"))]
         for i, t in enumerate(theta_i)
@@ -326,8 +347,8 @@ def _tis_from_run(args: argparse.Namespace, theta_i: np.ndarray) -> None:
 def _command_posterior(args: argparse.Namespace) -> None:
     from brdf_infer.posterior import run_posterior
 
+    _checked_model(args.model)
     scene, measurements = _scene_and_measurements(args.scene)
-    _require_reference_family(scene, "posterior")
     out = check_output_dir(args.out or Path("reports") / scene.name / args.sampler)
     if args.warmup is None:
         args.warmup = 1000 if args.sampler == "nuts" else 4000
@@ -344,6 +365,7 @@ def _command_posterior(args: argparse.Namespace) -> None:
         out=out,
         resume=args.resume,
         error_model=args.error_model,
+        model=args.model,
         target_accept=args.target_accept,
         announce=lambda what: _progress(what + " ..."),
     )
@@ -367,7 +389,9 @@ def _print_posterior_summary(summary: dict[str, Any], out: Path) -> None:
         ]
         for name, values in diagnostics["parameters"].items()
     ]
-    print(f"posterior of scene '{summary['scene']}' ({summary['sampler']})")
+    print(
+        f"posterior of scene '{summary['scene']}', model {summary['model']} ({summary['sampler']})"
+    )
     print(_table(["parameter", "mean", "sd", "R-hat", "ESS bulk", "ESS tail"], rows))
     tis70 = summary["tis_70deg"]
     if tis70 is not None:
@@ -468,14 +492,20 @@ def _command_run(args: argparse.Namespace) -> None:
             raise BadInputError(f"must be at least 1, got {value}", field=option)
     if args.warmup < 0:
         raise BadInputError(f"must be >= 0, got {args.warmup}", field="--warmup")
+    _checked_model(args.model)
     scene, measurements = _scene_and_measurements(args.scene)
-    _require_reference_family(scene, "run")
     out = check_output_dir(args.out or Path("reports") / scene.name)
     result = run(
         scene,
         measurements,
         out,
-        RunSettings(chains=args.chains, draws=args.draws, warmup=args.warmup, seed=args.seed),
+        RunSettings(
+            chains=args.chains,
+            draws=args.draws,
+            warmup=args.warmup,
+            seed=args.seed,
+            model=args.model,
+        ),
         example=Path(args.example) if args.example else None,
         progress=_progress,
     )
@@ -483,11 +513,12 @@ def _command_run(args: argparse.Namespace) -> None:
         _emit_json(result.as_json())
         return
     paper, lsq = result.paper_fit, result.lsq
-    print(f"scene '{scene.name}': {len(measurements)} measurements")
-    print(
-        f"paper fit: sigma_E = {100 * paper['sigma_e']:.2f} % on {paper['n_points']} points "
-        f"(selection '{paper['selection']}')"
-    )
+    print(f"scene '{scene.name}': {len(measurements)} measurements, model {result.model}")
+    if paper is not None:
+        print(
+            f"paper fit: sigma_E = {100 * paper['sigma_e']:.2f} % on {paper['n_points']} points "
+            f"(selection '{paper['selection']}')"
+        )
     print(
         f"least squares: chi2 = {lsq['cost']:.2f} for {lsq['n_points']} points "
         f"({lsq['starts_converged']}/{lsq['starts']} starts at the optimum)"
@@ -619,8 +650,8 @@ def _command_sbc(args: argparse.Namespace) -> None:
     _headless()
     from brdf_infer.sbc import COVERAGE_LEVELS, SbcSettings, run_sbc, write_sbc
 
+    _checked_model(args.model)
     scene, measurements = _scene_and_measurements(args.scene)
-    _require_reference_family(scene, "sbc")
     settings = SbcSettings(
         replicates=args.replicates,
         draws=args.draws,
@@ -647,7 +678,13 @@ def _command_sbc(args: argparse.Namespace) -> None:
         f"simulation-based calibration of scene '{scene.name}': {settings.replicates} "
         f"replicates, truth ranked among {settings.draws} draws ..."
     )
-    result = run_sbc(scene, measurements, settings, progress=not args.json and sys.stderr.isatty())
+    result = run_sbc(
+        scene,
+        measurements,
+        settings,
+        model=args.model,
+        progress=not args.json and sys.stderr.isatty(),
+    )
     write_sbc(out, result)
     if args.json:
         _emit_json({"out": str(out), **result.as_json()})
@@ -668,6 +705,56 @@ def _command_sbc(args: argparse.Namespace) -> None:
     print(
         f"time: {result.seconds:.0f} s ({result.compile_seconds:.0f} s compiling); "
         f"results in {out}/ (sbc.json, sbc.html)"
+    )
+
+
+def _command_batch(args: argparse.Namespace) -> None:
+    _headless()
+    from brdf_infer.batch import BatchSettings, run_batch
+
+    _checked_model(args.model)
+    settings = BatchSettings(
+        chains=args.chains,
+        draws=args.draws,
+        warmup=args.warmup,
+        seed=args.seed,
+        target_accept=args.target_accept,
+        mode=args.mode,
+    )
+    settings.check()
+    out = check_output_dir(args.out or Path("reports") / "batch")
+    result = run_batch(args.scenes, out, settings, model=args.model, progress=_progress)
+    if args.json:
+        _emit_json({"out": str(out), **result.as_json()})
+        return
+    rows = []
+    for entry in result.entries:
+        item = entry.as_json()
+        if entry.error is not None:
+            rows.append([item["scene"], "skipped", "", "", "", entry.error])
+            continue
+        at = item["tis"]["theta_i_deg"].index(70.0) if item["tis"] else None
+        tis70 = (
+            "–"
+            if at is None
+            else f"{100 * item['tis']['median'][at]:.2f} "
+            f"({100 * item['tis']['lo95'][at]:.2f}–{100 * item['tis']['hi95'][at]:.2f})"
+        )
+        rows.append(
+            [
+                item["scene"],
+                item["model"],
+                f"{item['r_hat_max']:.3f}",
+                f"{item['ess_min']:.0f}",
+                str(item["divergences"]),
+                f"TIS(70°) {tis70} %; {item['out']}",
+            ]
+        )
+    print(_table(["scene", "model", "R-hat max", "ESS min", "divergences", "result"], rows))
+    print(
+        f"{len(result.entries)} scene(s) in {result.groups} compiled group(s) on "
+        f"{result.devices} device(s): {result.seconds:.1f} s ({result.compile_seconds:.1f} s "
+        f"compiling); summary in {out / 'batch.json'}"
     )
 
 
@@ -746,17 +833,14 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--draws", type=int, default=1000, help="NUTS draws per chain")
     run.add_argument("--warmup", type=int, default=1000, help="NUTS warmup per chain")
     run.add_argument("--seed", type=int, default=0, help="random seed")
+    _model_argument(run)
     run.set_defaults(handler=_command_run)
 
     fit = scene_command(
         "fit", "fit Eq. (7): the paper's regression or least squares over all six parameters"
     )
     fit.add_argument("--method", choices=["paper", "lsq"], default="paper", help="fit method")
-    fit.add_argument(
-        "--model",
-        help="model family: strumik2024, abg, harvey-shack, lambertian, lambertian+abg "
-        "(default: the scene's [model] family)",
-    )
+    _model_argument(fit)
     fit.add_argument("--starts", type=int, default=16, help="lsq: number of starts")
     fit.add_argument(
         "--solver", choices=["lm", "gauss-newton", "dogleg"], default="lm", help="lsq: solver"
@@ -796,7 +880,27 @@ def build_parser() -> argparse.ArgumentParser:
         default=0.8,
         help="NUTS target acceptance probability (raise towards 0.95 if a run diverges)",
     )
+    _model_argument(posterior)
     posterior.set_defaults(handler=_command_posterior)
+
+    batch = command("batch", "posteriors of many scenes, one compiled program per model structure")
+    batch.add_argument("scenes", nargs="+", metavar="SCENE_OR_GLOB", help="scenes or globs")
+    batch.add_argument("--chains", type=int, default=4, help="NUTS chains per scene")
+    batch.add_argument("--draws", type=int, default=1000, help="NUTS draws per chain")
+    batch.add_argument("--warmup", type=int, default=1000, help="NUTS warmup per chain")
+    batch.add_argument("--seed", type=int, default=0, help="random seed (as posterior --seed)")
+    batch.add_argument("--target-accept", type=float, default=0.8, help="NUTS target acceptance")
+    batch.add_argument(
+        "--mode",
+        choices=["auto", "threads", "vmap"],
+        default="auto",
+        help="threads: one scene per CPU thread; vmap: one vmapped program, the scene axis "
+        "sharded over every device (auto: threads on a single CPU, else vmap)",
+    )
+    batch.add_argument("--out", help="output directory (default: reports/batch)")
+    batch.add_argument("--json", action="store_true", help="one JSON object on stdout")
+    _model_argument(batch)
+    batch.set_defaults(handler=_command_batch)
 
     tis = command("tis", "total integrated scatter, Eq. (9), of a parameter set or a run")
     source = tis.add_mutually_exclusive_group()
@@ -871,6 +975,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="largest NUTS tree depth during the warmup (10 after it)",
     )
     sbc.add_argument("--out", help="output directory (default: reports/<scene>/sbc)")
+    _model_argument(sbc)
     sbc.set_defaults(handler=_command_sbc)
 
     export = scene_command(

@@ -31,11 +31,10 @@ from scipy.special import logsumexp
 from brdf_infer._arviz import az
 from brdf_infer.errors import BadInputError
 from brdf_infer.measurements import Measurements
-from brdf_infer.model import FAMILY_NAMES, REFERENCE_FAMILY, family
+from brdf_infer.model import FAMILY_NAMES, family
 from brdf_infer.posterior import (
     NutsProgram,
-    build_family_model,
-    build_posterior_model,
+    build_model,
     chain_keys,
     flatten_draws,
     loo_terms,
@@ -139,12 +138,6 @@ def _interval(values: np.ndarray) -> dict[str, float]:
     return {"median": float(median), "lo95": float(low), "hi95": float(high)}
 
 
-def _build(scene: Scene, measurements: Measurements, name: str):
-    if name == REFERENCE_FAMILY:
-        return build_posterior_model(scene, measurements)
-    return build_family_model(scene, measurements, family(name))
-
-
 def _without_row(model, row: int):
     noise = model.data.noise
     sigma = noise.sigma_row.at[row].set(LEFT_OUT_SIGMA)
@@ -166,7 +159,7 @@ def fit_family(
 ) -> FamilyResult:
     """Sample ``name`` on the scene's rows; leave-one-out terms, refits where k > 0.7."""
     started = time.perf_counter()
-    model = _build(scene, measurements, name)
+    model = build_model(scene, measurements, name)
     member = family(name, scene.model.fold, scene.model.constants)
     program = NutsProgram(model, warmup=settings.warmup, target_accept=settings.target_accept)
     keys = chain_keys(settings.seed, 1, settings.chains)[0]

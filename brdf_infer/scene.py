@@ -116,8 +116,8 @@ class ModelSettings:
         out_of_plane: the full-hemisphere extension of Eq. (8) is on; without it no
             hemisphere product (TIS, maps) is built.
         constants: out-of-plane and folding constants.
-        family: the model family ``fit`` uses (``strumik2024``: Eqs. 7, 8, 10; the others
-            are fitted by ``fit --method lsq`` and ranked by ``compare``).
+        family: the BRDF family that ``fit``, ``posterior``, ``run`` and ``sbc`` use unless
+            ``--model`` names another (``strumik2024``: Eqs. 7, 8, 10, the default).
     """
 
     fold: bool = False

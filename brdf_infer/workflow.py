@@ -1,5 +1,7 @@
 """The main job as one library call: paper fit, least squares, NUTS posterior (and the earlier
-error model beside it), ray traces, model comparison and the report, into one run folder.
+error model beside it), ray traces, model comparison and the report, into one run folder. For
+a model family other than ``strumik2024`` the paper fit (Eq. 7's regression) and the ray traces
+(whose surface scatters by Eq. 7) are left out.
 
 ``brdf-infer run`` parses its options and calls :func:`run`; a notebook calls it the same way:
 
@@ -35,13 +37,15 @@ def _silent(message: str) -> None:
 
 @dataclass(frozen=True)
 class RunSettings:
-    """NUTS settings of the main job (and the least-squares starts)."""
+    """NUTS settings of the main job, the least-squares starts, and the model family (None: the
+    scene's ``[model] family``)."""
 
     chains: int = 4
     draws: int = 1000
     warmup: int = 500
     seed: int = 0
     lsq_starts: int = 16
+    model: str | None = None
 
 
 @dataclass
@@ -51,8 +55,10 @@ class RunResult:
     Attributes:
         out: the run folder.
         report: the HTML report.
+        model: the model family sampled.
         verdict: the diagnostics that failed (empty: every one passes).
-        paper_fit, lsq: the fit summaries.
+        paper_fit, lsq: the fit summaries (``paper_fit``: the article's regression of Eq. 7,
+            None when another family is run).
         posterior: the posterior summary (``summary.json``).
         comparison: the PSIS-LOO comparison (``compare.json``), where the scene asks for one.
         seconds: wall time.
@@ -60,8 +66,9 @@ class RunResult:
 
     out: Path
     report: Path
+    model: str
     verdict: list[str]
-    paper_fit: dict[str, Any]
+    paper_fit: dict[str, Any] | None
     lsq: dict[str, Any]
     posterior: dict[str, Any]
     comparison: dict[str, Any] | None
@@ -71,6 +78,7 @@ class RunResult:
         payload = {
             "out": str(self.out),
             "report": str(self.report),
+            "model": self.model,
             "verdict": self.verdict,
             "paper_fit": self.paper_fit,
             "lsq": self.lsq,
@@ -218,20 +226,39 @@ def run(
         progress: called with one line per step.
     """
     from brdf_infer._atomic import atomic_write_json
-    from brdf_infer.posterior import run_posterior
+    from brdf_infer.model import REFERENCE_FAMILY
+    from brdf_infer.posterior import build_model, run_posterior
     from brdf_infer.report import write_example, write_report
 
     start = time.perf_counter()
+    name = settings.model or scene.model.family
+    build_model(scene, measurements, name)  # an unknown family fails before any work
+    reference = name == REFERENCE_FAMILY
+    traces = scene.raytrace is not None and reference  # the ray tracer scatters by Eq. (7)
     out.mkdir(parents=True, exist_ok=True)
-    steps = 5 + (scene.raytrace is not None) + bool(scene.compare)
+    steps = 5 + traces + bool(scene.compare)
     step = iter(range(1, steps + 1))
-    progress(f"[{next(step)}/{steps}] paper fit of scene '{scene.name}' ({len(measurements)} rows)")
-    paper = paper_fit_summary(scene, measurements)
-    atomic_write_json(out / "fit_paper.json", paper)
-    progress(f"[{next(step)}/{steps}] least-squares fit of all free parameters")
-    lsq = lsq_summary(
-        scene, measurements, starts=settings.lsq_starts, seed=settings.seed, progress=progress
-    )
+    paper = None
+    if reference:
+        progress(
+            f"[{next(step)}/{steps}] paper fit of scene '{scene.name}' ({len(measurements)} rows)"
+        )
+        paper = paper_fit_summary(scene, measurements)
+        atomic_write_json(out / "fit_paper.json", paper)
+    else:
+        progress(f"[{next(step)}/{steps}] model {name}: no paper fit (it is Eq. 7's regression)")
+    progress(f"[{next(step)}/{steps}] least-squares fit of all free parameters of {name}")
+    if reference:
+        lsq = lsq_summary(
+            scene, measurements, starts=settings.lsq_starts, seed=settings.seed, progress=progress
+        )
+    else:
+        from brdf_infer.family_fit import fit_family_lsq
+        from brdf_infer.model import family
+
+        lsq = fit_family_lsq(
+            scene, measurements, family(name), starts=settings.lsq_starts, seed=settings.seed
+        ).as_json(scene.name)
     atomic_write_json(out / "fit_lsq.json", lsq)
     progress(f"[{next(step)}/{steps}] NUTS posterior ({settings.chains} chains x {settings.draws})")
     options = {
@@ -239,6 +266,7 @@ def run(
         "draws": settings.draws,
         "warmup": settings.warmup,
         "seed": settings.seed,
+        "model": name,
     }
     posterior = run_posterior(scene, measurements, out=out, **options)
     if scene.errors.model != "spread":
@@ -248,7 +276,7 @@ def run(
         )
     else:
         next(step)
-    if scene.raytrace is not None:
+    if traces:
         progress(f"[{next(step)}/{steps}] ray tracing series {scene.raytrace.series} (Sec. 6)")
         atomic_write_json(
             out / "raytrace.json", {"traces": run_traces(scene, measurements, posterior)}
@@ -268,6 +296,7 @@ def run(
     return RunResult(
         out=out,
         report=report,
+        model=name,
         verdict=failures,
         paper_fit=paper,
         lsq=lsq,

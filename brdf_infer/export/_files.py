@@ -12,6 +12,11 @@ What each file means:
 - ``draw_000.bsdf`` …: single posterior draws, each a consistent BRDF with its own exact TIS,
   for Monte Carlo stray-light runs (the spread of their results is the budget's band).
 - ``abg.json`` / ``abg.csv``: TIS-preserving ABg fits per angle of incidence.
+
+A posterior run of another model family (``abg``, ``harvey-shack``, ``lambertian``,
+``lambertian+abg``) exports the same .BSDF files from that family's BRDF and TIS (the TIS lines
+of a band from at most 400 evenly spaced draws, each TIS a 2-D quadrature); a run of ``abg``
+exports its own posterior A, B, g as the ABg rows.
 """
 
 from __future__ import annotations
@@ -25,15 +30,24 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 
 from brdf_infer._atomic import atomic_write_bytes, atomic_write_json
+from brdf_infer.errors import BadInputError
 from brdf_infer.export._abg import AbgFit, fit_abg
-from brdf_infer.export._grid import ScatterGrid, brdf_table, table_integral
+from brdf_infer.export._grid import (
+    ScatterGrid,
+    brdf_table,
+    specular_frame_to_model,
+    table_integral,
+)
 from brdf_infer.export._zemax import BsdfFile, write_bsdf
-from brdf_infer.model import tis
+from brdf_infer.model import ModelFamily, tis
 from brdf_infer.params import HemisphereConstants, Params, params_to_dict
-from brdf_infer.posterior import tis_band
+from brdf_infer.posterior import family_tis_band, tis_band
+from brdf_infer.posterior._bands import FAMILY_TIS_DRAWS
 
 FORMATS = ("zemax-bsdf", "abg")
 EXPORTS_FILE = "exports.json"  # in a run folder: the exports made from it, for the report
@@ -61,16 +75,28 @@ class Source:
         params: one parameter set (scalar fields) or every posterior draw (1-D fields).
         from_run: ``params`` holds posterior draws.
         fold: the hemisphere BRDF includes Eq. (10) (as the paper's Eq. 9 does).
-        constants: Δφ and folding constants.
+        constants: Δφ and folding constants (None with ``family``).
         scene: the scene's name, for the file comments.
+        family: a posterior run of another model family (``params`` is then None and
+            ``physical`` holds the draws of its physical parameters).
+        physical: the draws of ``family``'s parameters.
     """
 
     label: str
-    params: Params
+    params: Params | None
     from_run: bool
     fold: bool
-    constants: HemisphereConstants
+    constants: HemisphereConstants | None
     scene: str
+    family: ModelFamily | None = None
+    physical: dict[str, np.ndarray] | None = None
+
+    @property
+    def count(self) -> int:
+        """Number of parameter sets (posterior draws; 1 for a parameter set)."""
+        if self.family is not None:
+            return int(np.size(next(iter(self.physical.values()))))
+        return int(np.size(self.params.brdf0))
 
 
 def planned_files(source: Source, export_format: str, draws: int) -> list[str]:
@@ -99,10 +125,24 @@ def _comments(source: Source, kind: str, grid: ScatterGrid, extra: list[str]) ->
         f"brdf_infer {__version__} export, {dt.datetime.now(dt.UTC).isoformat(timespec='seconds')}",
         f"scene: {source.scene}",
         f"source: {'posterior run ' if source.from_run else 'parameter set '}{source.label}",
-        f"file: {kind}: {_MEANING[kind]}",
-        "model: Strumik et al. 2024 Eqs. (7), (8)"
-        + (", (10)" if source.fold else "")
-        + f"; constants {dict(source.constants._asdict())}",
+        f"file: {kind}: "
+        + (
+            _MEANING[kind]
+            if source.family is None
+            else _MEANING[kind].replace("exact Eq. (9)", f"{source.family.name}")
+        ),
+        (
+            "model: Strumik et al. 2024 Eqs. (7), (8)"
+            + (", (10)" if source.fold else "")
+            + f"; constants {dict(source.constants._asdict())}"
+            if source.family is None
+            else f"model: {source.family.name} ("
+            + ", ".join(
+                f"{n} [{source.family.units[n].replace('sr⁻¹', '1/sr')}]"
+                for n in source.family.parameters
+            )
+            + ")"
+        ),
         "angles in degrees; BSDF in 1/sr; scatter angles relative to the specular ray "
         "(azimuth 0 toward the surface normal); 0 below the horizon",
         f"grid: {grid.theta_i_deg.size} angles of incidence, azimuth step "
@@ -184,6 +224,8 @@ def export_zemax(
         One entry per file: path, kind, theta_i_deg, tis, table_integral.
     """
     theta_i = grid.theta_i_deg
+    if source.family is not None:
+        return _export_family_zemax(source, grid, out, draws, progress)
     if not source.from_run:
         tables = _tables(grid, source.params, source)
         tis_lines = np.asarray(tis(theta_i, source.params, source.fold, source.constants))
@@ -216,7 +258,7 @@ def export_zemax(
             )
         )
         quantiles[:, k] = np.quantile(table, list(_BAND_QUANTILES.values()), axis=0)
-    count = int(np.size(source.params.brdf0))
+    count = source.count
     files = []
     for q, kind in enumerate(_BAND_QUANTILES):
         tis_lines = np.asarray(band[_TIS_KEYS[kind]])
@@ -252,7 +294,106 @@ def export_zemax(
     return files
 
 
+def _family_tables(member: ModelFamily, grid: ScatterGrid, physical: dict) -> np.ndarray:
+    """BRDF tables of ``member`` at every θi, shape (draws..., n_aoi, n_azimuth, n_radial)."""
+    psi, r = np.meshgrid(grid.azimuth_deg, grid.radial_deg, indexing="ij")
+    batch = {k: jnp.asarray(v, float)[..., None, None] for k, v in physical.items()}
+
+    @jax.jit
+    def one_angle(theta_i_deg):
+        theta, phi, z = specular_frame_to_model(theta_i_deg, psi, r)
+        return jnp.where(z > 0.0, jnp.exp(member.log_brdf(theta_i_deg, theta, phi, batch)), 0.0)
+
+    return np.stack([np.asarray(one_angle(float(t))) for t in grid.theta_i_deg], axis=-3)
+
+
+def _export_family_zemax(
+    source: Source, grid: ScatterGrid, out: Path, draws: int, progress: Callable[[str], None]
+) -> list[dict]:
+    """:func:`export_zemax` for a run of another model family (module docstring)."""
+    member, theta_i = source.family, grid.theta_i_deg
+    progress(f"TIS band of {member.name} over at most {FAMILY_TIS_DRAWS} draws")
+    band = family_tis_band(member, source.physical, theta_i, FAMILY_TIS_DRAWS)
+    quantiles = np.empty(
+        (len(_BAND_QUANTILES), theta_i.size, grid.azimuth_deg.size, grid.radial_deg.size)
+    )
+    for k, t in enumerate(theta_i):
+        progress(f"posterior quantiles of the tables at theta_i = {t:g} deg")
+        one = ScatterGrid(np.array([t]), grid.azimuth_deg, grid.radial_deg)
+        table = _family_tables(member, one, source.physical)[:, 0]
+        quantiles[:, k] = np.quantile(table, list(_BAND_QUANTILES.values()), axis=0)
+    files = [
+        _write_table_file(
+            out,
+            f"{kind}.bsdf",
+            kind,
+            source,
+            grid,
+            quantiles[q],
+            np.asarray(band[_TIS_KEYS[kind]]),
+            [
+                f"quantile {_BAND_QUANTILES[kind]:g} over {source.count} posterior draws "
+                f"(TIS over {band['draws']})"
+            ],
+        )
+        for q, kind in enumerate(_BAND_QUANTILES)
+    ]
+    for k, index in enumerate(draw_indices(source.count, draws) if draws else []):
+        one = {name: float(values[index]) for name, values in source.physical.items()}
+        progress(f"draw {k + 1} of {draws}")
+        tis_lines = np.array([float(member.tis(float(t), one)) for t in theta_i])
+        text = ", ".join(f"{name}={value:.10g}" for name, value in one.items())
+        files.append(
+            _write_table_file(
+                out,
+                f"draw_{k:03d}.bsdf",
+                "draw",
+                source,
+                grid,
+                _family_tables(member, grid, one),
+                tis_lines,
+                [f"posterior draw {index} of {source.count}: {text}"],
+            )
+        )
+    return files
+
+
 # ---------------------------------------------------------------------------- ABg
+
+
+def _abg_of_abg_run(source: Source, theta_i: np.ndarray) -> tuple[list[dict], dict]:
+    """The ABg rows of a posterior run of ``abg`` itself: its A, B, g (the same at every θi)
+    and its TIS, median and 95 % interval over the draws; nothing is fitted.
+
+    Raises:
+        BadInputError: a run of a family that ABg cannot represent.
+    """
+    member = source.family
+    if member.name != "abg":
+        raise BadInputError(
+            f"ABg rows are fitted to Eq. (7) or read from an abg run, not a run of {member.name} "
+            "(export it with --format zemax-bsdf)",
+            field="--format",
+        )
+    band = family_tis_band(member, source.physical, theta_i, FAMILY_TIS_DRAWS)
+    columns = {name: np.quantile(source.physical[name], [0.025, 0.5, 0.975]) for name in "ABg"}
+    rows = []
+    for k, t in enumerate(theta_i):
+        row = {"theta_i_deg": float(t)}
+        for name, (low, median, high) in columns.items():
+            row |= {name: float(median), f"{name}_lo95": float(low), f"{name}_hi95": float(high)}
+        for name in ("tis_model", "tis_abg"):
+            row |= {
+                name: band["median"][k],
+                f"{name}_lo95": band["lo95"][k],
+                f"{name}_hi95": band["hi95"][k],
+            }
+        row |= {"rms_log_error": 0.0, "rms_log_error_lo95": 0.0, "rms_log_error_hi95": 0.0}
+        rows.append(row)
+    return rows, {"draws": source.count, "of_draws": source.count, "fitted": False}
+
+
+# ---------------------------------------------------------------------------- ABg fits
 
 
 def _abg_rows(fit: AbgFit) -> list[dict]:
@@ -315,13 +456,15 @@ def export_abg(
         (files, rows).
     """
     theta_i = np.asarray(theta_i_deg, float)
-    if not source.from_run:
+    if source.family is not None:
+        rows, details = _abg_of_abg_run(source, theta_i)
+    elif not source.from_run:
         progress("fitting ABg")
         model_tis = np.asarray(tis(theta_i, source.params, source.fold, source.constants))
         rows = _abg_rows(fit_abg(theta_i, source.params, model_tis, source.fold, source.constants))
         details = {"parameters": params_to_dict(source.params)}
     else:
-        count = int(np.size(source.params.brdf0))
+        count = source.count
         median = Params(*(float(np.median(v)) for v in source.params))
         progress("fitting ABg to the posterior median parameters")
         centre = fit_abg(

@@ -1,7 +1,15 @@
-"""Posterior over the six parameters of Eq. (7): NumPyro NUTS and emcee from one model,
-with ArviZ diagnostics and credible bands for the BRDF and the TIS."""
+"""Posterior over the six parameters of Eq. (7), or of another BRDF family's: NumPyro NUTS and
+emcee from one model, with ArviZ diagnostics and credible bands for the BRDF and the TIS."""
 
-from brdf_infer.posterior._bands import QUANTILES, compute_bands, draws_params, tis_band
+from brdf_infer.posterior._bands import (
+    QUANTILES,
+    compute_bands,
+    draws_params,
+    draws_physical,
+    family_bands,
+    family_tis_band,
+    tis_band,
+)
 from brdf_infer.posterior._family_model import FamilyPosteriorModel, build_family_model
 from brdf_infer.posterior._loo import pointwise_loo_terms
 from brdf_infer.posterior._model import NOISE_SITES, PosteriorModel, build_posterior_model
@@ -12,12 +20,20 @@ from brdf_infer.posterior._results import (
     SUMMARY_FILE,
     THRESHOLDS,
     diagnostics,
+    family_draws,
     flatten_draws,
     inference_data,
     load_run_draws,
+    load_run_family,
     loo_terms,
 )
-from brdf_infer.posterior._run import CHECKPOINT_FILE, PosteriorRun, run_posterior
+from brdf_infer.posterior._run import (
+    CHECKPOINT_FILE,
+    PosteriorRun,
+    build_model,
+    model_name,
+    run_posterior,
+)
 from brdf_infer.posterior._samplers import Draws, run_emcee, run_nuts
 
 __all__ = [
@@ -34,15 +50,22 @@ __all__ = [
     "PosteriorModel",
     "PosteriorRun",
     "build_family_model",
+    "build_model",
     "build_posterior_model",
     "chain_keys",
     "compute_bands",
     "diagnostics",
     "draws_params",
+    "draws_physical",
+    "family_bands",
+    "family_draws",
+    "family_tis_band",
     "flatten_draws",
     "inference_data",
     "load_run_draws",
+    "load_run_family",
     "loo_terms",
+    "model_name",
     "pointwise_loo_terms",
     "run_emcee",
     "run_nuts",

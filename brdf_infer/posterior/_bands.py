@@ -1,15 +1,22 @@
-"""Credible bands (median, 68 %, 95 %) for the in-plane BRDF, TIS and π·BRDF0."""
+"""Credible bands (median, 68 %, 95 %) for the in-plane BRDF, TIS and π·BRDF0 of a
+``strumik2024`` run, and for the in-plane BRDF and TIS of a run of any other family."""
 
 from __future__ import annotations
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 
-from brdf_infer.model import brdf_inplane, tis
+from brdf_infer.model import ModelFamily, brdf_inplane, tis
 from brdf_infer.params import HemisphereConstants, Params
 
 QUANTILES = {"lo95": 0.025, "lo68": 0.16, "median": 0.5, "hi68": 0.84, "hi95": 0.975}
 TIS_THETA_I_DEG = np.arange(0.0, 90.0, 1.0)  # 0°, 1°, …, 89°
 BRDF_THETA_S_DEG = np.arange(-90.0, 90.5, 1.0)
+# A family's TIS is a 2-D quadrature (≈ 1 ms each): its band is taken over evenly spaced
+# draws at every 5° (TIS(70°) included).
+FAMILY_TIS_THETA_I_DEG = np.arange(0.0, 90.0, 5.0)
+FAMILY_TIS_DRAWS = 400
 
 
 def quantile_band(samples: np.ndarray, axis: int = 0) -> dict[str, list]:
@@ -66,4 +73,60 @@ def compute_bands(
     }
     if with_tis:
         bands["tis"] = tis_band(params, TIS_THETA_I_DEG, True, constants)
+    return bands
+
+
+def draws_physical(sites: dict[str, np.ndarray], family: ModelFamily) -> dict[str, np.ndarray]:
+    """All draws (chains flattened) of ``family``'s physical parameters."""
+    return {name: np.asarray(sites[name]).reshape(-1) for name in family.parameters}
+
+
+def evenly_spaced(physical: dict[str, np.ndarray], count: int) -> dict[str, np.ndarray]:
+    """At most ``count`` evenly spaced draws of every parameter."""
+    total = next(iter(physical.values())).size
+    if total <= count:
+        return physical
+    index = np.linspace(0, total - 1, count).round().astype(int)
+    return {name: values[index] for name, values in physical.items()}
+
+
+def family_tis_band(
+    family: ModelFamily, physical: dict[str, np.ndarray], theta_i_deg, draws: int
+) -> dict[str, list]:
+    """TIS(θi) quantiles of ``family`` over at most ``draws`` evenly spaced draws (the
+    quadrature is mapped over the draws in small batches to bound memory)."""
+    theta = jnp.asarray(theta_i_deg, float)
+    thinned = {k: jnp.asarray(v, float) for k, v in evenly_spaced(physical, draws).items()}
+    curve = jax.jit(
+        lambda p: jax.lax.map(
+            lambda one: jax.vmap(lambda t: family.tis(t, one))(theta), p, batch_size=16
+        )
+    )
+    values = np.asarray(curve(thinned))
+    return {
+        "theta_i_deg": np.asarray(theta_i_deg, float).tolist(),
+        "draws": int(values.shape[0]),
+        **quantile_band(values),
+    }
+
+
+def family_bands(
+    family: ModelFamily, physical: dict[str, np.ndarray], theta_i_deg, with_tis: bool = True
+) -> dict[str, dict]:
+    """The bands of a run of ``family``: ``{"brdf_inplane": …, "tis": …}`` as in
+    :func:`compute_bands` (the TIS at :data:`FAMILY_TIS_THETA_I_DEG` over
+    :data:`FAMILY_TIS_DRAWS` draws; no π·BRDF0, a parameter of Eq. 7 only)."""
+    theta_i = np.asarray(theta_i_deg, float)
+    grid_i, grid_s = np.meshgrid(theta_i, BRDF_THETA_S_DEG, indexing="ij")
+    batch = {k: jnp.asarray(v, float)[:, None, None] for k, v in physical.items()}
+    brdf = np.exp(np.asarray(jax.jit(family.log_brdf_signed)(grid_i[None], grid_s[None], batch)))
+    bands = {
+        "brdf_inplane": {
+            "theta_i_deg": theta_i.tolist(),
+            "theta_s_deg": BRDF_THETA_S_DEG.tolist(),
+            **quantile_band(brdf),
+        }
+    }
+    if with_tis:
+        bands["tis"] = family_tis_band(family, physical, FAMILY_TIS_THETA_I_DEG, FAMILY_TIS_DRAWS)
     return bands

@@ -27,6 +27,7 @@ from brdf_infer.posterior._model import (
     drawn_noise_scales,
     observe,
     prior_distribution,
+    row_labels,
     sample_noise_scales,
 )
 from brdf_infer.scene import Scene
@@ -40,13 +41,19 @@ class FamilyPosteriorModel:
         scene: the scene (its error model; its ``[priors]`` are those of ``strumik2024``).
         family: the BRDF family.
         data: the scene's own data (the default argument of the model).
+        sample_names, row_samples, row_series: as in
+            :class:`brdf_infer.posterior.PosteriorModel`.
         sigma_scale: multiplies the likelihood's σ in the inference (1; a planted fault only).
     """
 
     scene: Scene
     family: ModelFamily
     data: ModelData
+    sample_names: tuple[str, ...]
+    row_samples: tuple[str, ...]
+    row_series: tuple[int, ...]
     sigma_scale: float = 1.0
+    whiten = False  # the family's own coordinates are sampled (no whitened reparametrisation)
 
     @property
     def errors(self):
@@ -119,4 +126,6 @@ def build_family_model(
             file=scene.path,
             field="errors.angle_method",
         )
-    return FamilyPosteriorModel(scene, family, build_model_data(scene, measurements))
+    return FamilyPosteriorModel(
+        scene, family, build_model_data(scene, measurements), **row_labels(measurements)
+    )

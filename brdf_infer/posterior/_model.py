@@ -420,9 +420,16 @@ def build_posterior_model(
         scene=scene,
         data=build_model_data(scene, measurements),
         whiten=reparametrise,
-        sample_names=tuple(dict.fromkeys(str(s) for s in measurements.sample)),
-        row_samples=tuple(str(s) for s in measurements.sample),
-        row_series=tuple(
-            list(dict.fromkeys(measurements.series)).index(s) for s in measurements.series
-        ),
+        **row_labels(measurements),
     )
+
+
+def row_labels(measurements: Measurements) -> dict[str, tuple]:
+    """``sample_names``, ``row_samples`` and ``row_series`` of a posterior model (class
+    attributes of :class:`PosteriorModel`)."""
+    series = list(dict.fromkeys(measurements.series))
+    return {
+        "sample_names": tuple(dict.fromkeys(str(s) for s in measurements.sample)),
+        "row_samples": tuple(str(s) for s in measurements.sample),
+        "row_series": tuple(series.index(s) for s in measurements.series),
+    }

@@ -195,6 +195,7 @@ class NutsProgram:
         draws: int,
         *,
         workers: int | None = None,
+        mode: str = "auto",
         progress: bool = False,
         description: str = "NUTS",
     ) -> NutsOutput:
@@ -211,18 +212,27 @@ class NutsProgram:
             keys: PRNG keys of shape (data sets, chains, 2).
             draws: kept draws per chain.
             workers: threads on a CPU (default ``os.cpu_count()``).
+            mode: ``threads`` (one data set per thread, each through the one-data-set
+                program), ``vmap`` (one program vmapped over the data sets, the data-set
+                axis sharded over every device JAX sees: :func:`shard_batch`) or ``auto``:
+                threads on a single CPU device, else vmap.
             progress: a progress bar (per data set) on stderr.
             description: the progress bar's label.
 
         Returns:
             Draws of shape (data sets, chains, draws, ...).
         """
+        if mode not in ("auto", "threads", "vmap"):
+            raise ValueError(f"unknown mode {mode!r} (auto, threads, vmap)")
+        if mode == "auto":
+            single_cpu = jax.default_backend() == "cpu" and jax.device_count() == 1
+            mode = "threads" if single_cpu else "vmap"
         count = int(keys.shape[0])
         total = self.warmup + draws
         bar = _progress_bar(progress, count, description, unit="data set")
         with compile_clock() as compile_seconds:
             clock = time.perf_counter()
-            if jax.default_backend() == "cpu":
+            if mode == "threads":
                 outputs = self._threaded(datasets, keys, draws, total, workers, bar)
             else:
                 outputs = [self._vmapped(datasets, keys, draws, total)]
@@ -260,16 +270,18 @@ class NutsProgram:
             return [first, *pool.map(one, range(1, count))]
 
     def _vmapped(self, datasets, keys, draws, total) -> NutsOutput:
+        count = int(keys.shape[0])
+        datasets, keys = shard_batch((datasets, keys))
         start = jax.vmap(jax.vmap(self._start, (0, None)), (0, 0))
         steps = jax.vmap(jax.vmap(lambda s, d: self._steps(s, d, total), (0, None)), (0, 0))
         state = self._compile("vstart", start, keys, datasets)(keys, datasets)
         _, records = self._compile("vsteps", steps, state, datasets)(state, datasets)
-        flat_z, *statistics = (np.asarray(r)[:, :, self.warmup :] for r in records)
-        flat_z = jnp.asarray(flat_z)
+        flat_z = records[0][:, :, self.warmup :]
+        statistics = [np.asarray(r)[:count, :, self.warmup :] for r in records[1:]]
         constrain = jax.vmap(jax.vmap(jax.vmap(self.flat.constrain, (0, None)), (0, None)))
         sites = self._compile("vconstrain", constrain, flat_z, datasets)(flat_z, datasets)
         return NutsOutput(
-            sites={k: np.asarray(v) for k, v in jax.device_get(sites).items()},
+            sites={k: np.asarray(v)[:count] for k, v in jax.device_get(sites).items()},
             stats=dict(zip(_STATISTICS, statistics, strict=True)),
             seconds={},
         )
@@ -288,6 +300,33 @@ def _progress_bar(enabled: bool, total: int, description: str, unit: str = "it")
     from tqdm import tqdm
 
     return tqdm(total=total, desc=description, unit=unit, file=sys.stderr)
+
+
+BATCH_AXIS = "batch"
+
+
+def shard_batch(tree):
+    """``tree``'s leaves (one leading batch axis) padded to a multiple of the number of devices
+    (by repeating the last entry) and sharded over every device JAX sees along that axis
+    (``jax.sharding``: a 1-D ``Mesh`` and ``NamedSharding``), so that a vmapped program runs a
+    part of the batch on each device; unchanged on one device. Callers drop the padding from
+    the results (the first ``n`` entries are the original batch)."""
+    devices = jax.devices()
+    if len(devices) == 1:
+        return tree
+    from jax.sharding import Mesh, NamedSharding, PartitionSpec
+
+    count = jax.tree_util.tree_leaves(tree)[0].shape[0]
+    extra = -count % len(devices)
+
+    def pad(leaf):
+        leaf = jnp.asarray(leaf)
+        if extra == 0:
+            return leaf
+        return jnp.concatenate([leaf, jnp.repeat(leaf[-1:], extra, axis=0)])
+
+    sharding = NamedSharding(Mesh(np.array(devices), (BATCH_AXIS,)), PartitionSpec(BATCH_AXIS))
+    return jax.device_put(jax.tree_util.tree_map(pad, tree), sharding)
 
 
 def stack_data(datasets: list[ModelData]) -> ModelData:

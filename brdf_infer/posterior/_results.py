@@ -18,6 +18,7 @@ import brdf_infer
 from brdf_infer._arviz import az
 from brdf_infer._atomic import atomic_write_json, publish
 from brdf_infer.errors import BadInputError
+from brdf_infer.model import REFERENCE_FAMILY, ModelFamily, family
 from brdf_infer.params import PARAM_NAMES
 from brdf_infer.posterior._loo import pointwise_loo_terms
 from brdf_infer.posterior._model import NOISE_SITES, PosteriorModel
@@ -121,6 +122,7 @@ def inference_data(
     idata.posterior.attrs.update(
         {
             "scene": scene.name,
+            "model": getattr(getattr(model, "family", None), "name", REFERENCE_FAMILY),
             "scene_file": str(scene.path),
             "scene_toml": scene.path.read_text(),
             "sampler": draws.sampler,
@@ -140,13 +142,17 @@ def inference_data(
 
 
 def diagnostics(
-    idata: az.InferenceData, draws: Draws, free: tuple[str, ...] = PARAM_NAMES
+    idata: az.InferenceData,
+    draws: Draws,
+    parameters: tuple[str, ...] = PARAM_NAMES,
+    fixed: tuple[str, ...] = (),
 ) -> dict[str, Any]:
-    """R-hat, bulk/tail ESS per free parameter (paper units) and learned noise scale (fixed
-    parameters are listed apart), divergences and BFMI (NUTS), run length in autocorrelation
-    times (emcee), and the list of thresholds that failed (:data:`THRESHOLDS`). A statistic
-    that is undefined (a chain that never moved) counts as failed."""
-    sampled = [name for name in PARAM_NAMES if name in free]
+    """R-hat, bulk/tail ESS per sampled physical parameter (``parameters``, in their units)
+    and learned noise scale (``fixed`` parameters are listed apart), divergences and BFMI
+    (NUTS), run length in autocorrelation times (emcee), and the list of thresholds that
+    failed (:data:`THRESHOLDS`). A statistic that is undefined (a chain that never moved)
+    counts as failed."""
+    sampled = [name for name in parameters if name not in fixed]
     sampled += [name for name in NOISE_SITES if name in idata.posterior]
     summary = az.summary(idata, var_names=sampled, kind="all", round_to="none")
 
@@ -164,7 +170,7 @@ def diagnostics(
             name: {column: float(summary.loc[name, column]) for column in summary.columns}
             for name in sampled
         },
-        "fixed": [name for name in PARAM_NAMES if name not in sampled],
+        "fixed": list(fixed),
     }
     if draws.sampler == "nuts":
         result["divergences"] = int(np.sum(draws.stats["diverging"]))
@@ -213,24 +219,66 @@ def write_results(out: Path, idata: az.InferenceData, summary: dict, bands: dict
     atomic_write_json(out / SUMMARY_FILE, summary)
 
 
-def load_run_draws(run: Path):
-    """(Params of every draw, fold, constants) of a posterior run directory.
-
-    Raises:
-        BadInputError: no readable posterior.nc in ``run``.
-    """
-    from brdf_infer.params import HemisphereConstants, Params
-
+def _run_posterior_group(run: Path):
     path = run / POSTERIOR_FILE
     if not path.is_file():
         raise BadInputError("no posterior.nc here (run 'brdf-infer posterior' first)", file=run)
     try:
-        posterior = az.from_netcdf(path).posterior
+        return az.from_netcdf(path).posterior, path
     except (OSError, ValueError) as error:
         raise BadInputError(f"cannot read: {error}", file=path) from None
+
+
+def load_run_draws(run: Path):
+    """(Params of every draw, fold, constants) of a ``strumik2024`` posterior run directory.
+
+    Raises:
+        BadInputError: no readable posterior.nc in ``run``, or a run of another family
+            (:func:`load_run_family` reads any).
+    """
+    from brdf_infer.params import HemisphereConstants, Params
+
+    posterior, path = _run_posterior_group(run)
+    name = posterior.attrs.get("model", REFERENCE_FAMILY)
+    if name != REFERENCE_FAMILY:
+        raise BadInputError(f"a run of {name}, not of {REFERENCE_FAMILY}", file=path)
     missing = [name for name in PARAM_NAMES if name not in posterior]
     if missing:
         raise BadInputError(f"posterior lacks {', '.join(missing)}", file=path)
     params = Params(*(np.asarray(posterior[name]).reshape(-1) for name in PARAM_NAMES))
     constants = HemisphereConstants(**json.loads(posterior.attrs["constants"]))
     return params, True, constants
+
+
+def load_run_family(run: Path, fold: bool = True) -> tuple[ModelFamily, dict[str, np.ndarray]]:
+    """(the run's model family, every draw of its physical parameters) for a posterior run
+    of any family (``fold``: ``strumik2024`` with Eq. 10, as its TIS is defined).
+
+    Raises:
+        BadInputError: no readable posterior.nc in ``run``, or one without its parameters.
+    """
+    posterior, path = _run_posterior_group(run)
+    return family_draws(posterior, fold, path)
+
+
+def family_draws(
+    posterior, fold: bool = True, path: Path | None = None
+) -> tuple[ModelFamily, dict[str, np.ndarray]]:
+    """(model family, every draw of its physical parameters) of a run's ``posterior`` group
+    (its attribute ``model``; runs without it are ``strumik2024``).
+
+    Raises:
+        BadInputError: an unknown family, or a group without its parameters (naming ``path``).
+    """
+    from brdf_infer.params import HemisphereConstants
+
+    name = posterior.attrs.get("model", REFERENCE_FAMILY)
+    try:
+        constants = HemisphereConstants(**json.loads(posterior.attrs["constants"]))
+        member = family(name, fold, constants)
+    except (KeyError, TypeError, ValueError):
+        raise BadInputError(f"unknown model {name!r} or constants in the run", file=path) from None
+    missing = [p for p in member.parameters if p not in posterior]
+    if missing:
+        raise BadInputError(f"posterior lacks {', '.join(missing)}", file=path)
+    return member, {p: np.asarray(posterior[p]).reshape(-1) for p in member.parameters}

@@ -17,13 +17,21 @@ from brdf_infer._arviz import az
 from brdf_infer.error_model import ERROR_MODELS
 from brdf_infer.errors import BadInputError
 from brdf_infer.measurements import Measurements
+from brdf_infer.model import FAMILY_NAMES, REFERENCE_FAMILY, family
 from brdf_infer.params import PARAM_NAMES
-from brdf_infer.posterior._bands import compute_bands, draws_params
+from brdf_infer.posterior._bands import compute_bands, draws_params, draws_physical, family_bands
+from brdf_infer.posterior._family_model import FamilyPosteriorModel, build_family_model
 from brdf_infer.posterior._loo import loo_pit, uniformity_p_value
 from brdf_infer.posterior._model import NOISE_SITES, PosteriorModel, build_posterior_model
 from brdf_infer.posterior._potential import FlatPotential
 from brdf_infer.posterior._results import diagnostics, inference_data, loo_terms, write_results
-from brdf_infer.posterior._samplers import emcee_settings, load_checkpoint, run_emcee, run_nuts
+from brdf_infer.posterior._samplers import (
+    Draws,
+    emcee_settings,
+    load_checkpoint,
+    run_emcee,
+    run_nuts,
+)
 from brdf_infer.scene import Scene
 
 CHECKPOINT_FILE = "emcee_checkpoint.npz"
@@ -51,6 +59,31 @@ def with_error_model(scene: Scene, error_model: str | None) -> Scene:
     return dataclasses.replace(scene, errors=dataclasses.replace(scene.errors, model=error_model))
 
 
+def build_model(
+    scene: Scene, measurements: Measurements, name: str | None = None
+) -> PosteriorModel | FamilyPosteriorModel:
+    """The posterior model of ``scene`` under the family ``name`` (default: the scene's
+    ``[model] family``).
+
+    Raises:
+        BadInputError: an unknown family (field ``--model``), or latent angles with a family
+            other than ``strumik2024``.
+    """
+    name = scene.model.family if name is None else name
+    if name not in FAMILY_NAMES:
+        raise BadInputError(
+            f"unknown model family {name!r} (known: {', '.join(FAMILY_NAMES)})", field="--model"
+        )
+    if name == REFERENCE_FAMILY:
+        return build_posterior_model(scene, measurements)
+    return build_family_model(scene, measurements, family(name))
+
+
+def model_name(model: PosteriorModel | FamilyPosteriorModel) -> str:
+    """The family a posterior model samples."""
+    return model.family.name if isinstance(model, FamilyPosteriorModel) else REFERENCE_FAMILY
+
+
 def run_fingerprint(model: PosteriorModel, measurements: Measurements) -> dict[str, str]:
     """Hashes of what a run samples: the scene text, the measurement rows, the model options."""
 
@@ -75,6 +108,7 @@ def run_fingerprint(model: PosteriorModel, measurements: Measurements) -> dict[s
         "constants": scene.model.constants._asdict(),
         "priors": {name: dataclasses.asdict(prior) for name, prior in scene.priors.items()},
         "reparametrised": model.whiten,
+        "family": model_name(model),
     }
     return {
         "scene": digest(scene.path.read_bytes()),
@@ -123,6 +157,7 @@ def run_posterior(
     out: Path | None = None,
     resume: bool = False,
     error_model: str | None = None,
+    model: str | None = None,
     progress: bool | None = None,
     announce: Callable[[str], None] | None = None,
 ) -> PosteriorRun:
@@ -138,6 +173,9 @@ def run_posterior(
         out: output directory (nothing written when None; emcee then keeps no checkpoint).
         resume: continue an interrupted emcee run from ``out``'s checkpoint.
         error_model: override the scene's ``errors.model`` (``generative`` or ``spread``).
+        model: the BRDF family to sample (default: the scene's ``[model] family``); every
+            family writes the same files (its physical parameters in the posterior, its
+            bands; π·BRDF0 for ``strumik2024`` only).
         progress: progress bar on stderr (default: when stderr is a terminal).
         announce: called with a one-line description of the run once every setting (and a
             checkpoint to resume) has been checked, before any sampling.
@@ -165,7 +203,8 @@ def run_posterior(
         )
     started = time.perf_counter()
     scene = with_error_model(scene, error_model)
-    model = build_posterior_model(scene, measurements)
+    name = scene.model.family if model is None else model
+    model = build_model(scene, measurements, name)
     if sampler == "nuts":
         what = f"{chains} chains x ({warmup} warmup + {draws} draws)"
     else:
@@ -176,7 +215,7 @@ def run_posterior(
             load_checkpoint(None if out is None else out / CHECKPOINT_FILE, settings, identity)
         what = f"{settings['walkers']} walkers x {steps} steps ({warmup} burn-in)"
     if announce is not None:
-        announce(f"posterior of scene '{scene.name}' with {sampler}: {what}")
+        announce(f"posterior of scene '{scene.name}' ({name}) with {sampler}: {what}")
     if sampler == "nuts":
         result = run_nuts(
             model,
@@ -202,41 +241,68 @@ def run_posterior(
             fingerprint=run_fingerprint(model, measurements),
             progress=progress,
         )
+    return complete_run(model, measurements, result, seed, out, started)
+
+
+def complete_run(
+    model: PosteriorModel | FamilyPosteriorModel,
+    measurements: Measurements,
+    result: Draws,
+    seed: int,
+    out: Path | None,
+    started: float,
+) -> PosteriorRun:
+    """From a sampler's draws to the run: InferenceData, PSIS-LOO and LOO-PIT, bands,
+    diagnostics and the summary, written to ``out`` (when given) atomically; ``started``: the
+    ``time.perf_counter()`` at the start of the run (its total time)."""
+    scene, name = model.scene, model_name(model)
     log_lik, cdf = loo_terms(model, result.sites)  # once: for PSIS-LOO and the LOO-PIT
     idata = inference_data(model, result, seed, log_lik)
-    params = draws_params(result.sites)
-    bands = compute_bands(
-        params,
-        scene.band_theta_i_deg(measurements),
-        scene.model.fold,
-        scene.model.constants,
-        scene.makes_tis,
-    )
-    checks = diagnostics(idata, result, scene.free_parameters)
-    tis_70 = (
-        {key: bands["tis"][key][70] for key in ("median", "lo68", "hi68", "lo95", "hi95")}
-        if "tis" in bands
-        else None
-    )
+    theta_i_band = scene.band_theta_i_deg(measurements)
+    if name == REFERENCE_FAMILY:
+        params = draws_params(result.sites)
+        bands = compute_bands(
+            params, theta_i_band, scene.model.fold, scene.model.constants, scene.makes_tis
+        )
+        parameters, fixed = (
+            PARAM_NAMES,
+            tuple(n for n in PARAM_NAMES if n not in scene.free_parameters),
+        )
+        medians = {n: float(np.median(getattr(params, n))) for n in PARAM_NAMES}
+        units = dict(zip(PARAM_NAMES, family(name).units.values(), strict=True))
+        pi_brdf0 = {key: bands["pi_brdf0"][key] for key in ("median", "lo95", "hi95")}
+    else:
+        physical = draws_physical(result.sites, model.family)
+        bands = family_bands(model.family, physical, theta_i_band)
+        parameters, fixed = model.family.parameters, ()
+        medians = {n: float(np.median(v)) for n, v in physical.items()}
+        units, pi_brdf0 = dict(model.family.units), None
+    checks = diagnostics(idata, result, parameters, fixed)
+    tis_70 = None
+    if "tis" in bands:
+        at = bands["tis"]["theta_i_deg"].index(70.0)
+        tis_70 = {key: bands["tis"][key][at] for key in ("median", "lo68", "hi68", "lo95", "hi95")}
     summary = {
         "scene": scene.name,
+        "model": name,
         "sampler": result.sampler,
         "settings": result.settings,
         "error_model": scene.errors.describe(),
         "options": {"reparametrised": model.whiten},
         "n_points": len(measurements),
-        "median": {name: float(np.median(getattr(params, name))) for name in PARAM_NAMES},
+        "median": medians,
+        "units": units,
         "noise": {
-            name: _interval(result.sites[name]) for name in NOISE_SITES if name in result.sites
+            site: _interval(result.sites[site]) for site in NOISE_SITES if site in result.sites
         },
         "diagnostics": checks,
         "predictive": predictive_checks(idata, log_lik, cdf),
         "tis_70deg": tis_70,
-        "pi_brdf0": {key: bands["pi_brdf0"][key] for key in ("median", "lo95", "hi95")},
+        "pi_brdf0": pi_brdf0,
         "seconds": {**result.seconds, "total": time.perf_counter() - started},
     }
     if out is not None:
         write_results(out, idata, summary, bands)
-        if sampler == "emcee":
+        if result.sampler == "emcee":
             (out / CHECKPOINT_FILE).unlink(missing_ok=True)
     return PosteriorRun(idata, summary, bands, out)

@@ -74,7 +74,19 @@ def run_nuts(
     output = program.run(
         model.data, chain_keys(seed, 1, chains)[0], draws, progress=_progress_enabled(progress)
     )
-    sites, stats = output.sites, output.stats
+    settings = {
+        "chains": chains,
+        "warmup": warmup,
+        "draws": draws,
+        "seed": seed,
+        "dense_mass": True,
+        "target_accept": target_accept,
+    }
+    return nuts_draws(output.sites, output.stats, settings, output.seconds)
+
+
+def nuts_draws(sites: dict, stats: dict, settings: dict, seconds: dict[str, float]) -> Draws:
+    """:class:`Draws` of one data set's NUTS output (sites and statistics (chain, draw, ...))."""
     return Draws(
         sites=sites,
         stats={
@@ -86,15 +98,8 @@ def run_nuts(
             "tree_depth": np.log2(stats["num_steps"] + 1).astype(int),
         },
         sampler="nuts",
-        settings={
-            "chains": chains,
-            "warmup": warmup,
-            "draws": draws,
-            "seed": seed,
-            "dense_mass": True,
-            "target_accept": target_accept,
-        },
-        seconds=output.seconds,
+        settings=settings,
+        seconds=seconds,
     )
 
 

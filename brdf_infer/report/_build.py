@@ -13,8 +13,15 @@ from brdf_infer._arviz import az
 from brdf_infer._atomic import atomic_write_bytes
 from brdf_infer.compare import COMPARE_FILE
 from brdf_infer.errors import BadInputError
-from brdf_infer.params import PARAM_NAMES
-from brdf_infer.posterior import BANDS_FILE, POSTERIOR_FILE, SUMMARY_FILE, THRESHOLDS, draws_params
+from brdf_infer.model import REFERENCE_FAMILY
+from brdf_infer.posterior import (
+    BANDS_FILE,
+    POSTERIOR_FILE,
+    SUMMARY_FILE,
+    THRESHOLDS,
+    draws_params,
+    family_draws,
+)
 from brdf_infer.report import _figures, _html, _noise
 from brdf_infer.report._compare import compare_figure, compare_table_html
 from brdf_infer.report._export import abg_table, load_exports, plot_export
@@ -59,6 +66,8 @@ def write_report(run: Path, progress=print) -> tuple[Path, list[str]]:
     idata, summary, bands = _load(run)
     attrs = idata.posterior.attrs
     scene = load_scene(attrs["scene_file"])
+    member, physical = family_draws(idata.posterior)
+    reference_model = member.name == REFERENCE_FAMILY
     rows = scene.load_measurements()
     with warnings.catch_warnings():  # high Pareto k are reported in the verdict instead
         warnings.simplefilter("ignore", UserWarning)
@@ -121,12 +130,12 @@ def write_report(run: Path, progress=print) -> tuple[Path, list[str]]:
             + ".",
             lambda: _figures.tis_band(bands, scene.load_tis_reference()),
         )
-    if scene.makes_maps:
+    if scene.outputs.maps and (scene.model.out_of_plane or not reference_model):
         add(
             "hemisphere",
             "Hemisphere maps (cf. Fig. 9): posterior median BRDF on one logarithmic colour scale "
             "(top) and the relative width of its 95 % band (bottom).",
-            lambda: _figures.hemisphere_maps(draws_params(idata.posterior), scene.model.constants),
+            lambda: _figures.hemisphere_maps(member, physical),
         )
     exports = load_exports(run)
     tables = next(
@@ -137,7 +146,7 @@ def write_report(run: Path, progress=print) -> tuple[Path, list[str]]:
         ),
         None,
     )
-    if tables:
+    if tables and reference_model:
         add(
             "export",
             "Exported .BSDF tables read back as a ray tracer reads them, cut through the plane "
@@ -166,7 +175,9 @@ def write_report(run: Path, progress=print) -> tuple[Path, list[str]]:
 
     table = az.summary(
         idata,
-        var_names=[n for n in PARAM_NAMES if n not in summary["diagnostics"].get("fixed", [])],
+        var_names=[
+            n for n in member.parameters if n not in summary["diagnostics"].get("fixed", [])
+        ],
         round_to="none",
     )
     sections = [
@@ -178,7 +189,7 @@ def write_report(run: Path, progress=print) -> tuple[Path, list[str]]:
             f"emcee ≥ {THRESHOLDS['tau_multiple']} autocorrelation times."
         )
         + "</p>",
-        _result_box(summary, bands, scene.band_theta_i_deg(rows)),
+        _result_box(summary, bands, scene.band_theta_i_deg(rows), member.name),
         *(_html.figure(png, caption) for name, caption, png in figures if name == "brdf_bands"),
         "<h2>The run</h2>",
         _html.table(
@@ -186,6 +197,7 @@ def write_report(run: Path, progress=print) -> tuple[Path, list[str]]:
             [
                 ["scene", f"{scene.name}: {scene.description}"],
                 ["scene file", attrs["scene_file"]],
+                ["model", member.name + ("" if reference_model else f" ({_units(member)})")],
                 ["measurements", f"{scene.measurements_path} ({len(rows)} rows)"],
                 ["sampler", f"{attrs['sampler']} {attrs['settings']}"],
                 ["seed", attrs["seed"]],
@@ -201,7 +213,7 @@ def write_report(run: Path, progress=print) -> tuple[Path, list[str]]:
         ),
         "<h3>Priors</h3>",
         "<p>Each prior is on the coordinate named (the sampler's well-conditioned one).</p>",
-        _priors_table(scene),
+        _priors_table(scene) if reference_model else _family_priors_table(member),
         "<h3>Data</h3>",
         _html.table(
             ["series", "sample", "θi [deg]", "θs [deg]", "R [-]", "σ_R [-]"],
@@ -218,7 +230,7 @@ def write_report(run: Path, progress=print) -> tuple[Path, list[str]]:
                 )
             ],
         ),
-        "<h2>ArviZ summary (paper units)</h2>",
+        "<h2>ArviZ summary (physical units)</h2>",
         _html.table(
             ["parameter", *table.columns],
             [[name, *(f"{v:.4g}" for v in table.loc[name])] for name in table.index],
@@ -274,7 +286,7 @@ def write_report(run: Path, progress=print) -> tuple[Path, list[str]]:
             else []
         ),
     ]
-    title = f"brdf_infer report: {scene.name} ({attrs['sampler']})"
+    title = f"brdf_infer report: {scene.name}, {member.name} ({attrs['sampler']})"
     document = _html.page(title, sections)
     path = atomic_write_bytes(run / REPORT_FILE, document.encode())
     progress(f"report written in {time.perf_counter() - started:.1f} s")
@@ -331,22 +343,40 @@ PRIOR_COORDINATES = {
 
 
 def _priors_table(scene) -> str:
-    rows = []
-    for name, prior in scene.priors.items():
-        if prior.fixed:
-            settings = f"fixed at {prior.value:g}"
-        elif prior.kind == "normal":
-            settings = f"N({prior.loc:g}, {prior.scale:g})"
-        elif prior.kind == "uniform":
-            settings = f"U[{prior.lower:g}, {prior.upper:g}]"
-        else:
-            settings = f"N({prior.loc:g}, {prior.scale:g}) on [{prior.lower:g}, {prior.upper:g}]"
-        rows.append([name, PRIOR_COORDINATES[name], settings])
+    rows = [
+        [name, PRIOR_COORDINATES[name], _prior_text(prior)] for name, prior in scene.priors.items()
+    ]
     return _html.table(["parameter", "prior on the coordinate", "prior"], rows)
 
 
-def _result_box(summary: dict, bands: dict, angles) -> str:
-    """The answer first: TIS at the scene's incidence angles and π·BRDF0, 95 % intervals."""
+def _units(member) -> str:
+    return ", ".join(f"{name} [{member.units[name]}]" for name in member.parameters)
+
+
+def _prior_text(prior) -> str:
+    if prior.fixed:
+        return f"fixed at {prior.value:g}"
+    if prior.kind == "normal":
+        return f"N({prior.loc:g}, {prior.scale:g})"
+    if prior.kind == "uniform":
+        return f"U[{prior.lower:g}, {prior.upper:g}]"
+    bounds = (
+        f"{'-inf' if prior.lower is None else f'{prior.lower:g}'}, "
+        f"{'inf' if prior.upper is None else f'{prior.upper:g}'}"
+    )
+    return f"N({prior.loc:g}, {prior.scale:g}) on [{bounds}]"
+
+
+def _family_priors_table(member) -> str:
+    return _html.table(
+        ["coordinate", "meaning", "prior"],
+        [[c.site, c.description, _prior_text(c.prior)] for c in member.coordinates],
+    )
+
+
+def _result_box(summary: dict, bands: dict, angles, model: str = REFERENCE_FAMILY) -> str:
+    """The answer first: TIS at the scene's incidence angles and π·BRDF0 (``strumik2024``),
+    95 % intervals."""
     rows = []
     if "tis" in bands:
         grid = np.asarray(bands["tis"]["theta_i_deg"])
@@ -359,16 +389,19 @@ def _result_box(summary: dict, bands: dict, angles) -> str:
                     f"{100 * values[1]:.2f} – {100 * values[2]:.2f} %",
                 ]
             )
-    brdf0 = summary["pi_brdf0"]
-    rows.append(
-        [
-            "π·BRDF0 (near-normal TIS, Sec. 7)",
-            f"{100 * brdf0['median']:.2f} %",
-            f"{100 * brdf0['lo95']:.2f} – {100 * brdf0['hi95']:.2f} %",
-        ]
-    )
+    brdf0 = summary.get("pi_brdf0")
+    if brdf0 is not None:
+        rows.append(
+            [
+                "π·BRDF0 (near-normal TIS, Sec. 7)",
+                f"{100 * brdf0['median']:.2f} %",
+                f"{100 * brdf0['lo95']:.2f} – {100 * brdf0['hi95']:.2f} %",
+            ]
+        )
     return (
-        '<div class="result"><h2>Result</h2>'
+        '<div class="result"><h2>Result'
+        + ("" if model == REFERENCE_FAMILY else f" ({_html.escape(model)})")
+        + "</h2>"
         + _html.table(["quantity", "posterior median", "95 % credible interval"], rows)
         + "</div>"
     )
@@ -495,9 +528,14 @@ def _raytrace_table(traces: list[dict]) -> str:
     return note + _html.table(header, table)
 
 
+def _indices_of(grid: list[float], angles: tuple[float, ...]) -> list[int]:
+    """Positions in a band's θi grid of those ``angles`` it holds."""
+    return [list(grid).index(angle) for angle in angles if angle in grid]
+
+
 def _tis_table(bands: dict) -> str:
     band = bands["tis"]
-    chosen = [0, 5, 30, 50, 70, 80]
+    chosen = _indices_of(band["theta_i_deg"], (0.0, 5.0, 30.0, 50.0, 70.0, 80.0))
     rows = [
         [
             f"{band['theta_i_deg'][i]:g}",
@@ -569,7 +607,7 @@ def write_example(run: Path, example: Path, failures: list[str]) -> Path:
                     f"| {band['theta_i_deg'][i]:g} | {100 * band['median'][i]:.2f} | "
                     f"{100 * band['lo68'][i]:.2f}–{100 * band['hi68'][i]:.2f} | "
                     f"{100 * band['lo95'][i]:.2f}–{100 * band['hi95'][i]:.2f} |"
-                    for i in (0, 30, 50, 70, 80)
+                    for i in _indices_of(band["theta_i_deg"], (0.0, 30.0, 50.0, 70.0, 80.0))
                 ),
             ]
             if band

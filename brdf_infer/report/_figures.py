@@ -4,12 +4,13 @@ from __future__ import annotations
 
 import json
 
+import jax
 import matplotlib.pyplot as plt
 import numpy as np
 
 from brdf_infer._arviz import az
-from brdf_infer.model import brdf_hemisphere, brdf_inplane
-from brdf_infer.params import PARAM_NAMES, PARAMETER_SETS, HemisphereConstants, Params
+from brdf_infer.model import REFERENCE_FAMILY, ModelFamily, brdf_inplane, family
+from brdf_infer.params import PARAM_NAMES, PARAMETER_SETS
 from brdf_infer.scene import Scene
 
 MAP_THETA_I_DEG = (5.0, 30.0, 50.0, 70.0)
@@ -30,24 +31,6 @@ SAMPLER_COORDINATES = {
 _PAPER_NAME = {"log_brdf0": "brdf0", "b1": "a1", "b2": "a2", "b3": "a3"}
 
 
-def sampled_coordinates(idata: az.InferenceData) -> list[str]:
-    """The run's free coordinates (also a chain that never moved is shown)."""
-    free = json.loads(idata.posterior.attrs.get("free_parameters", json.dumps(PARAM_NAMES)))
-    return [
-        name
-        for name in SAMPLER_COORDINATES
-        if name in idata.posterior
-        and (
-            _PAPER_NAME.get(name, name) in free
-            or name
-            in (
-                "sample_sd",
-                "repeatability",
-            )
-        )
-    ]
-
-
 SHORT_NAMES = {
     "log_brdf0": "ln BRDF0",
     "b1": "b1",
@@ -64,10 +47,47 @@ COORDINATE_NOTE = (
 )
 
 
-def _labeller(short: bool = False):
+def _family(idata: az.InferenceData):
+    """The run's model family (``None``: ``strumik2024``, sampled in its whitened coordinates)."""
+    name = idata.posterior.attrs.get("model", REFERENCE_FAMILY)
+    return None if name == REFERENCE_FAMILY else family(name)
+
+
+def sampled_coordinates(idata: az.InferenceData) -> list[str]:
+    """The run's free coordinates (also a chain that never moved is shown)."""
+    member = _family(idata)
+    noise = [name for name in ("sample_sd", "repeatability") if name in idata.posterior]
+    if member is not None:
+        return [c.site for c in member.coordinates] + noise
+    free = json.loads(idata.posterior.attrs.get("free_parameters", json.dumps(PARAM_NAMES)))
+    return [
+        name
+        for name in SAMPLER_COORDINATES
+        if name in idata.posterior and (_PAPER_NAME.get(name, name) in free or name in noise)
+    ]
+
+
+def coordinate_labels(idata: az.InferenceData, short: bool = False) -> dict[str, str]:
+    """Axis label of each sampled coordinate (the family's descriptions for other families)."""
+    member = _family(idata)
+    labels = dict(SHORT_NAMES if short else SAMPLER_COORDINATES)
+    if member is not None:
+        labels.update({c.site: c.site if short else c.description for c in member.coordinates})
+    return labels
+
+
+def coordinate_note(idata: az.InferenceData) -> str:
+    """What the pair plot's coordinates are, in words with units."""
+    member = _family(idata)
+    if member is None:
+        return COORDINATE_NOTE
+    return "; ".join(f"{c.site}: {c.description}" for c in member.coordinates)
+
+
+def _labeller(idata: az.InferenceData, short: bool = False):
     from arviz.labels import MapLabeller
 
-    return MapLabeller(var_name_map=SHORT_NAMES if short else SAMPLER_COORDINATES)
+    return MapLabeller(var_name_map=coordinate_labels(idata, short))
 
 
 def trace(idata: az.InferenceData):
@@ -77,7 +97,7 @@ def trace(idata: az.InferenceData):
         var_names=names,
         compact=False,
         figsize=(11, 1.6 * len(names)),
-        labeller=_labeller(),
+        labeller=_labeller(idata),
     )
     figure = axes.ravel()[0].figure
     for axis in axes.ravel():
@@ -93,7 +113,7 @@ def rank(idata: az.InferenceData):
     columns = 4
     lines = int(np.ceil(len(names) / columns))
     figure, axes = plt.subplots(lines, columns, figsize=(12, 2.8 * lines), squeeze=False)
-    az.plot_rank(idata, var_names=names, ax=axes.ravel()[: len(names)], labeller=_labeller())
+    az.plot_rank(idata, var_names=names, ax=axes.ravel()[: len(names)], labeller=_labeller(idata))
     for axis in axes.ravel():
         axis.tick_params(labelsize=7)
         axis.title.set_fontsize(9)
@@ -117,14 +137,16 @@ def pair(idata: az.InferenceData):
         marginals=True,
         figsize=(12, 12),
         textsize=9,
-        labeller=_labeller(short=True),
+        labeller=_labeller(idata, short=True),
         scatter_kwargs={"alpha": 0.15, "s": 2},
     )
     figure = np.ravel(axes)[0].figure
     for axis in np.ravel(axes):
         axis.tick_params(labelsize=7)
     note = " (divergences in red)" if has_divergences else ""
-    figure.suptitle(f"Pairs in the sampler's coordinates{note}:\n{COORDINATE_NOTE}", fontsize=10)
+    figure.suptitle(
+        f"Pairs in the sampler's coordinates{note}:\n{coordinate_note(idata)}", fontsize=10
+    )
     figure.subplots_adjust(top=0.93, left=0.07, bottom=0.06, right=0.98)
     return figure
 
@@ -279,21 +301,22 @@ def tis_band(bands: dict, reference: list[tuple[float, float, str]] = ()) -> plt
     return figure
 
 
-def hemisphere_maps(params: Params, constants: HemisphereConstants, draws: int = 400) -> plt.Figure:
-    """Polar maps (Fig. 9 convention) of the posterior median BRDF on one shared logarithmic
-    colour scale, and of the relative width of its 95 % band on one shared linear scale."""
+def hemisphere_maps(member: ModelFamily, physical: dict, draws: int = 400) -> plt.Figure:
+    """Polar maps (Fig. 9 convention) of the posterior median BRDF of ``member`` (every draw of
+    its physical parameters in ``physical``) on one shared logarithmic colour scale, and of the
+    relative width of its 95 % band on one shared linear scale."""
     from matplotlib.colors import LogNorm, Normalize
 
-    take = np.linspace(0, np.size(params.brdf0) - 1, min(draws, np.size(params.brdf0))).astype(int)
-    batch = Params(*(np.asarray(v)[take][:, None, None] for v in params))
+    count = np.size(next(iter(physical.values())))
+    take = np.linspace(0, count - 1, min(draws, count)).astype(int)
+    batch = {name: np.asarray(v)[take][:, None, None] for name, v in physical.items()}
     theta = np.linspace(0.0, 89.0, 46)
     phi = np.linspace(0.0, 360.0, 91)
     grid_theta, grid_phi = np.meshgrid(theta, phi, indexing="ij")
     medians, widths = [], []
+    log_brdf = jax.jit(member.log_brdf)
     for angle in MAP_THETA_I_DEG:
-        values = np.asarray(
-            brdf_hemisphere(angle, grid_theta[None], grid_phi[None], batch, True, constants)
-        )
+        values = np.exp(np.asarray(log_brdf(angle, grid_theta[None], grid_phi[None], batch)))
         low, median, high = np.quantile(values, [0.025, 0.5, 0.975], axis=0)
         medians.append(median)
         widths.append((high - low) / median)
@@ -321,8 +344,9 @@ def hemisphere_maps(params: Params, constants: HemisphereConstants, draws: int =
             axis.tick_params(labelsize=7)
             axis.set_title(f"θi = {angle:g}°" if row == 0 else "", pad=10)
         figure.colorbar(mesh, ax=axes[row, :].tolist(), shrink=0.8, label=label)
+    model = "Eqs. (8), (10)" if member.name == REFERENCE_FAMILY else member.name
     figure.suptitle(
-        "Full-hemisphere BRDF, Eqs. (8), (10): radius θ [deg], angle φ [deg] "
+        f"Full-hemisphere BRDF, {model}: radius θ [deg], angle φ [deg] "
         "(forward side at φ = 180°); one colour scale per row"
     )
     return figure

@@ -7,6 +7,7 @@ import io
 import numpy as np
 from matplotlib.figure import Figure
 
+from brdf_infer.model import FAMILIES
 from brdf_infer.report import _html
 from brdf_infer.sbc import (
     COVERAGE_LEVELS,
@@ -27,6 +28,8 @@ LABELS = {
     "sample_sd": "sample sd τ [ln R]",
     "repeatability": "repeatability σ_rep [ln R]",
 }
+for _member in FAMILIES.values():  # the other families' physical parameters
+    LABELS.update({n: f"{n} [{_member.units[n]}]" for n in _member.parameters if n not in LABELS})
 
 
 def png(figure: Figure, dpi: int = 90) -> bytes:
