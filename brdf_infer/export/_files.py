@@ -259,21 +259,7 @@ def export_zemax(
         )
         quantiles[:, k] = np.quantile(table, list(_BAND_QUANTILES.values()), axis=0)
     count = source.count
-    files = []
-    for q, kind in enumerate(_BAND_QUANTILES):
-        tis_lines = np.asarray(band[_TIS_KEYS[kind]])
-        files.append(
-            _write_table_file(
-                out,
-                f"{kind}.bsdf",
-                kind,
-                source,
-                grid,
-                quantiles[q],
-                tis_lines,
-                [f"quantile {_BAND_QUANTILES[kind]:g} over {count} posterior draws"],
-            )
-        )
+    files = _band_files(out, source, grid, quantiles, band, "")
     for k, index in enumerate(draw_indices(count, draws) if draws else []):
         one = Params(*(float(np.asarray(v)[index]) for v in source.params))
         tables = _tables(grid, one, source)
@@ -292,6 +278,26 @@ def export_zemax(
             )
         )
     return files
+
+
+def _band_files(
+    out: Path, source: Source, grid: ScatterGrid, quantiles: np.ndarray, band: dict, note: str
+) -> list[dict]:
+    """``lower95``, ``median`` and ``upper95.bsdf``: the tables' pointwise quantiles
+    (``quantiles``, one per file) with the TIS band's quantiles as TIS lines."""
+    return [
+        _write_table_file(
+            out,
+            f"{kind}.bsdf",
+            kind,
+            source,
+            grid,
+            quantiles[q],
+            np.asarray(band[_TIS_KEYS[kind]]),
+            [f"quantile {_BAND_QUANTILES[kind]:g} over {source.count} posterior draws{note}"],
+        )
+        for q, kind in enumerate(_BAND_QUANTILES)
+    ]
 
 
 def _family_tables(member: ModelFamily, grid: ScatterGrid, physical: dict) -> np.ndarray:
@@ -322,22 +328,7 @@ def _export_family_zemax(
         one = ScatterGrid(np.array([t]), grid.azimuth_deg, grid.radial_deg)
         table = _family_tables(member, one, source.physical)[:, 0]
         quantiles[:, k] = np.quantile(table, list(_BAND_QUANTILES.values()), axis=0)
-    files = [
-        _write_table_file(
-            out,
-            f"{kind}.bsdf",
-            kind,
-            source,
-            grid,
-            quantiles[q],
-            np.asarray(band[_TIS_KEYS[kind]]),
-            [
-                f"quantile {_BAND_QUANTILES[kind]:g} over {source.count} posterior draws "
-                f"(TIS over {band['draws']})"
-            ],
-        )
-        for q, kind in enumerate(_BAND_QUANTILES)
-    ]
+    files = _band_files(out, source, grid, quantiles, band, f" (TIS over {band['draws']})")
     for k, index in enumerate(draw_indices(source.count, draws) if draws else []):
         one = {name: float(values[index]) for name, values in source.physical.items()}
         progress(f"draw {k + 1} of {draws}")

@@ -277,11 +277,11 @@ class NutsProgram:
         state = self._compile("vstart", start, keys, datasets)(keys, datasets)
         _, records = self._compile("vsteps", steps, state, datasets)(state, datasets)
         flat_z = records[0][:, :, self.warmup :]
-        statistics = [np.asarray(r)[:count, :, self.warmup :] for r in records[1:]]
+        statistics = [np.asarray(r)[:count, :, self.warmup :] for r in gather_batch(records[1:])]
         constrain = jax.vmap(jax.vmap(jax.vmap(self.flat.constrain, (0, None)), (0, None)))
         sites = self._compile("vconstrain", constrain, flat_z, datasets)(flat_z, datasets)
         return NutsOutput(
-            sites={k: np.asarray(v)[:count] for k, v in jax.device_get(sites).items()},
+            sites={k: np.asarray(v)[:count] for k, v in gather_batch(sites).items()},
             stats=dict(zip(_STATISTICS, statistics, strict=True)),
             seconds={},
         )
@@ -326,7 +326,21 @@ def shard_batch(tree):
         return jnp.concatenate([leaf, jnp.repeat(leaf[-1:], extra, axis=0)])
 
     sharding = NamedSharding(Mesh(np.array(devices), (BATCH_AXIS,)), PartitionSpec(BATCH_AXIS))
-    return jax.device_put(jax.tree_util.tree_map(pad, tree), sharding)
+
+    def place(leaf):  # every process holds the whole batch; each device takes its part
+        host = np.asarray(pad(leaf))
+        return jax.make_array_from_callback(host.shape, sharding, lambda index: host[index])
+
+    return jax.tree_util.tree_map(place, tree)
+
+
+def gather_batch(tree):
+    """The whole of sharded results on every process (several hosts: ``process_allgather``)."""
+    if jax.process_count() == 1:
+        return jax.device_get(tree)
+    from jax.experimental import multihost_utils
+
+    return multihost_utils.process_allgather(tree, tiled=True)
 
 
 def stack_data(datasets: list[ModelData]) -> ModelData:
