@@ -109,7 +109,9 @@ class FamilyPosteriorModel:
         physical = {name: jnp.asarray(sites[name]) for name in self.family.parameters}
         count = next(iter(physical.values())).shape[0]
         scales = drawn_noise_scales(self.errors, sites, count)
-        return jax.jit(jax.vmap(lambda p, s: self.likelihood_parts(p, s)))(physical, scales)
+        # the data as an argument, not a constant: one compilation serves every data set
+        parts = jax.jit(jax.vmap(lambda p, s, d: self.likelihood_parts(p, s, d), (0, 0, None)))
+        return parts(physical, scales, self.data)
 
 
 def build_family_model(

@@ -336,7 +336,9 @@ class PosteriorModel:
         """:meth:`likelihood_parts` of every draw (leading axis) of a posterior's sites."""
         params = Params(*(jnp.asarray(sites[name]) for name in Params._fields))
         scales = drawn_noise_scales(self.errors, sites, params.brdf0.shape[0])
-        return jax.jit(jax.vmap(lambda p, s: self.likelihood_parts(p, s)))(params, scales)
+        # the data as an argument, not a constant: one compilation serves every data set
+        parts = jax.jit(jax.vmap(lambda p, s, d: self.likelihood_parts(p, s, d), (0, 0, None)))
+        return parts(params, scales, self.data)
 
 
 def observe(

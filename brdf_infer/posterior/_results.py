@@ -69,11 +69,11 @@ def replicated_data(model: PosteriorModel, sites: dict[str, np.ndarray], seed: i
     chains, n_draws = next(iter(sites.values())).shape[:2]
     flat = {k: jnp.asarray(v) for k, v in flatten_draws(sites).items() if k != "obs"}
 
-    def draw(key):
-        predictive = Predictive(model, posterior_samples=flat, return_sites=["obs"])
-        return predictive(key, mode="predict")["obs"]
+    def draw(key, samples, data):  # data and draws as arguments: compiled once per shape
+        predictive = Predictive(model, posterior_samples=samples, return_sites=["obs"])
+        return predictive(key, data, mode="predict")["obs"]
 
-    replicated = jax.jit(draw)(jax.random.PRNGKey(seed + 7))
+    replicated = jax.jit(draw)(jax.random.PRNGKey(seed + 7), flat, model.data)
     return np.asarray(replicated).reshape(chains, n_draws, -1)
 
 
