@@ -885,6 +885,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     batch = command("batch", "posteriors of many scenes, one compiled program per model structure")
     batch.add_argument("scenes", nargs="+", metavar="SCENE_OR_GLOB", help="scenes or globs")
+    batch.add_argument(
+        "--sampler", choices=["nuts"], default="nuts", help="sampler (NUTS: one compiled program)"
+    )
     batch.add_argument("--chains", type=int, default=4, help="NUTS chains per scene")
     batch.add_argument("--draws", type=int, default=1000, help="NUTS draws per chain")
     batch.add_argument("--warmup", type=int, default=1000, help="NUTS warmup per chain")

@@ -8,6 +8,8 @@ from pathlib import Path
 from brdf_infer._atomic import atomic_write_bytes
 from brdf_infer.bench._batch import HEADERS as BATCH_HEADERS
 from brdf_infer.bench._batch import batch_rows
+from brdf_infer.bench._cache import HEADERS as CACHE_HEADERS
+from brdf_infer.bench._cache import cache_rows
 from brdf_infer.bench._export import ABG_HEADERS, GRID_HEADERS, abg_rows, grid_rows
 from brdf_infer.bench._families import comparison_row, quadrature_rows
 from brdf_infer.bench._fits import fit_rows
@@ -78,27 +80,29 @@ def _raytrace_plot(rows, path: Path) -> None:
 def write_report(out: Path, quick: bool, progress=print) -> Path:
     """Run the benchmarks and write ``out`` (Markdown) plus PNG plots beside it."""
     started = time.perf_counter()
-    progress("benchmark 1/9: TIS quadratures ...")
+    progress("benchmark 1/10: TIS quadratures ...")
     tis_table = tis_rows(quick)
     count, batch_seconds, batch_compile = batched_throughput(quick)
-    progress("benchmark 2/9: fits ...")
+    progress("benchmark 2/10: fits ...")
     scene = load_scene("lya")
     fits = fit_rows(scene, scene.load_measurements(), quick)
-    progress("benchmark 3/9: samplers ...")
+    progress("benchmark 3/10: samplers ...")
     samplers, reference = sampler_rows(scene, quick, progress)
-    progress("benchmark 4/9: ray tracer ...")
+    progress("benchmark 4/10: ray tracer ...")
     traces, reference_rays = raytrace_rows(scene, quick)
-    progress("benchmark 5/9: sampling robustness ...")
+    progress("benchmark 5/10: sampling robustness ...")
     robustness = robustness_rows(scene, quick, progress)
-    progress("benchmark 6/9: simulation-based calibration ...")
+    progress("benchmark 6/10: simulation-based calibration ...")
     calibrations = sbc_rows(scene, quick, progress)
-    progress("benchmark 7/9: exports ...")
+    progress("benchmark 7/10: exports ...")
     grids, abgs = grid_rows(quick), abg_rows(quick)
-    progress("benchmark 8/9: model families ...")
+    progress("benchmark 8/10: model families ...")
     quadratures = quadrature_rows(quick)
     comparison = comparison_row(scene, scene.load_measurements(), quick)
-    progress("benchmark 9/9: batch inference ...")
+    progress("benchmark 9/10: batch inference ...")
     batches = batch_rows(scene, quick, progress=progress)
+    progress("benchmark 10/10: compilation cache ...")
+    caches = cache_rows(quick, progress)
     sbc_plots = []
     for row, suffix in zip(calibrations[:2], ("sbc", "sbc_planted"), strict=True):
         path = out.with_name(f"{out.stem}_{suffix}.png")
@@ -351,6 +355,16 @@ def write_report(out: Path, quick: bool, progress=print) -> Path:
         "(no accelerator; see the README).",
         "",
         _markdown_table(BATCH_HEADERS, [row.cells for row in batches]),
+        "",
+        "## Compilation cache",
+        "",
+        "Fresh processes with an empty persistent cache folder (`BRDF_INFER_CACHE`), then "
+        "the same command again: wall time end to end (process start, imports, compiling or "
+        "loading the programs, sampling, files; `run` also the paper fit, least squares, the "
+        "spread variant, ray traces and the report) and the NUTS compile time of the "
+        "posterior (`summary.json` seconds.compile).",
+        "",
+        _markdown_table(CACHE_HEADERS, [row.cells for row in caches]),
         "",
     ]
     atomic_write_bytes(out, "\n".join(sections).encode())
