@@ -90,19 +90,44 @@ def evenly_spaced(physical: dict[str, np.ndarray], count: int) -> dict[str, np.n
     return {name: values[index] for name, values in physical.items()}
 
 
+_PROGRAMS: dict[tuple[str, int], tuple[ModelFamily, object]] = {}
+
+
+def _program(kind: str, family: ModelFamily, make):
+    """``make(family)`` jitted once per family object (a family holds a dict, so it is not
+    hashable; keyed by identity, the family kept alive beside its program)."""
+    key = (kind, id(family))
+    if key not in _PROGRAMS:
+        _PROGRAMS[key] = (family, jax.jit(make(family)))
+    return _PROGRAMS[key][1]
+
+
+def _tis_curve_program(family: ModelFamily):
+    """TIS of every draw at every angle; the quadrature is mapped over the draws in small
+    batches to bound memory."""
+    return _program(
+        "tis",
+        family,
+        lambda member: (
+            lambda p, theta: jax.lax.map(
+                lambda one: jax.vmap(lambda t: member.tis(t, one))(theta), p, batch_size=16
+            )
+        ),
+    )
+
+
+def _signed_program(family: ModelFamily):
+    """The family's in-plane ln BRDF."""
+    return _program("signed", family, lambda member: member.log_brdf_signed)
+
+
 def family_tis_band(
     family: ModelFamily, physical: dict[str, np.ndarray], theta_i_deg, draws: int
 ) -> dict[str, list]:
-    """TIS(θi) quantiles of ``family`` over at most ``draws`` evenly spaced draws (the
-    quadrature is mapped over the draws in small batches to bound memory)."""
+    """TIS(θi) quantiles of ``family`` over at most ``draws`` evenly spaced draws."""
     theta = jnp.asarray(theta_i_deg, float)
     thinned = {k: jnp.asarray(v, float) for k, v in evenly_spaced(physical, draws).items()}
-    curve = jax.jit(
-        lambda p: jax.lax.map(
-            lambda one: jax.vmap(lambda t: family.tis(t, one))(theta), p, batch_size=16
-        )
-    )
-    values = np.asarray(curve(thinned))
+    values = np.asarray(_tis_curve_program(family)(thinned, theta))
     return {
         "theta_i_deg": np.asarray(theta_i_deg, float).tolist(),
         "draws": int(values.shape[0]),
@@ -119,7 +144,7 @@ def family_bands(
     theta_i = np.asarray(theta_i_deg, float)
     grid_i, grid_s = np.meshgrid(theta_i, BRDF_THETA_S_DEG, indexing="ij")
     batch = {k: jnp.asarray(v, float)[:, None, None] for k, v in physical.items()}
-    brdf = np.exp(np.asarray(jax.jit(family.log_brdf_signed)(grid_i[None], grid_s[None], batch)))
+    brdf = np.exp(np.asarray(_signed_program(family)(grid_i[None], grid_s[None], batch)))
     bands = {
         "brdf_inplane": {
             "theta_i_deg": theta_i.tolist(),
