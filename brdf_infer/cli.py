@@ -50,13 +50,16 @@ def _emit_json(content: dict[str, Any]) -> None:
     print(json.dumps(content))
 
 
-def _scene_and_measurements(name: str):
-    """The scene (every file it names checked) and its rows; unit-plausibility warnings on
-    stderr."""
+def _scene_and_measurements(name: str, instrument: str | None = None):
+    """The scene (every file it names checked; predicting through ``instrument`` when given)
+    and its rows; unit-plausibility warnings on stderr."""
     from brdf_infer.plausibility import measurement_warnings
-    from brdf_infer.scene import load_scene
+    from brdf_infer.scene import check_instrument, load_scene
 
+    _checked_instrument(instrument)
     scene = load_scene(name)
+    if instrument is not None:
+        scene = check_instrument(scene, instrument)
     measurements = scene.load_measurements()
     for warning in measurement_warnings(measurements):
         _progress(f"warning: {warning}")
@@ -149,7 +152,7 @@ def _command_fit(args: argparse.Namespace) -> None:
             f"unknown model family {args.model!r} (known: {', '.join(FAMILY_NAMES)})",
             field="--model",
         )
-    scene, measurements = _scene_and_measurements(args.scene)
+    scene, measurements = _scene_and_measurements(args.scene, args.instrument)
     args.model = args.model or scene.model.family
     if args.model != REFERENCE_FAMILY and args.method != "lsq":
         raise BadInputError(
@@ -348,7 +351,7 @@ def _command_posterior(args: argparse.Namespace) -> None:
     from brdf_infer.posterior import run_posterior
 
     _checked_model(args.model)
-    scene, measurements = _scene_and_measurements(args.scene)
+    scene, measurements = _scene_and_measurements(args.scene, args.instrument)
     out = check_output_dir(args.out or Path("reports") / scene.name / args.sampler)
     if args.warmup is None:
         args.warmup = 1000 if args.sampler == "nuts" else 4000
@@ -424,7 +427,12 @@ def _command_export(args: argparse.Namespace) -> None:
 
 def _command_compare(args: argparse.Namespace) -> None:
     _headless()
-    command_compare(args, _scene_and_measurements, _table, _progress)
+    command_compare(
+        args,
+        lambda name: _scene_and_measurements(name, args.instrument),
+        _table,
+        _progress,
+    )
 
 
 def _command_brdf(args: argparse.Namespace) -> None:
@@ -493,7 +501,7 @@ def _command_run(args: argparse.Namespace) -> None:
     if args.warmup < 0:
         raise BadInputError(f"must be >= 0, got {args.warmup}", field="--warmup")
     _checked_model(args.model)
-    scene, measurements = _scene_and_measurements(args.scene)
+    scene, measurements = _scene_and_measurements(args.scene, args.instrument)
     out = check_output_dir(args.out or Path("reports") / scene.name)
     result = run(
         scene,
@@ -646,12 +654,61 @@ def _print_raytrace(payload: dict) -> None:
     print(f"time: {payload['seconds']:.2f} s (+{payload['compile_seconds']:.2f} s compile)")
 
 
+def _command_predict(args: argparse.Namespace) -> None:
+    from brdf_infer.params import resolve_params
+    from brdf_infer.predict import predict_rows
+
+    scene, measurements = _scene_and_measurements(args.scene, args.instrument)
+    payload = predict_rows(scene, measurements, resolve_params(args.params))
+    if args.json:
+        _emit_json(payload)
+        return
+    print(f"instrument model '{payload['instrument']}' (README, \"Instrument models\")")
+    headers = ["series", "sample", "theta_i [deg]", "theta_s [deg]", "measured", "predicted"]
+    print(
+        _table(
+            [*headers, "pred/meas"],
+            [
+                [
+                    row["series"],
+                    row["sample"],
+                    f"{row['theta_i_deg']:g}",
+                    f"{row['theta_s_deg']:g}",
+                    f"{row['measured']:.3e}",
+                    f"{row['predicted']:.3e}",
+                    f"{row['predicted'] / row['measured']:.3f}",
+                ]
+                for row in payload["rows"]
+            ],
+        )
+    )
+
+
+def _checked_instrument(name: str | None) -> None:
+    """``--instrument``: a known instrument model (checked before the scene is read)."""
+    from brdf_infer.instrument import INSTRUMENT_MODELS
+
+    if name is not None and name not in INSTRUMENT_MODELS:
+        raise BadInputError(
+            f"unknown instrument model {name!r} (known: {', '.join(INSTRUMENT_MODELS)})",
+            field="--instrument",
+        )
+
+
+def _instrument_argument(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--instrument",
+        help="what a raw reflectance is: point (Eq. 6), aperture (dPs/Pi through the detector "
+        "aperture), image (Eq. 2 over the signal square) (default: the scene's [instrument])",
+    )
+
+
 def _command_sbc(args: argparse.Namespace) -> None:
     _headless()
     from brdf_infer.sbc import COVERAGE_LEVELS, SbcSettings, run_sbc, write_sbc
 
     _checked_model(args.model)
-    scene, measurements = _scene_and_measurements(args.scene)
+    scene, measurements = _scene_and_measurements(args.scene, args.instrument)
     settings = SbcSettings(
         replicates=args.replicates,
         draws=args.draws,
@@ -834,6 +891,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--warmup", type=int, default=1000, help="NUTS warmup per chain")
     run.add_argument("--seed", type=int, default=0, help="random seed")
     _model_argument(run)
+    _instrument_argument(run)
     run.set_defaults(handler=_command_run)
 
     fit = scene_command(
@@ -841,6 +899,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     fit.add_argument("--method", choices=["paper", "lsq"], default="paper", help="fit method")
     _model_argument(fit)
+    _instrument_argument(fit)
     fit.add_argument("--starts", type=int, default=16, help="lsq: number of starts")
     fit.add_argument(
         "--solver", choices=["lm", "gauss-newton", "dogleg"], default="lm", help="lsq: solver"
@@ -881,6 +940,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="NUTS target acceptance probability (raise towards 0.95 if a run diverges)",
     )
     _model_argument(posterior)
+    _instrument_argument(posterior)
     posterior.set_defaults(handler=_command_posterior)
 
     batch = command("batch", "posteriors of many scenes, one compiled program per model structure")
@@ -958,6 +1018,17 @@ def build_parser() -> argparse.ArgumentParser:
     raytrace.add_argument("--out", help="also write raytrace.json and figures here")
     raytrace.set_defaults(handler=_command_raytrace)
 
+    predict = scene_command(
+        "predict", "the model's prediction of every measurement row under an instrument model"
+    )
+    predict.add_argument(
+        "--params",
+        default="uv-paper",
+        help="parameter set name, JSON file or inline JSON object of the six parameters",
+    )
+    _instrument_argument(predict)
+    predict.set_defaults(handler=_command_predict)
+
     sbc = scene_command("sbc", "simulation-based calibration: is the scene's posterior calibrated?")
     sbc.add_argument("--replicates", type=int, default=200, help="simulated data sets")
     sbc.add_argument("--draws", type=int, default=100, help="posterior draws per replicate")
@@ -979,6 +1050,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sbc.add_argument("--out", help="output directory (default: reports/<scene>/sbc)")
     _model_argument(sbc)
+    _instrument_argument(sbc)
     sbc.set_defaults(handler=_command_sbc)
 
     export = scene_command(
@@ -991,6 +1063,7 @@ def build_parser() -> argparse.ArgumentParser:
         "compare", "rank model families (Eq. 7, ABg, Harvey–Shack, Lambertian, …) by PSIS-LOO"
     )
     add_compare_arguments(compare)
+    _instrument_argument(compare)
     compare.set_defaults(handler=_command_compare)
 
     report = command("report", "HTML report of a posterior run: the answer, then diagnostics")

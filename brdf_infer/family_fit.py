@@ -26,7 +26,7 @@ import optimistix as optx
 from brdf_infer.error_model import value_sigma
 from brdf_infer.measurements import Measurements
 from brdf_infer.model import ModelFamily
-from brdf_infer.observations import build_observation_model
+from brdf_infer.observations import build_observation_model, through_instrument
 from brdf_infer.priors import Prior
 from brdf_infer.scene import Scene
 
@@ -102,7 +102,12 @@ def fit_family_lsq(
     def residuals(w, _):
         physical = member.to_physical(internal(w))
         mean = member.log_brdf_rows(rows.theta_i_deg, rows.theta_s_deg, physical, rows.phi_s_deg)
-        return (mean + rows.log_aperture - rows.log_reflectance) / sigma
+        mean = through_instrument(
+            mean + rows.log_aperture,
+            rows.kernel,
+            lambda ti, t, p: member.log_brdf(ti, t, p, physical),
+        )
+        return (mean - rows.log_reflectance) / sigma
 
     rng = np.random.default_rng(seed)
     start_points = np.array(

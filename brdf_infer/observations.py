@@ -14,6 +14,7 @@ import numpy as np
 
 from brdf_infer._units import DEG
 from brdf_infer.error_model import noise_layout
+from brdf_infer.instrument import Kernel, build_kernel, kernel_log_reflectance
 from brdf_infer.measurements import Measurements
 from brdf_infer.model import log_brdf_hemisphere, log_brdf_inplane
 from brdf_infer.params import HemisphereConstants, Params
@@ -35,6 +36,8 @@ class Observations(NamedTuple):
         cos_weight: 1 where the measured value carries cos θs (raw reflectance), 0 for BRDF.
         phi_s_deg: azimuth of out-of-plane rows [deg], NaN in the plane; None when every row
             is in the plane (nothing out of plane is computed then).
+        kernel: the instrument kernel of the rows (``aperture`` or ``image``), None for the
+            ``point`` instrument of Eq. (6).
     """
 
     theta_i_deg: jnp.ndarray
@@ -44,6 +47,7 @@ class Observations(NamedTuple):
     sigma: jnp.ndarray
     cos_weight: jnp.ndarray
     phi_s_deg: jnp.ndarray | None = None
+    kernel: Kernel | None = None
 
 
 def row_log_brdf(
@@ -69,11 +73,26 @@ def predicted_log_reflectance(
     params: Params, data: Observations, fold: bool, constants: HemisphereConstants
 ) -> jnp.ndarray:
     """ln R of every row: ln BRDF of Eq. (7) (+ Eq. 10; Eq. 8 out of the plane) + ln(Ω cos θs),
-    Eq. (6); ln BRDF itself for BRDF rows."""
+    Eq. (6); ln BRDF itself for BRDF rows; with a kernel, ln Σ w_k BRDF_k of Eq. (8) at its
+    nodes (``brdf_infer.instrument``)."""
     log_brdf = row_log_brdf(
         data.theta_i_deg, data.theta_s_deg, params, fold, constants, data.phi_s_deg
     )
-    return log_brdf + data.log_aperture
+    return through_instrument(
+        log_brdf + data.log_aperture,
+        data.kernel,
+        lambda ti, t, p: log_brdf_hemisphere(ti, t, p, params, fold, constants),
+    )
+
+
+def through_instrument(point_log_reflectance, kernel: Kernel | None, log_brdf) -> jnp.ndarray:
+    """The rows' ln R: Eq. (6)'s ``point_log_reflectance``, replaced on the kernel's rows by
+    ln Σ w_k BRDF_k with ``log_brdf(θi, θ, φ)`` the family's BRDF [ln sr⁻¹]."""
+    if kernel is None:
+        return point_log_reflectance
+    return jnp.where(
+        kernel.applies > 0, kernel_log_reflectance(log_brdf, kernel), point_log_reflectance
+    )
 
 
 def log_reflectance_at(
@@ -158,5 +177,6 @@ def build_observation_model(scene: Scene, measurements: Measurements) -> Observa
         phi_s_deg=None if measurements.phi_s_deg is None else jnp.asarray(measurements.phi_s_deg),
         log_reflectance=jnp.asarray(np.log(measurements.reflectance)),
         sigma=noise_layout(scene.errors, measurements).sigma_row,
+        kernel=build_kernel(scene, measurements),
     )
     return ObservationModel(data, scene.model.fold, scene.model.constants)

@@ -108,7 +108,8 @@ def params_from_mapping(mapping: Any, *, source: str = "parameters") -> Params:
 
 
 def resolve_params(name_or_file: str) -> Params:
-    """A named parameter set (``uv-paper``, ``vis-paper``) or a JSON file of the six fields.
+    """A named parameter set (``uv-paper``, ``vis-paper``), an inline JSON object or a JSON file
+    of the six fields.
 
     A JSON file may hold the fields at its top level or under ``"params"`` (the output of
     ``brdf-infer fit --json`` can be used directly).
@@ -118,6 +119,12 @@ def resolve_params(name_or_file: str) -> Params:
     """
     if name_or_file in PARAMETER_SETS:
         return PARAMETER_SETS[name_or_file]
+    if name_or_file.lstrip().startswith("{"):
+        try:
+            content = json.loads(name_or_file)
+        except json.JSONDecodeError as error:
+            raise BadInputError(f"not valid JSON: {error.msg}", field="--params") from None
+        return params_from_mapping(content, source="--params")
     path = Path(name_or_file)
     if not path.exists():
         known = ", ".join(sorted(PARAMETER_SETS))

@@ -60,6 +60,14 @@ Schema (keys other than these are errors; defaults in brackets)::
                                              #   (100 × 100 pixels of 26 µm, Sec. 3.1)
     rays = 1000000                           # [1e6] rays per configuration
     image_theta_i_deg = 80.0                 # [80] θi of the simulated images (Fig. 13)
+    [instrument]                             # what the likelihood predicts (brdf_infer.instrument)
+    model = "point"                          # ["point"] Eq. (6); "aperture": dPs/Pi through AD;
+                                             #   "image": Eq. (2) over the signal rectangle
+    nodes = 16                               # [16] kernel nodes per row: 8, 16, 32, 64, 128
+    candidates = 65536                       # [65536] Sobol points compressed into them
+    [instrument.series.NAME]                 # [the [raytrace] table for its series] beam
+                                             #   geometry of series NAME: the [raytrace] keys
+                                             #   source_diameter_mm … signal_region_mm
 """
 
 from __future__ import annotations
@@ -194,6 +202,24 @@ class RaytraceSettings:
 
 
 @dataclass(frozen=True)
+class InstrumentSettings:
+    """What the likelihood predicts for a raw-reflectance row (:mod:`brdf_infer.instrument`).
+
+    Attributes:
+        model: ``point`` (Eq. 6, the article's), ``aperture`` (dPs/Pi through AD averaged
+            over beam footprint and aperture) or ``image`` (Eq. 2 over the signal rectangle).
+        nodes: kernel nodes per row.
+        candidates: Sobol points of the full cubature, compressed into ``nodes``.
+        series: beam geometry of each series named in ``[instrument.series.NAME]``.
+    """
+
+    model: str = "point"
+    nodes: int = 16
+    candidates: int = 65536
+    series: dict[str, RaytraceSettings] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
 class Scene:
     """A validated scene."""
 
@@ -211,6 +237,16 @@ class Scene:
     raytrace: RaytraceSettings | None = None
     compare: tuple[str, ...] = ()
     bsdf_thinning: tuple[int, int] = (1, 1)
+    instrument: InstrumentSettings = field(default_factory=InstrumentSettings)
+
+    def setup_of(self, series: str) -> RaytraceSettings | None:
+        """The beam geometry of a series: ``[instrument.series.NAME]``, else the
+        ``[raytrace]`` table when it simulates that series, else None."""
+        if series in self.instrument.series:
+            return self.instrument.series[series]
+        if self.raytrace is not None and self.raytrace.series == series:
+            return self.raytrace
+        return None
 
     @property
     def free_parameters(self) -> tuple[str, ...]:
@@ -404,6 +440,7 @@ def _string(document: dict, key: str, path: Path, default: str | None = None) ->
 
 
 _TOP_KEYS = {
+    "instrument",
     "name",
     "description",
     "wavelength_nm",
@@ -420,7 +457,9 @@ _TOP_KEYS = {
 }
 
 
-def _pair(table: dict, key: str, path: Path, default: tuple[float, float]) -> tuple[float, float]:
+def _pair(
+    table: dict, key: str, path: Path, default: tuple[float, float], prefix: str = "raytrace."
+) -> tuple[float, float]:
     value = table.get(key, list(default))
     if not (
         isinstance(value, list)
@@ -428,7 +467,7 @@ def _pair(table: dict, key: str, path: Path, default: tuple[float, float]) -> tu
         and all(isinstance(v, int | float) and not isinstance(v, bool) and v > 0 for v in value)
     ):
         raise BadInputError(
-            f"expected two positive numbers [mm], got {value!r}", file=path, field="raytrace." + key
+            f"expected two positive numbers [mm], got {value!r}", file=path, field=prefix + key
         )
     return (float(value[0]), float(value[1]))
 
@@ -445,6 +484,49 @@ def _parse_raytrace(document: dict, path: Path, series: dict) -> RaytraceSetting
             file=path,
             field="raytrace.series",
         )
+    return _setup(table, path, name, "raytrace.")
+
+
+_GEOMETRY_KEYS = set(RaytraceSettings.__dataclass_fields__) - {
+    "series",
+    "rays",
+    "image_theta_i_deg",
+}
+
+
+def _parse_instrument(document: dict, path: Path, scene_series: dict) -> InstrumentSettings:
+    """The ``[instrument]`` table (schema: :class:`InstrumentSettings`)."""
+    from brdf_infer.instrument import INSTRUMENT_MODELS, NODE_SHAPES
+
+    defaults = InstrumentSettings()
+    table = _table(document, "instrument", path, {"model", "nodes", "candidates", "series"})
+    model = _choice(table, "model", path, INSTRUMENT_MODELS, defaults.model, "instrument.")
+    nodes = table.get("nodes", defaults.nodes)
+    if isinstance(nodes, bool) or nodes not in NODE_SHAPES:
+        raise BadInputError(
+            f"expected one of {', '.join(map(str, NODE_SHAPES))}, got {nodes!r}",
+            file=path,
+            field="instrument.nodes",
+        )
+    candidates = table.get("candidates", defaults.candidates)
+    if isinstance(candidates, bool) or not isinstance(candidates, int) or candidates < 256:
+        raise BadInputError(
+            f"expected an integer >= 256, got {candidates!r}",
+            file=path,
+            field="instrument.candidates",
+        )
+    series_tables = _table(table, "series", path, set(scene_series), "instrument.")
+    setups = {}
+    for name in series_tables:
+        prefix = f"instrument.series.{name}."
+        geometry = _table(series_tables, name, path, _GEOMETRY_KEYS, "instrument.series.")
+        setups[name] = _setup(geometry, path, name, prefix)
+    return InstrumentSettings(model=model, nodes=nodes, candidates=candidates, series=setups)
+
+
+def _setup(table: dict, path: Path, name: str, prefix: str) -> RaytraceSettings:
+    """A beam geometry table (the ``[raytrace]`` keys) of series ``name``."""
+    defaults = RaytraceSettings()
     apertures = table.get("beam_apertures_mm", [list(a) for a in defaults.beam_apertures_mm])
     if not (
         isinstance(apertures, list)
@@ -459,22 +541,22 @@ def _parse_raytrace(document: dict, path: Path, series: dict) -> RaytraceSetting
         raise BadInputError(
             "expected a list of [diameter, distance from the source] pairs, both > 0 [mm]",
             file=path,
-            field="raytrace.beam_apertures_mm",
+            field=prefix + "beam_apertures_mm",
         )
     rays = table.get("rays", defaults.rays)
     if isinstance(rays, bool) or not isinstance(rays, int) or rays < 1:
         raise BadInputError(
-            f"expected a positive integer, got {rays!r}", file=path, field="raytrace.rays"
+            f"expected a positive integer, got {rays!r}", file=path, field=prefix + "rays"
         )
     settings = RaytraceSettings(
         series=name,
         beam_apertures_mm=tuple((float(d), float(z)) for d, z in apertures),
-        sample_size_mm=_pair(table, "sample_size_mm", path, defaults.sample_size_mm),
-        detector_size_mm=_pair(table, "detector_size_mm", path, defaults.detector_size_mm),
-        signal_region_mm=_pair(table, "signal_region_mm", path, defaults.signal_region_mm),
+        sample_size_mm=_pair(table, "sample_size_mm", path, defaults.sample_size_mm, prefix),
+        detector_size_mm=_pair(table, "detector_size_mm", path, defaults.detector_size_mm, prefix),
+        signal_region_mm=_pair(table, "signal_region_mm", path, defaults.signal_region_mm, prefix),
         rays=rays,
         **{
-            key: _prefixed_number(table, key, path, getattr(defaults, key), "raytrace.")
+            key: _prefixed_number(table, key, path, getattr(defaults, key), prefix)
             for key in (
                 "source_diameter_mm",
                 "source_distance_mm",
@@ -485,13 +567,13 @@ def _parse_raytrace(document: dict, path: Path, series: dict) -> RaytraceSetting
     )
     if not 0 <= settings.image_theta_i_deg < 90:
         raise BadInputError(
-            "expected an angle in [0, 90) deg", file=path, field="raytrace.image_theta_i_deg"
+            "expected an angle in [0, 90) deg", file=path, field=prefix + "image_theta_i_deg"
         )
     if max(z for _, z in settings.beam_apertures_mm) >= settings.source_distance_mm:
         raise BadInputError(
             "every beam aperture must lie between the source and the sample",
             file=path,
-            field="raytrace.beam_apertures_mm",
+            field=prefix + "beam_apertures_mm",
         )
     return settings
 
@@ -658,7 +740,7 @@ def parse_scene(document: dict, path: Path) -> Scene:
     priors.update({name: parse_prior(name, table, path) for name, table in prior_table.items()})
     wavelength = document.get("wavelength_nm")
     compare = _compare_families(document, path)
-    return Scene(
+    scene = Scene(
         name=_string(document, "name", path),
         path=path,
         description=_string(document, "description", path, default=""),
@@ -689,7 +771,51 @@ def parse_scene(document: dict, path: Path) -> Scene:
         raytrace=_parse_raytrace(document, path, series),
         compare=compare,
         bsdf_thinning=thinning,
+        instrument=_parse_instrument(document, path, series),
     )
+    check_instrument(scene, scene.instrument.model, field="instrument.model")
+    return scene
+
+
+def check_instrument(scene: Scene, model: str, field: str = "--instrument") -> Scene:
+    """``scene`` predicting through instrument ``model``, checked: a kernel needs every
+    raw-reflectance series' beam geometry and the out-of-plane BRDF (its nodes leave the
+    plane of incidence).
+
+    Raises:
+        BadInputError: unknown model, a series without geometry, out_of_plane off.
+    """
+    from dataclasses import replace
+
+    from brdf_infer.instrument import INSTRUMENT_MODELS
+
+    if model not in INSTRUMENT_MODELS:
+        raise BadInputError(
+            f"unknown instrument model {model!r} (known: {', '.join(INSTRUMENT_MODELS)})",
+            file=scene.path if field != "--instrument" else None,
+            field=field,
+        )
+    if model != "point":
+        where = {"file": scene.path, "field": field}
+        missing = [
+            name
+            for name, geometry in scene.series.items()
+            if geometry.quantity == "raw_reflectance" and scene.setup_of(name) is None
+        ]
+        if missing:
+            raise BadInputError(
+                f"instrument model {model!r} needs the beam geometry of series "
+                f"{', '.join(missing)}: add [instrument.series.NAME] (the [raytrace] keys), "
+                'or use model = "point"',
+                **where,
+            )
+        if not scene.model.out_of_plane:
+            raise BadInputError(
+                f"instrument model {model!r} needs the out-of-plane BRDF of Eq. (8) "
+                "(model.out_of_plane = true): its nodes leave the plane of incidence",
+                **where,
+            )
+    return replace(scene, instrument=replace(scene.instrument, model=model))
 
 
 def scene_file(name_or_path: str | Path) -> Path:

@@ -62,6 +62,7 @@ def test_vanishing_detector_aperture_converges_to_the_point_estimate(lya, theta_
             small.model.constants,
             2**16,
             jax.random.PRNGKey(3),
+            fold=small.model.fold,
         )
         exact = point_estimate(configuration, UV_PAPER, small)
         errors.append(abs(estimate.simulated / exact - 1))

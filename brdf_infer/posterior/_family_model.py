@@ -20,6 +20,7 @@ from brdf_infer.error_model import angle_slopes, covariance_factors
 from brdf_infer.errors import BadInputError
 from brdf_infer.measurements import Measurements
 from brdf_infer.model import ModelFamily
+from brdf_infer.observations import through_instrument
 from brdf_infer.posterior._model import (
     LikelihoodParts,
     ModelData,
@@ -92,7 +93,11 @@ class FamilyPosteriorModel:
         mean = self.family.log_brdf_rows(
             rows.theta_i_deg, rows.theta_s_deg, physical, rows.phi_s_deg
         )
-        mean = mean + rows.log_aperture
+        mean = through_instrument(
+            mean + rows.log_aperture,
+            rows.kernel,
+            lambda ti, t, p: self.family.log_brdf(ti, t, p, physical),
+        )
         if self.errors.angles_on:
             g_rot, g_cam = angle_slopes(
                 lambda ti, ts: self.log_reflectance_at(ti, ts, physical, rows),

@@ -183,8 +183,10 @@ def trace_configuration(
     rays: int,
     key: jax.Array,
     estimator: str = "nee",
+    fold: bool = True,
 ) -> Estimate:
-    """Ray-trace one configuration with ``rays`` rays in chunks of ``CHUNK_RAYS``."""
+    """Ray-trace one configuration with ``rays`` rays in chunks of ``CHUNK_RAYS`` (Eq. 10's
+    folding when ``fold``)."""
     if estimator not in ESTIMATORS:
         raise ValueError(f"unknown estimator {estimator!r} (known: {', '.join(ESTIMATORS)})")
     sums, outer = np.zeros(len(TALLIES)), np.zeros((len(TALLIES), len(TALLIES)))
@@ -199,6 +201,7 @@ def trace_configuration(
             n,
             estimator,
             limiting,
+            fold,
         )
         sums += np.asarray(chunk_sums)
         outer += np.asarray(chunk_outer)
@@ -212,14 +215,14 @@ def point_estimate(configuration: Configuration, params: Params, scene: Scene) -
         configuration.theta_s_deg,
         180.0,
         params,
-        True,
+        scene.model.fold,
         scene.model.constants,
     )
     return float(brdf) * _aperture_factor(configuration, scene)
 
 
 def compile_tallies(
-    params: Params, setup, constants, rays: int, estimator, limiting, batched: bool
+    params: Params, setup, constants, rays: int, estimator, limiting, batched: bool, fold=True
 ):
     """Compile every chunk size once, outside the timing; returns the seconds it took."""
     started = time.perf_counter()
@@ -227,14 +230,14 @@ def compile_tallies(
     key = jax.random.PRNGKey(0)
     for n in sorted(set(_chunks(rays))):
         jax.block_until_ready(
-            function(key, 45.0, 45.0, params, setup, constants, n, estimator, limiting)
+            function(key, 45.0, 45.0, params, setup, constants, n, estimator, limiting, fold)
         )
     return time.perf_counter() - started
 
 
 _over_draws = jax.jit(
-    jax.vmap(tally_moments, in_axes=(None, None, None, 0, None, None, None, None, None)),
-    static_argnums=(6, 7, 8),
+    jax.vmap(tally_moments, in_axes=(None, None, None, 0, None, None, None, None, None, None)),
+    static_argnums=(6, 7, 8, 9),
 )
 
 
@@ -300,7 +303,10 @@ def raytrace_series(
     rays = rays or scene.raytrace.rays
     setup, limiting = build_setup(scene)
     constants = scene.model.constants
-    compile_seconds = compile_tallies(params, setup, constants, rays, estimator, limiting, False)
+    fold = scene.model.fold
+    compile_seconds = compile_tallies(
+        params, setup, constants, rays, estimator, limiting, False, fold
+    )
     key = jax.random.PRNGKey(seed)
     started = time.perf_counter()
     rows = []
@@ -315,6 +321,7 @@ def raytrace_series(
             rays,
             jax.random.fold_in(key, index),
             estimator,
+            fold,
         )
         rows.append(_row(configuration, estimate, point_estimate(configuration, params, scene)))
     seconds = time.perf_counter() - started
@@ -344,8 +351,9 @@ def raytrace_posterior(
     constants = scene.model.constants
     count = int(np.size(draws.brdf0))
     draws = Params(*(jnp.asarray(np.asarray(v, float).reshape(-1)) for v in draws))
+    fold = scene.model.fold
     compile_seconds = compile_tallies(
-        Params(*(v[:16] for v in draws)), setup, constants, rays, "nee", limiting, True
+        Params(*(v[:16] for v in draws)), setup, constants, rays, "nee", limiting, True, fold
     )
     key = jax.random.PRNGKey(seed)
     started = time.perf_counter()
@@ -366,6 +374,7 @@ def raytrace_posterior(
                     n,
                     "nee",
                     limiting,
+                    fold,
                 )
                 for start in range(0, count, 16)
             ]
@@ -378,7 +387,7 @@ def raytrace_posterior(
                 configuration.theta_s_deg,
                 180.0,
                 draws,
-                True,
+                fold,
                 constants,
             )
         ) * _aperture_factor(configuration, scene)
@@ -455,6 +464,7 @@ def simulate_images(
             "nee",
             limiting,
             bins,
+            scene.model.fold,
         )
         images.append(np.asarray(scattered))
     half = np.asarray(setup.detector_half_size)

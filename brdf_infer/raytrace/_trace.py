@@ -154,8 +154,10 @@ def _trace(
     n: int,
     estimator: str,
     limiting: int,
+    fold: bool = True,
 ):
-    """Per-ray tallies (n, 6) in the order of ``TALLIES`` and detector coordinates [mm]."""
+    """Per-ray tallies (n, 6) in the order of ``TALLIES`` and detector coordinates [mm];
+    the BRDF is Eq. (8), with Eq. (10)'s folding when ``fold`` (the scene's switch)."""
     k_beam, k_scatter = jax.random.split(key)
     origin, direction, weight, transverse = _beam(k_beam, n, theta_i_deg, setup, limiting)
     tau = -origin[:, 2] / direction[:, 2]
@@ -177,7 +179,7 @@ def _trace(
         cos_out, cos_aperture = omega[:, 2], omega @ detector_dir
         valid = on_sample & (cos_out > 0) & (cos_aperture > 0)
         theta_i, theta, phi = _scattering_angles(direction, omega)
-        log_brdf = log_brdf_hemisphere(theta_i, theta, phi, params, True, constants)
+        log_brdf = log_brdf_hemisphere(theta_i, theta, phi, params, fold, constants)
         area = jnp.pi * setup.aperture_radius**2
         log_geometry = jnp.log(jnp.where(valid, cos_out * cos_aperture * area, 1.0)) - 2 * jnp.log(
             distance
@@ -209,7 +211,7 @@ def _trace(
             & (jnp.sum(offset**2, axis=1) <= setup.aperture_radius**2)
         )
         theta_i, theta, phi = _scattering_angles(direction, omega)
-        log_brdf = log_brdf_hemisphere(theta_i, theta, phi, params, True, constants)
+        log_brdf = log_brdf_hemisphere(theta_i, theta, phi, params, fold, constants)
         contribution = jnp.where(through, jnp.pi * jnp.exp(log_brdf), 0.0)
     else:
         raise ValueError(f"unknown estimator {estimator!r} (known: {', '.join(ESTIMATORS)})")
@@ -236,22 +238,24 @@ def _trace(
     return tallies, (x, y), ref_xy
 
 
-@partial(jax.jit, static_argnames=("n", "estimator", "limiting"))
-def tally_moments(key, theta_i_deg, theta_s_deg, params, setup, constants, n, estimator, limiting):
+@partial(jax.jit, static_argnames=("n", "estimator", "limiting", "fold"))
+def tally_moments(
+    key, theta_i_deg, theta_s_deg, params, setup, constants, n, estimator, limiting, fold=True
+):
     """Sums Σz and Σzzᵀ of the per-ray tallies z (shape (6,) and (6, 6)) of n rays."""
     tallies, _, _ = _trace(
-        key, theta_i_deg, theta_s_deg, params, setup, constants, n, estimator, limiting
+        key, theta_i_deg, theta_s_deg, params, setup, constants, n, estimator, limiting, fold
     )
     return tallies.sum(axis=0), tallies.T @ tallies
 
 
-@partial(jax.jit, static_argnames=("n", "estimator", "limiting", "bins"))
+@partial(jax.jit, static_argnames=("n", "estimator", "limiting", "bins", "fold"))
 def detector_images(
-    key, theta_i_deg, theta_s_deg, params, setup, constants, n, estimator, limiting, bins
+    key, theta_i_deg, theta_s_deg, params, setup, constants, n, estimator, limiting, bins, fold
 ):
     """Scattered and reference power per detector pixel, ``bins`` = (in-plane, across)."""
     tallies, (x, y), (rx, ry) = _trace(
-        key, theta_i_deg, theta_s_deg, params, setup, constants, n, estimator, limiting
+        key, theta_i_deg, theta_s_deg, params, setup, constants, n, estimator, limiting, fold
     )
     half = setup.detector_half_size
     edges = (
