@@ -241,12 +241,15 @@ class NutsProgram:
             seconds = time.perf_counter() - clock
         if bar is not None:
             bar.close()
+        # threads: one output per data set, stacked on a new axis; vmap: one output that
+        # already has the data-set axis (also for a single data set)
+        stacked = mode == "threads"
         return NutsOutput(
             sites={k: np.stack([o.sites[k] for o in outputs]) for k in outputs[0].sites}
-            if len(outputs) > 1 or count == 1
+            if stacked
             else outputs[0].sites,
             stats={k: np.stack([o.stats[k] for o in outputs]) for k in outputs[0].stats}
-            if len(outputs) > 1 or count == 1
+            if stacked
             else outputs[0].stats,
             seconds={
                 "sampling": max(seconds - compile_seconds[0], 0.0),
