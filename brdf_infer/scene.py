@@ -64,7 +64,8 @@ Schema (keys other than these are errors; defaults in brackets)::
     model = "point"                          # ["point"] Eq. (6); "aperture": dPs/Pi through AD;
                                              #   "image": Eq. (2) over the signal rectangle
     nodes = 16                               # [16] kernel nodes per row: 8, 16, 32, 64, 128
-    candidates = 65536                       # [65536] Sobol points compressed into them
+    candidates = 65536                       # [2^16 aperture, 2^18 image] Sobol points
+                                             #   compressed into them
     [instrument.series.NAME]                 # [the [raytrace] table for its series] beam
                                              #   geometry of series NAME: the [raytrace] keys
                                              #   source_diameter_mm … signal_region_mm
@@ -209,13 +210,14 @@ class InstrumentSettings:
         model: ``point`` (Eq. 6, the article's), ``aperture`` (dPs/Pi through AD averaged
             over beam footprint and aperture) or ``image`` (Eq. 2 over the signal rectangle).
         nodes: kernel nodes per row.
-        candidates: Sobol points of the full cubature, compressed into ``nodes``.
+        candidates: Sobol points of the full cubature, compressed into ``nodes`` (None:
+            the instrument's default, ``brdf_infer.instrument.DEFAULT_CANDIDATES``).
         series: beam geometry of each series named in ``[instrument.series.NAME]``.
     """
 
     model: str = "point"
     nodes: int = 16
-    candidates: int = 65536
+    candidates: int | None = None
     series: dict[str, RaytraceSettings] = field(default_factory=dict)
 
 
@@ -509,7 +511,9 @@ def _parse_instrument(document: dict, path: Path, scene_series: dict) -> Instrum
             field="instrument.nodes",
         )
     candidates = table.get("candidates", defaults.candidates)
-    if isinstance(candidates, bool) or not isinstance(candidates, int) or candidates < 256:
+    if candidates is not None and (
+        isinstance(candidates, bool) or not isinstance(candidates, int) or candidates < 256
+    ):
         raise BadInputError(
             f"expected an integer >= 256, got {candidates!r}",
             file=path,

@@ -235,8 +235,11 @@ def run(
     build_model(scene, measurements, name)  # an unknown family fails before any work
     reference = name == REFERENCE_FAMILY
     traces = scene.raytrace is not None and reference  # the ray tracer scatters by Eq. (7)
+    from brdf_infer.instrument_comparison import supported_instruments
+
+    instruments = reference and len(supported_instruments(scene)) > 1
     out.mkdir(parents=True, exist_ok=True)
-    steps = 5 + traces + bool(scene.compare)
+    steps = 5 + traces + bool(scene.compare) + instruments
     step = iter(range(1, steps + 1))
     paper = None
     if reference:
@@ -276,6 +279,21 @@ def run(
         )
     else:
         next(step)
+    if instruments:
+        from brdf_infer.instrument_comparison import INSTRUMENT_FILE, compare_instruments
+
+        progress(f"[{next(step)}/{steps}] instrument models: posteriors side by side")
+        atomic_write_json(
+            out / INSTRUMENT_FILE,
+            compare_instruments(
+                scene,
+                measurements,
+                out,
+                options,
+                done={scene.instrument.model: (out, posterior)},
+                progress=progress,
+            ),
+        )
     if traces:
         progress(f"[{next(step)}/{steps}] ray tracing series {scene.raytrace.series} (Sec. 6)")
         atomic_write_json(

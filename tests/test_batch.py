@@ -175,3 +175,23 @@ def test_sharded_over_two_forced_cpu_devices_gives_the_results_of_one(tmp_path):
         # measured: 1.2e-9 at most after these 10 iterations (last-bit differences, amplified)
         np.testing.assert_allclose(two[name], one[name], rtol=1e-7, atol=0)
     assert not np.allclose(one["brdf0"][0], one["brdf0"][1])  # the data sets differ
+
+
+def test_vmapped_batch_of_one_scene(tmp_path, capsys):
+    """``--mode vmap`` with a single scene (the path every accelerator takes): its one data
+    set keeps one data-set axis (a batch of one failed on a GPU before)."""
+    out = tmp_path / "out"
+    code, _, err = run_cli(
+        "batch",
+        _scene(tmp_path, "only"),
+        *SMALL,
+        "--mode",
+        "vmap",
+        "--out",
+        str(out),
+        capsys=capsys,
+    )
+    assert code == 0, err
+    entry = json.loads((out / "batch.json").read_text())["scenes"][0]
+    assert entry["error"] is None and entry["divergences"] == 0
+    assert np.isfinite(entry["r_hat_max"]) and len(entry["tis"]["median"]) > 0

@@ -84,6 +84,14 @@ def test_run_is_the_main_job_and_its_verdict_passes(tmp_path, capsys, settings):
         assert (out_dir / name).is_file()
     assert not list(out_dir.rglob("*.tmp"))
     assert "TIS(70 deg)" in out and "done in" in out
+    instruments = json.loads((out_dir / "instruments.json").read_text())
+    assert [m["instrument"] for m in instruments["models"]] == ["point", "aperture", "image"]
+    for model in instruments["models"]:
+        assert (
+            model["tis_70deg"]["lo95"] < model["tis_70deg"]["median"] < model["tis_70deg"]["hi95"]
+        )
+        assert np.isfinite(model["elpd_loo"]) and model["raytrace"]["rms_ln_image_ratio"] > 0
+    assert "<h2>Instrument models</h2>" in (out_dir / "report.html").read_text()
 
 
 def test_json_stdout_is_one_object_in_a_real_process():

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from brdf_infer.sbc import SbcResult, SbcSettings, run_sbc
-from brdf_infer.scene import Scene
+from brdf_infer.scene import Scene, check_instrument
 
 PLANTED_SIGMA_SCALE = 1.35
 
@@ -53,11 +53,13 @@ HEADERS = [
 
 
 FAMILY_MODEL = "abg"  # another family through the same check
+INSTRUMENT = "image"  # a likelihood through the measurement kernel
 
 
 def sbc_rows(scene: Scene, quick: bool, progress=print) -> list[SbcRow]:
     """SBC of ``scene`` as built and with the planted too-wide σ, for ``strumik2024`` and for
-    :data:`FAMILY_MODEL` (the first two rows are the scene's own family)."""
+    :data:`FAMILY_MODEL` (the first two rows are the scene's own family), and of the
+    :data:`INSTRUMENT` kernel's likelihood as built (100 replicates)."""
     size = {"replicates": 6, "draws": 30, "thin": 1, "warmup": 150} if quick else {}
     measurements = scene.load_measurements()
     rows = []
@@ -68,4 +70,8 @@ def sbc_rows(scene: Scene, quick: bool, progress=print) -> list[SbcRow]:
             progress(f"  SBC, {prefix}{case}, {settings.replicates} replicates")
             result = run_sbc(scene, measurements, settings, model=model)
             rows.append(SbcRow(prefix + case, result))
+    kernel = {**size, "replicates": 6 if quick else 100}
+    progress(f"  SBC, {INSTRUMENT} instrument kernel, as built, {kernel['replicates']} replicates")
+    result = run_sbc(check_instrument(scene, INSTRUMENT), measurements, SbcSettings(**kernel))
+    rows.append(SbcRow(f"{INSTRUMENT} instrument: as built", result))
     return rows

@@ -285,6 +285,7 @@ def complete_run(
     summary = {
         "scene": scene.name,
         "model": name,
+        "instrument": scene.instrument.model,
         "sampler": result.sampler,
         "settings": result.settings,
         "error_model": scene.errors.describe(),
