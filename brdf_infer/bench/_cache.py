@@ -12,7 +12,15 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-HEADERS = ["command", "cold [s]", "warm [s]", "warm / cold", "compile cold → warm [s]"]
+HEADERS = [
+    "command",
+    "cold [s]",
+    "warm [s]",
+    "warm / cold",
+    "compile cold → warm [s]",
+    "programs compiled cold → warm",
+    "loaded from the cache warm",
+]
 
 
 @dataclass(frozen=True)
@@ -22,6 +30,9 @@ class CacheRow:
     warm: float
     compile_cold: float
     compile_warm: float
+    compilations_cold: int
+    compilations_warm: int
+    hits_warm: int
 
     @property
     def cells(self) -> list[str]:
@@ -31,21 +42,28 @@ class CacheRow:
             f"{self.warm:.1f}",
             f"{self.warm / self.cold:.2f}",
             f"{self.compile_cold:.1f} → {self.compile_warm:.1f}",
+            f"{self.compilations_cold} → {self.compilations_warm}",
+            str(self.hits_warm),
         ]
 
 
-def _timed_process(argv: list[str], cache: Path) -> tuple[float, dict]:
+def _timed_process(argv: list[str], cache: Path) -> tuple[float, dict, int, int]:
+    """Wall time, JSON output, XLA compilations and persistent-cache hits of one process
+    (counted from JAX's compile log, ``JAX_LOG_COMPILES=1``; programs that compile in under
+    0.2 s are not kept in the cache and compile again)."""
     clock = time.perf_counter()
     done = subprocess.run(
         [sys.executable, "-m", "brdf_infer", *argv, "--json"],
         capture_output=True,
         text=True,
-        env=dict(os.environ, BRDF_INFER_CACHE=str(cache)),
+        env=dict(os.environ, BRDF_INFER_CACHE=str(cache), JAX_LOG_COMPILES="1"),
     )
     seconds = time.perf_counter() - clock
     if done.returncode != 0:
         raise RuntimeError(done.stderr[-2000:])
-    return seconds, json.loads(done.stdout)
+    hits = done.stderr.lower().count("persistent compilation cache hit")
+    compilations = done.stderr.count("Finished XLA compilation") - hits  # logged for hits too
+    return seconds, json.loads(done.stdout), compilations, hits
 
 
 def cache_rows(quick: bool, progress=print) -> list[CacheRow]:
@@ -64,9 +82,15 @@ def cache_rows(quick: bool, progress=print) -> list[CacheRow]:
             for attempt in ("cold", "warm"):
                 progress(f"  {label}, {attempt} cache")
                 out = folder / f"out_{k}_{attempt}"
-                seconds, payload = _timed_process([*argv, "--out", str(out)], cache)
+                seconds, payload, compilations, hits = _timed_process(
+                    [*argv, "--out", str(out)], cache
+                )
                 summary = payload.get("posterior", payload)
-                timings.append((seconds, summary["seconds"]["compile"]))
-            (cold, compile_cold), (warm, compile_warm) = timings
-            rows.append(CacheRow(label, cold, warm, compile_cold, compile_warm))
+                timings.append((seconds, summary["seconds"]["compile"], compilations, hits))
+            (cold, compile_cold, count_cold, _), (warm, compile_warm, count_warm, hits) = timings
+            rows.append(
+                CacheRow(
+                    label, cold, warm, compile_cold, compile_warm, count_cold, count_warm, hits
+                )
+            )
     return rows

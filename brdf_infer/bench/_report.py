@@ -374,8 +374,10 @@ def write_report(out: Path, quick: bool, progress=print) -> Path:
         "Fresh processes with an empty persistent cache folder (`BRDF_INFER_CACHE`), then "
         "the same command again: wall time end to end (process start, imports, compiling or "
         "loading the programs, sampling, files; `run` also the paper fit, least squares, the "
-        "spread variant, ray traces and the report) and the NUTS compile time of the "
-        "posterior (`summary.json` seconds.compile).",
+        "spread variant, the two other instrument models' posteriors, ray traces and the "
+        "report), the NUTS compile time of the posterior (`summary.json` seconds.compile) "
+        "and the number of XLA programs compiled (from `JAX_LOG_COMPILES`; programs that "
+        "compile in under 0.2 s are not kept and compile again).",
         "",
         _markdown_table(CACHE_HEADERS, [row.cells for row in caches]),
         "",
