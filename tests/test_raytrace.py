@@ -3,6 +3,10 @@ against each other, geometry against hand-computed values, the CLI contract."""
 
 import json
 import math
+import os
+import subprocess
+import sys
+import textwrap
 from dataclasses import replace
 
 import jax
@@ -241,3 +245,64 @@ def test_scene_raytrace_table_errors_name_the_key(tmp_path, table, field, capsys
     path.write_text(text + "[raytrace]\n" + table + "\n")
     code, _, err = run_cli("raytrace", str(path), "--rays", "64", capsys=capsys)
     assert code == 2 and field in err, err
+
+
+def test_configurations_traced_together_are_those_traced_alone(lya):
+    """The configuration axis (one vmapped call per chunk) keeps each configuration's own
+    random stream: the same estimates as tracing it alone, to rounding."""
+    scene, measurements = lya
+    together = raytrace_series(scene, measurements, UV_PAPER, rays=3000, seed=4)
+    setup, limiting = build_setup(scene)
+    key = jax.random.PRNGKey(4)
+    for index, configuration in enumerate(configurations(scene, measurements)[:5]):
+        alone = trace_configuration(
+            configuration,
+            UV_PAPER,
+            setup,
+            limiting,
+            scene.model.constants,
+            3000,
+            jax.random.fold_in(key, index),
+            fold=scene.model.fold,
+        )
+        row = together.rows[index]
+        assert row["simulated"] == pytest.approx(alone.simulated, rel=1e-12)
+        assert row["image_ratio"] == pytest.approx(alone.image_ratio, rel=1e-12)
+
+
+_SHARDED_TRACE = textwrap.dedent(
+    """
+    import sys, json
+    import jax
+    import brdf_infer
+    from brdf_infer.params import UV_PAPER
+    from brdf_infer.raytrace import raytrace_series
+    from brdf_infer.scene import load_scene
+
+    scene = load_scene("lya")
+    result = raytrace_series(scene, scene.load_measurements(), UV_PAPER, rays=3000, seed=2)
+    rows = [[r["simulated"], r["image_ratio"]] for r in result.rows]
+    json.dump({"devices": jax.device_count(), "rows": rows}, open(sys.argv[1], "w"))
+    """
+)
+
+
+def test_configuration_axis_sharded_over_two_forced_cpu_devices(tmp_path):
+    """All 18 configurations in one call, sharded over two devices (padded to 18): the
+    values of one device."""
+    results = {}
+    for count in (1, 2):
+        env = dict(os.environ, JAX_PLATFORMS="cpu")
+        env["XLA_FLAGS"] = f"--xla_force_host_platform_device_count={count}"
+        target = tmp_path / f"trace_{count}.json"
+        done = subprocess.run(
+            [sys.executable, "-c", _SHARDED_TRACE, str(target)],
+            capture_output=True,
+            text=True,
+            timeout=600,
+            env=env,
+        )
+        assert done.returncode == 0, done.stderr[-2000:]
+        results[count] = json.loads(target.read_text())
+        assert results[count]["devices"] == count
+    np.testing.assert_allclose(results[2]["rows"], results[1]["rows"], rtol=1e-12)

@@ -28,6 +28,7 @@ import numpy as np
 from numpyro.infer.hmc import hmc
 
 from brdf_infer._compile_clock import compile_clock
+from brdf_infer._sharding import gather_batch, shard_batch
 from brdf_infer.posterior._model import ModelData, PosteriorModel
 from brdf_infer.posterior._potential import FlatPotential
 
@@ -303,47 +304,6 @@ def _progress_bar(enabled: bool, total: int, description: str, unit: str = "it")
     from tqdm import tqdm
 
     return tqdm(total=total, desc=description, unit=unit, file=sys.stderr)
-
-
-BATCH_AXIS = "batch"
-
-
-def shard_batch(tree):
-    """``tree``'s leaves (one leading batch axis) padded to a multiple of the number of devices
-    (by repeating the last entry) and sharded over every device JAX sees along that axis
-    (``jax.sharding``: a 1-D ``Mesh`` and ``NamedSharding``), so that a vmapped program runs a
-    part of the batch on each device; unchanged on one device. Callers drop the padding from
-    the results (the first ``n`` entries are the original batch)."""
-    devices = jax.devices()
-    if len(devices) == 1:
-        return tree
-    from jax.sharding import Mesh, NamedSharding, PartitionSpec
-
-    count = jax.tree_util.tree_leaves(tree)[0].shape[0]
-    extra = -count % len(devices)
-
-    def pad(leaf):
-        leaf = jnp.asarray(leaf)
-        if extra == 0:
-            return leaf
-        return jnp.concatenate([leaf, jnp.repeat(leaf[-1:], extra, axis=0)])
-
-    sharding = NamedSharding(Mesh(np.array(devices), (BATCH_AXIS,)), PartitionSpec(BATCH_AXIS))
-
-    def place(leaf):  # every process holds the whole batch; each device takes its part
-        host = np.asarray(pad(leaf))
-        return jax.make_array_from_callback(host.shape, sharding, lambda index: host[index])
-
-    return jax.tree_util.tree_map(place, tree)
-
-
-def gather_batch(tree):
-    """The whole of sharded results on every process (several hosts: ``process_allgather``)."""
-    if jax.process_count() == 1:
-        return jax.device_get(tree)
-    from jax.experimental import multihost_utils
-
-    return multihost_utils.process_allgather(tree, tiled=True)
 
 
 def stack_data(datasets: list[ModelData]) -> ModelData:

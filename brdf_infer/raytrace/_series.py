@@ -26,6 +26,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from brdf_infer._sharding import gather_batch, shard_batch
 from brdf_infer.measurements import Measurements
 from brdf_infer.model import brdf_hemisphere, solid_angle
 from brdf_infer.params import Params, params_to_dict
@@ -222,16 +223,36 @@ def point_estimate(configuration: Configuration, params: Params, scene: Scene) -
 
 
 def compile_tallies(
-    params: Params, setup, constants, rays: int, estimator, limiting, batched: bool, fold=True
+    params: Params,
+    setup,
+    constants,
+    rays: int,
+    estimator,
+    limiting,
+    batched: bool,
+    fold=True,
+    group: int = 0,
 ):
-    """Compile every chunk size once, outside the timing; returns the seconds it took."""
+    """Compile every chunk size once, outside the timing; returns the seconds it took.
+
+    ``batched``: the program vmapped over parameter draws; ``group`` > 0: the program
+    vmapped over that many configurations (:func:`raytrace_series`)."""
     started = time.perf_counter()
-    function = _over_draws if batched else tally_moments
     key = jax.random.PRNGKey(0)
     for n in sorted(set(_chunks(rays))):
-        jax.block_until_ready(
-            function(key, 45.0, 45.0, params, setup, constants, n, estimator, limiting, fold)
-        )
+        if group:
+            keys = jnp.stack([key] * group)
+            angles = jnp.full(group, 45.0)
+            arguments = shard_batch((keys, angles, angles))
+            result = _over_configurations(
+                *arguments, params, setup, constants, n, estimator, limiting, fold
+            )
+        else:
+            function = _over_draws if batched else tally_moments
+            result = function(
+                key, 45.0, 45.0, params, setup, constants, n, estimator, limiting, fold
+            )
+        jax.block_until_ready(result)
     return time.perf_counter() - started
 
 
@@ -239,6 +260,55 @@ _over_draws = jax.jit(
     jax.vmap(tally_moments, in_axes=(None, None, None, 0, None, None, None, None, None, None)),
     static_argnums=(6, 7, 8, 9),
 )
+# the configuration axis: one program for a group of (key, θi, θs), sharded over the devices
+_over_configurations = jax.jit(
+    jax.vmap(tally_moments, in_axes=(0, 0, 0, None, None, None, None, None, None, None)),
+    static_argnums=(6, 7, 8, 9),
+)
+RAYS_PER_CALL = 2**19  # rays in flight per call on a CPU (memory ~ 400 MB)
+
+
+def _group_size(configurations: int) -> int:
+    """Configurations traced together: all of them on an accelerator or several devices,
+    else as many as keep ``RAYS_PER_CALL`` rays in flight."""
+    devices = jax.device_count()
+    if jax.default_backend() != "cpu" or devices > 1:
+        return max(configurations, 1)
+    return max(1, min(configurations, RAYS_PER_CALL // CHUNK_RAYS))
+
+
+def _trace_group(
+    part: list[Configuration],
+    streams: list,
+    params: Params,
+    setup: Setup,
+    limiting: int,
+    constants,
+    rays: int,
+    estimator: str,
+    fold: bool,
+    group: int,
+) -> list[Estimate]:
+    """Ray-trace up to ``group`` configurations in one vmapped call per chunk, their axis
+    sharded over every device (``shard_batch``); each configuration's stream is the one
+    :func:`trace_configuration` would use, so the estimates are those of tracing each
+    configuration alone (to rounding)."""
+    count = len(part)
+    pad = group - count
+    theta_i = np.array([c.theta_i_deg for c in part] + [part[-1].theta_i_deg] * pad)
+    theta_s = np.array([c.theta_s_deg for c in part] + [part[-1].theta_s_deg] * pad)
+    sums = np.zeros((count, len(TALLIES)))
+    outer = np.zeros((count, len(TALLIES), len(TALLIES)))
+    for chunk, n in enumerate(_chunks(rays)):
+        keys = [jax.random.fold_in(stream, chunk) for stream in streams]
+        keys = jnp.stack(keys + [keys[-1]] * pad)
+        arguments = shard_batch((keys, jnp.asarray(theta_i), jnp.asarray(theta_s)))
+        chunk_sums, chunk_outer = gather_batch(
+            _over_configurations(*arguments, params, setup, constants, n, estimator, limiting, fold)
+        )
+        sums += np.asarray(chunk_sums)[:count]
+        outer += np.asarray(chunk_outer)[:count]
+    return [_estimate(s, o) for s, o in zip(sums, outer, strict=True)]
 
 
 def _row(configuration: Configuration, estimate: Estimate, point: float) -> dict:
@@ -301,29 +371,29 @@ def raytrace_series(
         ``image_ratio``, ``image_ratio_se`` and ``detected_fraction``.
     """
     rays = rays or scene.raytrace.rays
+    if estimator not in ESTIMATORS:
+        raise ValueError(f"unknown estimator {estimator!r} (known: {', '.join(ESTIMATORS)})")
     setup, limiting = build_setup(scene)
     constants = scene.model.constants
     fold = scene.model.fold
+    measured = configurations(scene, measurements)
+    group = _group_size(len(measured))
     compile_seconds = compile_tallies(
-        params, setup, constants, rays, estimator, limiting, False, fold
+        params, setup, constants, rays, estimator, limiting, False, fold, group
     )
     key = jax.random.PRNGKey(seed)
     started = time.perf_counter()
     rows = []
-    for index, configuration in enumerate(configurations(scene, measurements)):
-        _announce(progress, configuration, rays)
-        estimate = trace_configuration(
-            configuration,
-            params,
-            setup,
-            limiting,
-            constants,
-            rays,
-            jax.random.fold_in(key, index),
-            estimator,
-            fold,
+    for first in range(0, len(measured), group):
+        part = measured[first : first + group]
+        for configuration in part:
+            _announce(progress, configuration, rays)
+        streams = [jax.random.fold_in(key, first + k) for k in range(len(part))]
+        estimates = _trace_group(
+            part, streams, params, setup, limiting, constants, rays, estimator, fold, group
         )
-        rows.append(_row(configuration, estimate, point_estimate(configuration, params, scene)))
+        for configuration, estimate in zip(part, estimates, strict=True):
+            rows.append(_row(configuration, estimate, point_estimate(configuration, params, scene)))
     seconds = time.perf_counter() - started
     return RaytraceResult(rows, rays, _warnings(rows), estimator, seed, seconds, compile_seconds)
 
