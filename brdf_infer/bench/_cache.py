@@ -49,8 +49,7 @@ class CacheRow:
 
 def _timed_process(argv: list[str], cache: Path) -> tuple[float, dict, int, int]:
     """Wall time, JSON output, XLA compilations and persistent-cache hits of one process
-    (counted from JAX's compile log, ``JAX_LOG_COMPILES=1``; programs that compile in under
-    0.2 s are not kept in the cache and compile again)."""
+    (counted from JAX's compile log, ``JAX_LOG_COMPILES=1``)."""
     clock = time.perf_counter()
     done = subprocess.run(
         [sys.executable, "-m", "brdf_infer", *argv, "--json"],

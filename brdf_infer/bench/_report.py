@@ -376,8 +376,8 @@ def write_report(out: Path, quick: bool, progress=print) -> Path:
         "loading the programs, sampling, files; `run` also the paper fit, least squares, the "
         "spread variant, the two other instrument models' posteriors, ray traces and the "
         "report), the NUTS compile time of the posterior (`summary.json` seconds.compile) "
-        "and the number of XLA programs compiled (from `JAX_LOG_COMPILES`; programs that "
-        "compile in under 0.2 s are not kept and compile again).",
+        "and the number of XLA programs compiled and loaded from the cache (from "
+        "`JAX_LOG_COMPILES`).",
         "",
         _markdown_table(CACHE_HEADERS, [row.cells for row in caches]),
         "",
