@@ -25,7 +25,7 @@ from brdf_infer.posterior import (
 from brdf_infer.report import _figures, _html, _noise
 from brdf_infer.report._compare import compare_figure, compare_table_html
 from brdf_infer.report._export import abg_table, load_exports, plot_export
-from brdf_infer.report._instruments import instruments_section
+from brdf_infer.report._instruments import MEANINGS, instruments_section
 from brdf_infer.report._raytrace import figure_png, plot_detector_images, plot_raytrace
 from brdf_infer.scene import load_scene
 
@@ -199,6 +199,11 @@ def write_report(run: Path, progress=print) -> tuple[Path, list[str]]:
                 ["scene", f"{scene.name}: {scene.description}"],
                 ["scene file", attrs["scene_file"]],
                 ["model", member.name + ("" if reference_model else f" ({_units(member)})")],
+                [
+                    "instrument",
+                    f"{attrs.get('instrument', 'point')}: "
+                    + MEANINGS.get(attrs.get("instrument", "point"), ""),
+                ],
                 ["measurements", f"{scene.measurements_path} ({len(rows)} rows)"],
                 ["sampler", f"{attrs['sampler']} {attrs['settings']}"],
                 ["seed", attrs["seed"]],
