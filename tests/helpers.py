@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -73,3 +74,20 @@ def run_cli_process(*argv: str, cwd: Path | None = None) -> subprocess.Completed
         cwd=cwd,
         timeout=600,
     )
+
+
+def run_on_forced_cpu_devices(
+    script: str, argument: Path, devices: int, timeout: int = 900
+) -> None:
+    """Run ``python -c script argument`` in a fresh process whose JAX sees ``devices`` CPU
+    devices (``--xla_force_host_platform_device_count``); fails the test on a non-zero exit."""
+    env = dict(os.environ, JAX_PLATFORMS="cpu")
+    env["XLA_FLAGS"] = f"--xla_force_host_platform_device_count={devices}"
+    done = subprocess.run(
+        [sys.executable, "-c", script, str(argument)],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        env=env,
+    )
+    assert done.returncode == 0, done.stderr[-2000:]

@@ -4,9 +4,6 @@ writes them, the scene axis sharded over devices with the same results as on one
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-import sys
 import textwrap
 from pathlib import Path
 
@@ -14,7 +11,7 @@ import numpy as np
 import pytest
 
 from brdf_infer._arviz import az
-from tests.helpers import run_cli
+from tests.helpers import run_cli, run_on_forced_cpu_devices
 
 SMALL = ["--chains", "2", "--draws", "150", "--warmup", "150"]
 
@@ -156,17 +153,8 @@ def test_sharded_over_two_forced_cpu_devices_gives_the_results_of_one(tmp_path):
     the chains of the two separate as under any change of compiler or hardware."""
     results = {}
     for count in (1, 2):
-        env = dict(os.environ, JAX_PLATFORMS="cpu")
-        env["XLA_FLAGS"] = f"--xla_force_host_platform_device_count={count}"
         target = tmp_path / f"draws_{count}.npz"
-        done = subprocess.run(
-            [sys.executable, "-c", _SHARDED, str(target)],
-            capture_output=True,
-            text=True,
-            timeout=900,
-            env=env,
-        )
-        assert done.returncode == 0, done.stderr[-2000:]
+        run_on_forced_cpu_devices(_SHARDED, target, count)
         results[count] = dict(np.load(target))
         assert int(results[count]["devices"]) == count
     one, two = results[1], results[2]

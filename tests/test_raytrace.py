@@ -3,9 +3,6 @@ against each other, geometry against hand-computed values, the CLI contract."""
 
 import json
 import math
-import os
-import subprocess
-import sys
 import textwrap
 from dataclasses import replace
 
@@ -26,7 +23,7 @@ from brdf_infer.raytrace import (
     with_aperture,
 )
 from brdf_infer.raytrace._trace import tally_moments
-from tests.helpers import run_cli
+from tests.helpers import run_cli, run_on_forced_cpu_devices
 
 
 def _config(lya, theta_i, delta):
@@ -288,21 +285,12 @@ _SHARDED_TRACE = textwrap.dedent(
 
 
 def test_configuration_axis_sharded_over_two_forced_cpu_devices(tmp_path):
-    """All 18 configurations in one call, sharded over two devices (padded to 18): the
-    values of one device."""
+    """All 18 configurations in one call, nine on each of two devices: the values of one
+    device (which traces them a few at a time)."""
     results = {}
     for count in (1, 2):
-        env = dict(os.environ, JAX_PLATFORMS="cpu")
-        env["XLA_FLAGS"] = f"--xla_force_host_platform_device_count={count}"
         target = tmp_path / f"trace_{count}.json"
-        done = subprocess.run(
-            [sys.executable, "-c", _SHARDED_TRACE, str(target)],
-            capture_output=True,
-            text=True,
-            timeout=600,
-            env=env,
-        )
-        assert done.returncode == 0, done.stderr[-2000:]
+        run_on_forced_cpu_devices(_SHARDED_TRACE, target, count)
         results[count] = json.loads(target.read_text())
         assert results[count]["devices"] == count
     np.testing.assert_allclose(results[2]["rows"], results[1]["rows"], rtol=1e-12)
