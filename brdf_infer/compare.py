@@ -37,6 +37,7 @@ from brdf_infer.posterior import (
     build_model,
     chain_keys,
     flatten_draws,
+    interval95,
     loo_terms,
 )
 from brdf_infer.scene import Scene
@@ -133,11 +134,6 @@ def check_family_names(names: list[str]) -> list[str]:
     return names
 
 
-def _interval(values: np.ndarray) -> dict[str, float]:
-    low, median, high = np.quantile(np.asarray(values, float).reshape(-1), [0.025, 0.5, 0.975])
-    return {"median": float(median), "lo95": float(low), "hi95": float(high)}
-
-
 def _without_row(model, row: int):
     noise = model.data.noise
     sigma = noise.sigma_row.at[row].set(LEFT_OUT_SIGMA)
@@ -187,8 +183,8 @@ def fit_family(
     tis70 = jax.jit(lambda p: member.tis_curve(jnp.array([TIS_ANGLE_DEG]), p))(physical)
     return FamilyResult(
         name=name,
-        parameters={k: _interval(v) for k, v in flat.items()},
-        tis70=_interval(np.asarray(tis70)),
+        parameters={k: interval95(v) for k, v in flat.items()},
+        tis70=interval95(np.asarray(tis70)),
         idata=idata,
         r_hat_max=float(np.max(summary["r_hat"])),
         ess_bulk_min=float(np.min(summary["ess_bulk"])),

@@ -81,11 +81,6 @@ def _quantities(scene: Scene, params: Params) -> dict[str, np.ndarray]:
     }
 
 
-def _interval(values: np.ndarray) -> dict[str, float]:
-    low, median, high = np.quantile(values, [0.025, 0.5, 0.975])
-    return {"median": float(median), "lo95": float(low), "hi95": float(high)}
-
-
 def bias_experiment(
     scene: Scene,
     measurements: Measurements,
@@ -107,8 +102,7 @@ def bias_experiment(
         "coverage": {instrument: {QUANTITY: fraction of seeds}}}``.
     """
     from brdf_infer.lsq import fit_lsq
-    from brdf_infer.posterior import build_posterior_model
-    from brdf_infer.posterior._samplers import run_nuts
+    from brdf_infer.posterior import build_posterior_model, interval95, run_nuts
 
     truth_values = traced_values(scene, measurements, params, generated_by, rays, seed=7)
     truth = {k: float(v) for k, v in _quantities(scene, params).items()}
@@ -125,7 +119,7 @@ def bias_experiment(
                 model, chains=chains, warmup=warmup, draws=draws, seed=seed, progress=False
             )
             drawn = Params(*(np.asarray(result.sites[n]).reshape(-1) for n in Params._fields))
-            intervals = {k: _interval(v) for k, v in _quantities(scene, drawn).items()}
+            intervals = {k: interval95(v) for k, v in _quantities(scene, drawn).items()}
             fits.append(
                 {
                     "seed": seed,

@@ -20,6 +20,7 @@ import numpy as np
 from brdf_infer.errors import BadInputError
 from brdf_infer.instrument import INSTRUMENT_MODELS
 from brdf_infer.measurements import Measurements
+from brdf_infer.posterior import interval95
 from brdf_infer.scene import Scene, check_instrument
 
 INSTRUMENT_FILE = "instruments.json"
@@ -40,12 +41,6 @@ def supported_instruments(scene: Scene) -> list[str]:
     return supported
 
 
-def _interval(values) -> dict[str, float]:
-    values = np.asarray(values, float).reshape(-1)
-    low, median, high = np.quantile(values, [0.025, 0.5, 0.975])
-    return {"median": float(median), "lo95": float(low), "hi95": float(high)}
-
-
 def instrument_entry(name: str, run_dir: Path, idata: az.InferenceData, summary: dict) -> dict:
     """One row of the side-by-side table from a ``strumik2024`` posterior run."""
     posterior = idata.posterior
@@ -53,8 +48,8 @@ def instrument_entry(name: str, run_dir: Path, idata: az.InferenceData, summary:
     return {
         "instrument": name,
         "run": str(run_dir),
-        "brdf0": _interval(posterior["brdf0"]),
-        "alpha": _interval(posterior["alpha"]),
+        "brdf0": interval95(posterior["brdf0"]),
+        "alpha": interval95(posterior["alpha"]),
         "tis_70deg": summary["tis_70deg"],
         "pi_brdf0": summary["pi_brdf0"],
         "elpd_loo": float(loo.elpd_loo),

@@ -8,6 +8,7 @@ from brdf_infer.posterior._bands import (
     draws_physical,
     family_bands,
     family_tis_band,
+    interval95,
     tis_band,
 )
 from brdf_infer.posterior._family_model import FamilyPosteriorModel, build_family_model
@@ -62,6 +63,7 @@ __all__ = [
     "family_tis_band",
     "flatten_draws",
     "inference_data",
+    "interval95",
     "load_run_draws",
     "load_run_family",
     "loo_terms",

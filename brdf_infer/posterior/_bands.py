@@ -25,6 +25,12 @@ def quantile_band(samples: np.ndarray, axis: int = 0) -> dict[str, list]:
     return {name: values[k].tolist() for k, name in enumerate(QUANTILES)}
 
 
+def interval95(values) -> dict[str, float]:
+    """Median and central 95 % interval of all values (any shape, flattened)."""
+    low, median, high = np.quantile(np.asarray(values, float).reshape(-1), [0.025, 0.5, 0.975])
+    return {"median": float(median), "lo95": float(low), "hi95": float(high)}
+
+
 def draws_params(sites: dict[str, np.ndarray]) -> Params:
     """All draws (chains flattened) of the six parameters, paper units."""
     return Params(*(np.asarray(sites[name]).reshape(-1) for name in Params._fields))

@@ -19,7 +19,13 @@ from brdf_infer.errors import BadInputError
 from brdf_infer.measurements import Measurements
 from brdf_infer.model import FAMILY_NAMES, REFERENCE_FAMILY, family
 from brdf_infer.params import PARAM_NAMES
-from brdf_infer.posterior._bands import compute_bands, draws_params, draws_physical, family_bands
+from brdf_infer.posterior._bands import (
+    compute_bands,
+    draws_params,
+    draws_physical,
+    family_bands,
+    interval95,
+)
 from brdf_infer.posterior._family_model import FamilyPosteriorModel, build_family_model
 from brdf_infer.posterior._loo import loo_pit, uniformity_p_value
 from brdf_infer.posterior._model import NOISE_SITES, PosteriorModel, build_posterior_model
@@ -115,11 +121,6 @@ def run_fingerprint(model: PosteriorModel, measurements: Measurements) -> dict[s
         "measurements": digest(rows),
         "model options": digest(json.dumps(options, sort_keys=True, default=str).encode()),
     }
-
-
-def _interval(values: np.ndarray) -> dict[str, float]:
-    low, median, high = np.quantile(np.asarray(values).reshape(-1), [0.025, 0.5, 0.975])
-    return {"median": float(median), "lo95": float(low), "hi95": float(high)}
 
 
 def predictive_checks(idata: az.InferenceData, log_lik: np.ndarray, cdf: np.ndarray) -> dict:
@@ -294,7 +295,7 @@ def complete_run(
         "median": medians,
         "units": units,
         "noise": {
-            site: _interval(result.sites[site]) for site in NOISE_SITES if site in result.sites
+            site: interval95(result.sites[site]) for site in NOISE_SITES if site in result.sites
         },
         "diagnostics": checks,
         "predictive": predictive_checks(idata, log_lik, cdf),
