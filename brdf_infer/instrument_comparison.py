@@ -78,6 +78,7 @@ def compare_instruments(
     out: Path,
     options: dict[str, Any],
     *,
+    instruments: list[str] | None = None,
     done: dict[str, tuple[Path, Any]] | None = None,
     progress: Callable[[str], None] = lambda message: None,
 ) -> dict[str, Any]:
@@ -88,6 +89,7 @@ def compare_instruments(
         measurements: its rows.
         out: the run folder; posteriors not in ``done`` go to ``out/variants/instrument-NAME``.
         options: keyword arguments of :func:`brdf_infer.posterior.run_posterior`.
+        instruments: the instrument models (default: every one the scene supports).
         done: posterior runs already made, by instrument model: (folder, PosteriorRun).
         progress: called with one line per step.
 
@@ -100,7 +102,7 @@ def compare_instruments(
 
     done = dict(done or {})
     models = []
-    for name in supported_instruments(scene):
+    for name in supported_instruments(scene) if instruments is None else instruments:
         if name in done:
             folder, run = done[name]
         else:

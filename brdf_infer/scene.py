@@ -69,6 +69,11 @@ Schema (keys other than these are errors; defaults in brackets)::
     [instrument.series.NAME]                 # [the [raytrace] table for its series] beam
                                              #   geometry of series NAME: the [raytrace] keys
                                              #   source_diameter_mm … signal_region_mm
+    [studies]                                # what `run` adds to the one posterior [none]
+    error_models = ["spread"]                # [] posteriors under other error models
+    instruments = ["aperture", "image"]      # [] posteriors under other instrument models
+    raytrace = true                          # [false] ray-trace the posterior ([raytrace])
+    compare = ["strumik2024", "abg"]         # [] model families compared by PSIS-LOO
 """
 
 from __future__ import annotations
@@ -222,6 +227,34 @@ class InstrumentSettings:
 
 
 @dataclass(frozen=True)
+class Studies:
+    """What ``run`` does beyond the scene's one posterior (``[studies]``; each off by default).
+
+    Attributes:
+        error_models: further posteriors under these error models (``spread``), beside the
+            scene's, compared by PSIS-LOO in the report.
+        instruments: further posteriors under these instrument models (``aperture``,
+            ``image``), side by side with the scene's, each ray-traced where it can be.
+        raytrace: ray-trace the posterior (and ``[outputs] reference_params``) through the
+            ``[raytrace]`` setup (Sec. 6).
+        compare: model families compared by PSIS-LOO (at least two).
+    """
+
+    error_models: tuple[str, ...] = ()
+    instruments: tuple[str, ...] = ()
+    raytrace: bool = False
+    compare: tuple[str, ...] = ()
+
+    def requested(self) -> list[str]:
+        """One phrase per study asked for."""
+        asked = [f"error model {name}" for name in self.error_models]
+        asked += [f"instrument model {name}" for name in self.instruments]
+        asked += ["ray traces"] * self.raytrace
+        asked += [f"comparison of {', '.join(self.compare)}"] if self.compare else []
+        return asked
+
+
+@dataclass(frozen=True)
 class Scene:
     """A validated scene."""
 
@@ -237,7 +270,7 @@ class Scene:
     outputs: OutputSettings = field(default_factory=OutputSettings)
     priors: dict[str, Prior] = field(default_factory=lambda: dict(DEFAULT_PRIORS))
     raytrace: RaytraceSettings | None = None
-    compare: tuple[str, ...] = ()
+    studies: Studies = field(default_factory=Studies)
     bsdf_thinning: tuple[int, int] = (1, 1)
     instrument: InstrumentSettings = field(default_factory=InstrumentSettings)
 
@@ -412,24 +445,59 @@ def _count(table: dict, key: str, path: Path) -> int:
     return value
 
 
-def _compare_families(document: dict, path: Path) -> tuple[str, ...]:
-    """The model families ``run`` compares by PSIS-LOO (``compare = [...]``; none: no step)."""
+def _compare_families(names, path: Path, field_name: str) -> tuple[str, ...]:
+    """Model families to compare by PSIS-LOO (at least two; none: no comparison)."""
     from brdf_infer.model import FAMILY_NAMES
 
-    names = document.get("compare", [])
-    if not isinstance(names, list) or not all(isinstance(name, str) for name in names):
-        raise BadInputError("expected a list of model family names", file=path, field="compare")
-    for name in names:
-        if name not in FAMILY_NAMES:
-            raise BadInputError(
-                f"unknown model family {name!r} (known: {', '.join(FAMILY_NAMES)})",
-                file=path,
-                field="compare",
-            )
-    names = list(dict.fromkeys(names))
+    names = _names(names, path, field_name, FAMILY_NAMES, "model family")
     if len(names) == 1:
-        raise BadInputError("name at least two families to compare", file=path, field="compare")
-    return tuple(names)
+        raise BadInputError("name at least two families to compare", file=path, field=field_name)
+    return names
+
+
+def _names(names, path: Path, field_name: str, known, what: str) -> tuple[str, ...]:
+    if not isinstance(names, list) or not all(isinstance(name, str) for name in names):
+        raise BadInputError(f"expected a list of {what} names", file=path, field=field_name)
+    for name in names:
+        if name not in known:
+            raise BadInputError(
+                f"unknown {what} {name!r} (known: {', '.join(known)})", file=path, field=field_name
+            )
+    return tuple(dict.fromkeys(names))
+
+
+def _parse_studies(document: dict, path: Path) -> Studies:
+    """The ``[studies]`` table (and the older top-level ``compare = [...]``)."""
+    from brdf_infer.error_model import ERROR_MODELS
+    from brdf_infer.instrument import INSTRUMENT_MODELS
+
+    table = _table(document, "studies", path, set(Studies.__dataclass_fields__))
+    if "compare" in document and "compare" in table:
+        raise BadInputError(
+            "give compare once: in [studies] (the top-level key is its older form)",
+            file=path,
+            field="studies.compare",
+        )
+    compare = table.get("compare", document.get("compare", []))
+    field_name = "studies.compare" if "compare" in table else "compare"
+    return Studies(
+        error_models=_names(
+            table.get("error_models", []),
+            path,
+            "studies.error_models",
+            ERROR_MODELS,
+            "error model",
+        ),
+        instruments=_names(
+            table.get("instruments", []),
+            path,
+            "studies.instruments",
+            INSTRUMENT_MODELS,
+            "instrument model",
+        ),
+        raytrace=_boolean(table, "raytrace", path, "studies.", False),
+        compare=_compare_families(compare, path, field_name),
+    )
 
 
 def _string(document: dict, key: str, path: Path, default: str | None = None) -> str:
@@ -455,6 +523,7 @@ _TOP_KEYS = {
     "priors",
     "raytrace",
     "compare",
+    "studies",
     "bsdf",
 }
 
@@ -743,7 +812,7 @@ def parse_scene(document: dict, path: Path) -> Scene:
     priors = dict(DEFAULT_PRIORS)
     priors.update({name: parse_prior(name, table, path) for name, table in prior_table.items()})
     wavelength = document.get("wavelength_nm")
-    compare = _compare_families(document, path)
+    studies = _parse_studies(document, path)
     scene = Scene(
         name=_string(document, "name", path),
         path=path,
@@ -773,7 +842,7 @@ def parse_scene(document: dict, path: Path) -> Scene:
         ),
         priors=priors,
         raytrace=_parse_raytrace(document, path, series),
-        compare=compare,
+        studies=studies,
         bsdf_thinning=thinning,
         instrument=_parse_instrument(document, path, series),
     )

@@ -1,7 +1,10 @@
-"""The main job as one library call: paper fit, least squares, NUTS posterior (and the earlier
-error model beside it), ray traces, model comparison and the report, into one run folder. For
-a model family other than ``strumik2024`` the paper fit (Eq. 7's regression) and the ray traces
-(whose surface scatters by Eq. 7) are left out.
+"""The main job as one library call: paper fit, least squares, the scene's NUTS posterior,
+its products and the report, into one run folder. The studies a scene asks for in
+``[studies]`` (other error models, other instrument models, ray traces of the posterior, a
+model comparison) run after it; none runs unless asked (``RunSettings.studies`` overrides the
+scene's table, :func:`full_studies` is everything the scene can do). For a model family other
+than ``strumik2024`` the paper fit (Eq. 7's regression), the instrument study and the ray
+traces (whose surface scatters by Eq. 7) are left out.
 
 ``brdf-infer run`` parses its options and calls :func:`run`; a notebook calls it the same way:
 
@@ -24,7 +27,9 @@ from pathlib import Path
 from typing import Any
 
 from brdf_infer.measurements import Measurements
-from brdf_infer.scene import Scene
+from brdf_infer.scene import Scene, Studies
+
+STUDIES_FILE = "studies.json"
 
 RUN_TRACE_RAYS = 2**18  # ~0.05 % MC error per configuration (NEE)
 RUN_TRACE_DRAWS = 64
@@ -37,15 +42,47 @@ def _silent(message: str) -> None:
 
 @dataclass(frozen=True)
 class RunSettings:
-    """NUTS settings of the main job, the least-squares starts, and the model family (None: the
-    scene's ``[model] family``)."""
+    """NUTS settings of the main job, the least-squares starts, the model family (None: the
+    scene's ``[model] family``) and the studies (None: the scene's ``[studies]``)."""
 
     chains: int = 4
     draws: int = 1000
-    warmup: int = 500
+    warmup: int = 1000
     seed: int = 0
     lsq_starts: int = 16
     model: str | None = None
+    studies: Studies | None = None
+
+    def check(self) -> None:
+        """Raises BadInputError naming the setting that is out of range."""
+        from brdf_infer.errors import BadInputError
+
+        for name in ("chains", "draws", "lsq_starts"):
+            if getattr(self, name) < 1:
+                raise BadInputError(f"must be at least 1, got {getattr(self, name)}", field=name)
+        if self.warmup < 0:
+            raise BadInputError(f"must be >= 0, got {self.warmup}", field="warmup")
+
+
+def full_studies(scene: Scene) -> Studies:
+    """Every study the scene can run: the other error model, every instrument model its
+    geometry supports, ray traces where it has a ``[raytrace]`` setup, and the comparison of
+    the reference model with ABg and Lambertian (or the scene's own list)."""
+    from brdf_infer.error_model import ERROR_MODELS
+    from brdf_infer.instrument_comparison import supported_instruments
+
+    return Studies(
+        error_models=tuple(m for m in ERROR_MODELS if m != scene.errors.model),
+        instruments=tuple(m for m in supported_instruments(scene) if m != scene.instrument.model),
+        raytrace=scene.raytrace is not None,
+        compare=scene.studies.compare or ("strumik2024", "abg", "lambertian", "lambertian+abg"),
+    )
+
+
+def not_run(scene: Scene, studies: Studies) -> list[str]:
+    """The studies of :func:`full_studies` that ``studies`` leaves out, one phrase each."""
+    done = set(studies.requested())
+    return [study for study in full_studies(scene).requested() if study not in done]
 
 
 @dataclass
@@ -221,7 +258,7 @@ def run(
         scene: the scene.
         measurements: its rows.
         out: the run folder (created; result files are written atomically).
-        settings: NUTS and least-squares settings.
+        settings: NUTS and least-squares settings, and the studies.
         example: also write the small committed example report here.
         progress: called with one line per step.
     """
@@ -231,15 +268,18 @@ def run(
     from brdf_infer.report import write_example, write_report
 
     start = time.perf_counter()
+    settings.check()
     name = settings.model or scene.model.family
     build_model(scene, measurements, name)  # an unknown family fails before any work
     reference = name == REFERENCE_FAMILY
-    traces = scene.raytrace is not None and reference  # the ray tracer scatters by Eq. (7)
-    from brdf_infer.instrument_comparison import supported_instruments
-
-    instruments = reference and len(supported_instruments(scene)) > 1
+    studies = settings.studies if settings.studies is not None else scene.studies
+    error_models = [m for m in studies.error_models if m != scene.errors.model]
+    instruments = [m for m in studies.instruments if m != scene.instrument.model]
+    instruments = instruments if reference else []
+    traces = studies.raytrace and scene.raytrace is not None and reference
+    _check_studies(scene, instruments)
     out.mkdir(parents=True, exist_ok=True)
-    steps = 5 + traces + bool(scene.compare) + instruments
+    steps = 4 + len(error_models) + bool(instruments) + traces + bool(studies.compare)
     step = iter(range(1, steps + 1))
     paper = None
     if reference:
@@ -272,13 +312,15 @@ def run(
         "model": name,
     }
     posterior = run_posterior(scene, measurements, out=out, **options)
-    if scene.errors.model != "spread":
-        progress(f"[{next(step)}/{steps}] NUTS posterior with the earlier spread error model")
+    for error_model in error_models:
+        progress(f"[{next(step)}/{steps}] NUTS posterior with the {error_model} error model")
         run_posterior(
-            scene, measurements, error_model="spread", out=out / "variants" / "spread", **options
+            scene,
+            measurements,
+            error_model=error_model,
+            out=out / "variants" / error_model,
+            **options,
         )
-    else:
-        next(step)
     if instruments:
         from brdf_infer.instrument_comparison import INSTRUMENT_FILE, compare_instruments
 
@@ -290,6 +332,7 @@ def run(
                 measurements,
                 out,
                 options,
+                instruments=[scene.instrument.model, *instruments],
                 done={scene.instrument.model: (out, posterior)},
                 progress=progress,
             ),
@@ -300,13 +343,19 @@ def run(
             out / "raytrace.json", {"traces": run_traces(scene, measurements, posterior)}
         )
     comparison = None
-    if scene.compare:
+    if studies.compare:
         from brdf_infer.compare import compare_families, write_comparison
 
-        progress(f"[{next(step)}/{steps}] model comparison by PSIS-LOO: {', '.join(scene.compare)}")
-        result = compare_families(scene, measurements, list(scene.compare))
+        progress(
+            f"[{next(step)}/{steps}] model comparison by PSIS-LOO: {', '.join(studies.compare)}"
+        )
+        result = compare_families(scene, measurements, list(studies.compare))
         write_comparison(out, result)
         comparison = result.as_json()
+    atomic_write_json(
+        out / STUDIES_FILE,
+        {"run": studies.requested(), "not_run": not_run(scene, studies) if reference else []},
+    )
     progress(f"[{next(step)}/{steps}] report")
     report, failures = write_report(out, progress=_silent)
     if example is not None:
@@ -322,3 +371,11 @@ def run(
         comparison=comparison,
         seconds=time.perf_counter() - start,
     )
+
+
+def _check_studies(scene: Scene, instruments: list[str]) -> None:
+    """Refuse, before any work, an instrument study the scene's geometry cannot support."""
+    from brdf_infer.scene import check_instrument
+
+    for instrument in instruments:
+        check_instrument(scene, instrument, field="studies.instruments")

@@ -19,7 +19,8 @@ from brdf_infer.errors import BadInputError
 from brdf_infer.model import log_aperture_factor, log_brdf_inplane
 from brdf_infer.observations import log_reflectance_at
 from brdf_infer.params import PAPER_CONSTANTS, UV_PAPER
-from brdf_infer.posterior._loo import loo_conditionals, loo_pit, uniformity_p_value
+from brdf_infer.posterior._loo import loo_pit, uniformity_p_value
+from brdf_infer.posterior._lowrank import leave_one_out_conditionals
 from brdf_infer.posterior._model import build_posterior_model
 from tests.helpers import assert_allclose
 
@@ -126,7 +127,7 @@ def test_loo_conditionals_match_the_partitioned_normal():
     diagonal = rng.uniform(0.1, 1.0, n)
     mean, y = rng.normal(size=n), rng.normal(size=n)
     covariance = np.diag(diagonal) + factor @ factor.T
-    got_mean, got_sd = loo_conditionals(
+    got_mean, got_sd = leave_one_out_conditionals(
         jnp.asarray(y), jnp.asarray(mean), jnp.asarray(factor), jnp.asarray(diagonal)
     )
     for i in range(n):

@@ -14,41 +14,29 @@ Here Σ = D + W Wᵀ, so Q follows from the Woodbury identity with one k×k Chol
 
 from __future__ import annotations
 
+from functools import partial
+
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax.scipy.linalg import solve_triangular
 from jax.scipy.stats import norm
 from scipy import stats
 
 from brdf_infer._arviz import az
+from brdf_infer.posterior._lowrank import leave_one_out_conditionals
 
 
-def loo_conditionals(y, mean, factor, diagonal) -> tuple[jnp.ndarray, jnp.ndarray]:
-    """(mean, sd) of yᵢ | y₋ᵢ for every row, one draw (vmap for many).
-
-    Args:
-        y: observed values (n,).
-        mean: μ (n,).
-        factor: W (n, k).
-        diagonal: D (n,), > 0.
-    """
-    residual = y - mean
-    inverse_diagonal = 1.0 / diagonal
-    capacitance = jnp.eye(factor.shape[1]) + (factor.T * inverse_diagonal) @ factor
-    cholesky = jnp.linalg.cholesky(capacitance)
-    scaled = solve_triangular(cholesky, factor.T * inverse_diagonal, lower=True)  # k × n
-    precision_residual = inverse_diagonal * residual - scaled.T @ (scaled @ residual)
-    precision_diagonal = inverse_diagonal - jnp.sum(scaled**2, axis=0)
-    return y - precision_residual / precision_diagonal, 1.0 / jnp.sqrt(precision_diagonal)
-
-
-@jax.jit
-def pointwise_loo_terms(y, means, factors, diagonals) -> tuple[jnp.ndarray, jnp.ndarray]:
-    """(log p(yᵢ | y₋ᵢ, θ_s), P(ỹᵢ ≤ yᵢ | y₋ᵢ, θ_s)) for every draw s and row i."""
+@partial(jax.jit, static_argnames="disjoint")
+def pointwise_loo_terms(
+    y, means, factors, diagonals, disjoint: int = 0
+) -> tuple[jnp.ndarray, jnp.ndarray]:
+    """(log p(yᵢ | y₋ᵢ, θ_s), P(ỹᵢ ≤ yᵢ | y₋ᵢ, θ_s)) for every draw s and row i
+    (``disjoint``: leading columns of W with non-overlapping rows, see :mod:`._lowrank`)."""
 
     def one(mean, factor, diagonal):
-        conditional_mean, conditional_sd = loo_conditionals(y, mean, factor, diagonal)
+        conditional_mean, conditional_sd = leave_one_out_conditionals(
+            y, mean, factor, diagonal, disjoint
+        )
         z = (y - conditional_mean) / conditional_sd
         return norm.logpdf(y, conditional_mean, conditional_sd), norm.cdf(z)
 

@@ -60,13 +60,19 @@ from brdf_infer.observations import (
     predicted_log_reflectance,
 )
 from brdf_infer.params import Params
+from brdf_infer.posterior._lowrank import (
+    Whitened,
+    cholesky,
+    low_rank_normal_log_density,
+    solve_lower,
+    solve_upper_transposed,
+)
 from brdf_infer.priors import Prior
 from brdf_infer.scene import Scene
 
 LINEAR = ("brdf0", "a1", "a2", "a3")  # priors of c = (ln BRDF0, b1, b2, b3)
 LINEAR_SITES = ("log_brdf0", "b1", "b2", "b3")
 NOISE_SITES = ("sample_sd", "repeatability")
-OUT_OF_PLANE_VARIANCE = 1e12  # the whitening regression leaves out-of-plane rows out
 
 
 def prior_distribution(prior: Prior, scale: float = 1.0) -> dist.Distribution:
@@ -108,9 +114,14 @@ def gaussian_moments(prior: Prior) -> tuple[float, float]:
     return prior.loc, prior.scale  # normal; truncated normal: its untruncated moments suffice
 
 
-def whitened_coefficients(design, target, factor, diagonal, prior_mean, prior_sd, standard):
+def whitened_coefficients(
+    design, target, factor, diagonal, prior_mean, prior_sd, standard, disjoint: int = 0
+):
     """c = m + L⁻ᵀ u and ln|∂c/∂u| for the regression target = design·c + noise,
-    Cov(noise) = D + W Wᵀ (Woodbury: one small Cholesky).
+    Cov(noise) = D + W Wᵀ (Woodbury: the capacitance's small Cholesky, :mod:`._lowrank`).
+
+    With the posterior precision P = L Lᵀ = diag(1/sd²) + Xᵀ Σ⁻¹ X and the right-hand side
+    r = mean/sd² + Xᵀ Σ⁻¹ y, m = P⁻¹ r, so c = L⁻ᵀ (L⁻¹ r + u) with one solve each way.
 
     Args:
         design: (rows, k) columns of the free coefficients.
@@ -119,22 +130,20 @@ def whitened_coefficients(design, target, factor, diagonal, prior_mean, prior_sd
         diagonal: (rows,) D.
         prior_mean, prior_sd: (k,) normal stand-in of the coefficients' prior.
         standard: (k,) the whitened coordinates u.
+        disjoint: leading columns of W with non-overlapping rows (the per-sample effects).
     """
-    design_d = design / diagonal[:, None]
-    factor_d = factor / diagonal[:, None]
-    capacitance = jnp.eye(factor.shape[1]) + factor.T @ factor_d
-    capacitance_cholesky = jnp.linalg.cholesky(capacitance)
-
-    def woodbury(left, right):  # leftᵀ (D + W Wᵀ)⁻¹ right, left and right already ÷ D
-        inner = jax.scipy.linalg.cho_solve((capacitance_cholesky, True), factor.T @ right)
-        return left.T @ (right * diagonal[:, None]) - (factor.T @ left).T @ inner
-
-    precision = jnp.diag(1.0 / prior_sd**2) + woodbury(design_d, design_d)
-    cholesky = jnp.linalg.cholesky(precision)
-    rhs = prior_mean / prior_sd**2 + woodbury(design_d, (target / diagonal)[:, None])[:, 0]
-    mean = jax.scipy.linalg.cho_solve((cholesky, True), rhs)
-    offset = jax.scipy.linalg.solve_triangular(cholesky.T, standard, lower=False)
-    return mean + offset, -jnp.sum(jnp.log(jnp.diag(cholesky)))
+    whitened = Whitened(factor, diagonal, disjoint)
+    columns = whitened.scale(jnp.concatenate([design, target[:, None]], axis=1))
+    projected = whitened.project(columns)  # L_C⁻¹ Bᵀ [X' | y']
+    gram = columns.T @ columns - projected.T @ projected  # [X | y]ᵀ Σ⁻¹ [X | y]
+    free = design.shape[1]
+    precision = jnp.diag(1.0 / prior_sd**2) + gram[:free, :free]
+    rhs = prior_mean / prior_sd**2 + gram[:free, free]
+    cholesky_factor = cholesky(precision)
+    values = solve_upper_transposed(
+        cholesky_factor, solve_lower(cholesky_factor, rhs) + standard
+    )
+    return values, -jnp.sum(jnp.log(jnp.diagonal(cholesky_factor)))
 
 
 class ModelData(NamedTuple):
@@ -143,10 +152,14 @@ class ModelData(NamedTuple):
     Attributes:
         rows: geometry and measured ln R of each row.
         noise: the rows' noise structure.
+        mask: (rows,) 1 for a measured row, 0 for a padding row (a batch of scenes of unequal
+            size pads them to one shape); padding rows leave the likelihood and the
+            whitening regression exactly.
     """
 
     rows: Observations
     noise: NoiseLayout
+    mask: jnp.ndarray
 
 
 class LikelihoodParts(NamedTuple):
@@ -260,22 +273,24 @@ class PosteriorModel:
             )
         zero = jnp.zeros_like(rows.theta_i_deg)
         factor, diagonal = covariance_factors(noise, scales, zero, zero)  # no angle terms
+        factor = factor[:, : factor.shape[1] - noise.rotation_members.shape[-1]]  # zero there
+        regression = data.mask > 0  # padding rows leave the regression
         if rows.phi_s_deg is not None:  # Eq. (7)'s linearity holds in the plane only
-            outside = jnp.isfinite(rows.phi_s_deg)
-            factor = jnp.where(outside[:, None], 0.0, factor)
-            diagonal = jnp.where(outside, OUT_OF_PLANE_VARIANCE, diagonal)
+            regression = regression & ~jnp.isfinite(rows.phi_s_deg)
+        factor, diagonal = mask_rows(regression, factor, diagonal)
         moments = np.array([gaussian_moments(priors[LINEAR[k]]) for k in free])
         standard = numpyro.sample(
             "linear_std", dist.ImproperUniform(dist.constraints.real, (), (len(free),))
         )
         values, log_jacobian = whitened_coefficients(
-            design[:, free],
-            rows.log_reflectance - offset,
+            jnp.where(regression[:, None], design[:, free], 0.0),
+            jnp.where(regression, rows.log_reflectance - offset, 0.0),
             factor * self.sigma_scale,
             diagonal * self.sigma_scale**2,
             jnp.asarray(moments[:, 0]),
             jnp.asarray(moments[:, 1]),
             standard,
+            disjoint_columns(data),
         )
         log_prior = sum(
             prior_distribution(priors[LINEAR[k]]).log_prob(values[position])
@@ -345,20 +360,75 @@ def observe(
     parts: LikelihoodParts, data: ModelData, mode: str, sigma_scale: float, *, spread: bool
 ) -> None:
     """The ``obs`` site: the rows' ln R under mean and covariance ``parts`` (observed in
-    ``fit`` mode, drawn otherwise); σ scaled by ``sigma_scale`` except when simulating."""
+    ``fit`` mode, drawn otherwise); σ scaled by ``sigma_scale`` except when simulating.
+    Padding rows (``data.mask`` 0) add nothing to the log density."""
     observed = data.rows.log_reflectance if mode == "fit" else None
     if mode != "simulate" and sigma_scale != 1.0:
         parts = LikelihoodParts(
             parts.mean, parts.factor * sigma_scale, parts.diagonal * sigma_scale**2
         )
+    measured = data.mask > 0
     if spread:
-        with numpyro.plate("rows", data.rows.log_reflectance.shape[0]):
+        rows = numpyro.plate("rows", data.rows.log_reflectance.shape[0])
+        with rows, numpyro.handlers.mask(mask=measured):
             numpyro.sample("obs", dist.Normal(parts.mean, parts.diagonal**0.5), obs=observed)
     else:
+        factor, diagonal = mask_rows(measured, parts.factor, parts.diagonal)
+        mean = jnp.where(measured, parts.mean, data.rows.log_reflectance)
         numpyro.sample(
             "obs",
-            dist.LowRankMultivariateNormal(parts.mean, parts.factor, parts.diagonal),
+            LowRankNormal(mean, factor, diagonal, measured, disjoint_columns(data)),
             obs=observed,
+        )
+
+
+def disjoint_columns(data: ModelData) -> int:
+    """The leading columns of the rows' covariance factor W whose rows do not overlap: one per
+    physical sample (each row belongs to one sample), so the capacitance's leading block is
+    diagonal (:class:`brdf_infer.posterior._lowrank.BlockCholesky`)."""
+    return data.noise.sample_members.shape[-1]
+
+
+def mask_rows(keep: jnp.ndarray, factor: jnp.ndarray, diagonal: jnp.ndarray):
+    """(W, D) with the rows outside ``keep`` made independent unit-variance rows (W row 0,
+    D = 1): with a zero residual there they add nothing but the 2π constant."""
+    return jnp.where(keep[:, None], factor, 0.0), jnp.where(keep, diagonal, 1.0)
+
+
+class LowRankNormal(dist.Distribution):
+    """N(mean, D + W Wᵀ) over the rows, its log density in fused XLA ops (:mod:`._lowrank`).
+
+    Rows outside ``keep`` (masked: W row 0, D = 1, mean = the observed value) are left out of
+    the 2π normalisation, so they leave the log density exactly.
+    """
+
+    arg_constraints = {}  # noqa: RUF012 (NumPyro's class attribute)
+    support = dist.constraints.real_vector
+
+    def __init__(self, mean, factor, diagonal, keep=None, disjoint: int = 0):
+        self.loc, self.factor, self.diagonal = mean, factor, diagonal
+        self.disjoint = disjoint
+        self.keep = jnp.ones(mean.shape[-1], bool) if keep is None else keep
+        super().__init__(batch_shape=(), event_shape=mean.shape[-1:])
+
+    def sample(self, key, sample_shape=()):
+        rank_key, row_key = jax.random.split(key)
+        shared = jax.random.normal(rank_key, (*sample_shape, self.factor.shape[-1]))
+        own = jax.random.normal(row_key, (*sample_shape, self.loc.shape[-1]))
+        return self.loc + shared @ self.factor.T + own * jnp.sqrt(self.diagonal)
+
+    @property
+    def mean(self):
+        return self.loc
+
+    @property
+    def variance(self):
+        return self.diagonal + jnp.sum(self.factor**2, axis=-1)
+
+    def log_prob(self, value):
+        count = jnp.sum(self.keep)
+        return low_rank_normal_log_density(
+            value, self.loc, self.factor, self.diagonal, count, self.disjoint
         )
 
 
@@ -405,7 +475,11 @@ def drawn_noise_scales(errors: ErrorSettings, sites: dict, count: int) -> NoiseS
 def build_model_data(scene: Scene, measurements: Measurements) -> ModelData:
     """The :class:`ModelData` of ``measurements`` under ``scene``."""
     rows = build_observation_model(scene, measurements).data
-    return ModelData(rows=rows, noise=noise_layout(scene.errors, measurements))
+    return ModelData(
+        rows=rows,
+        noise=noise_layout(scene.errors, measurements),
+        mask=jnp.ones(len(measurements)),
+    )
 
 
 def build_posterior_model(

@@ -120,14 +120,16 @@ class NutsProgram:
                 self._compiled[key] = jax.jit(function).lower(*arguments).compile()
             return self._compiled[key]
 
-    def _chain(self, key, data: ModelData, total: int, on_chunk=None) -> list:
+    def _chain(self, key, data: ModelData, total: int, on_chunk=None, cancel=None) -> list:
         """One chain of ``total`` iterations in chunks of :data:`CHUNK` (the last one's surplus
-        is dropped): records (iterations, ...)."""
+        is dropped): records (iterations, ...). Stops between chunks once ``cancel`` is set."""
         chunk = CHUNK
         state = self._compile("start", self._start, key, data)(key, data)
         steps = self._compile("steps", lambda s, d: self._steps(s, d, chunk), state, data)
         parts, done = [], 0
         while done < total:
+            if cancel is not None and cancel.is_set():
+                raise Cancelled
             state, record = steps(state, data)
             parts.append(jax.device_get(record))
             if on_chunk is not None:
@@ -135,10 +137,21 @@ class NutsProgram:
             done += chunk
         return [np.concatenate([p[k] for p in parts])[:total] for k in range(len(parts[0]))]
 
-    def _single(self, data, keys, draws: int, on_chunk=None) -> NutsOutput:
-        """All chains of one data set, one after another; arrays (chains, draws, ...)."""
+    def _single(
+        self, data, keys, draws: int, on_chunk=None, workers: int = 1, cancel=None
+    ) -> NutsOutput:
+        """All chains of one data set, ``workers`` side by side; arrays (chains, draws, ...).
+
+        Each chain runs the same compiled program with its own key, so its draws do not
+        depend on how many run at once.
+        """
         total = self.warmup + draws
-        records = [self._chain(key, data, total, on_chunk) for key in keys]
+        records = _side_by_side(
+            lambda key, stop: self._chain(key, data, total, on_chunk, stop),
+            list(keys),
+            workers,
+            cancel,
+        )
         flat_z, *statistics = (
             np.stack([r[k] for r in records])[:, self.warmup :] for k in range(len(records[0]))
         )
@@ -157,18 +170,26 @@ class NutsProgram:
         keys: jnp.ndarray,
         draws: int,
         *,
+        workers: int | None = None,
+        cancel: threading.Event | None = None,
         progress: bool = False,
         description: str = "NUTS",
     ) -> NutsOutput:
-        """Every chain of one data set, one after another through one compiled program.
+        """Every chain of one data set through one compiled program, side by side in threads.
 
-        On a CPU that is as fast as running the chains side by side (vmapped chains wait for
-        the longest trajectory of each iteration) and compiles half as much.
+        The chains share the compiled program and each has its own key, so the draws are
+        those of running them one after another (the same program, bit for bit), in about
+        1/workers of the time on a CPU with that many cores. A small model's NUTS step is
+        latency-bound (a few µs of arithmetic per gradient), so threads over one program beat
+        vmapped chains, which wait for the longest trajectory of every iteration.
 
         Args:
             data: the data set.
             keys: PRNG keys, one per chain (chains, 2).
             draws: kept draws per chain (after the warmup).
+            workers: chains at once (default: one per core, at most one per chain).
+            cancel: set it (from another thread or a signal handler) to stop the chains
+                between compiled chunks; :class:`Cancelled` is raised.
             progress: a progress bar on stderr.
             description: the progress bar's label.
 
@@ -176,13 +197,18 @@ class NutsProgram:
             Draws of shape (chains, draws, ...).
         """
         total = self.warmup + draws
+        workers = default_workers(len(keys)) if workers is None else workers
         bar = _progress_bar(progress, len(keys) * total, description)
         with compile_clock() as compile_seconds:
             clock = time.perf_counter()
-            output = self._single(data, keys, draws, None if bar is None else bar.update)
+            try:
+                output = self._single(
+                    data, keys, draws, None if bar is None else bar.update, workers, cancel
+                )
+            finally:
+                if bar is not None:
+                    bar.close()
             seconds = time.perf_counter() - clock
-        if bar is not None:
-            bar.close()
         output.seconds = {
             "sampling": max(seconds - compile_seconds[0], 0.0),
             "compile": compile_seconds[0],
@@ -197,6 +223,7 @@ class NutsProgram:
         *,
         workers: int | None = None,
         mode: str = "auto",
+        cancel: threading.Event | None = None,
         progress: bool = False,
         description: str = "NUTS",
     ) -> NutsOutput:
@@ -217,6 +244,8 @@ class NutsProgram:
                 program), ``vmap`` (one program vmapped over the data sets, the data-set
                 axis sharded over every device JAX sees: :func:`shard_batch`) or ``auto``:
                 threads on a single CPU device, else vmap.
+            cancel: set it to stop between compiled chunks (threads mode) or before the
+                vmapped program starts; :class:`Cancelled` is raised.
             progress: a progress bar (per data set) on stderr.
             description: the progress bar's label.
 
@@ -234,8 +263,10 @@ class NutsProgram:
         with compile_clock() as compile_seconds:
             clock = time.perf_counter()
             if mode == "threads":
-                outputs = self._threaded(datasets, keys, draws, total, workers, bar)
+                outputs = self._threaded(datasets, keys, draws, workers, bar, cancel)
             else:
+                if cancel is not None and cancel.is_set():
+                    raise Cancelled
                 outputs = [self._vmapped(datasets, keys, draws, total)]
                 if bar is not None:
                     bar.update(count)
@@ -258,20 +289,17 @@ class NutsProgram:
             },
         )
 
-    def _threaded(self, datasets, keys, draws, total, workers, bar) -> list[NutsOutput]:
-        count = int(keys.shape[0])
+    def _threaded(self, datasets, keys, draws, workers, bar, cancel) -> list[NutsOutput]:
+        """One data set per thread, its chains one after another (the cores are busy)."""
 
-        def one(index: int) -> NutsOutput:
+        def one(index: int, stop: threading.Event) -> NutsOutput:
             data = jax.tree_util.tree_map(lambda leaf: leaf[index], datasets)
-            output = self._single(data, keys[index], draws)
+            output = self._single(data, keys[index], draws, cancel=stop)
             if bar is not None:
                 bar.update(1)
             return output
 
-        first = one(0)  # compiles, once, before the threads share the programs
-        workers = workers or os.cpu_count() or 1
-        with ThreadPoolExecutor(max_workers=workers) as pool:
-            return [first, *pool.map(one, range(1, count))]
+        return _side_by_side(one, list(range(int(keys.shape[0]))), workers or 0, cancel)
 
     def _vmapped(self, datasets, keys, draws, total) -> NutsOutput:
         count = int(keys.shape[0])
@@ -289,6 +317,48 @@ class NutsProgram:
             stats=dict(zip(_STATISTICS, statistics, strict=True)),
             seconds={},
         )
+
+
+class Cancelled(Exception):
+    """Sampling stopped because its ``cancel`` event was set."""
+
+
+def default_workers(tasks: int) -> int:
+    """Threads for ``tasks`` independent chains or data sets: one per core, at most one per
+    task."""
+    return max(1, min(tasks, os.cpu_count() or 1))
+
+
+class _Stop:
+    """Set when this group of threads must stop: by itself, or by an outside ``cancel``."""
+
+    def __init__(self, cancel: threading.Event | None):
+        self._own = threading.Event()
+        self._cancel = cancel
+
+    def set(self) -> None:
+        self._own.set()
+
+    def is_set(self) -> bool:
+        return self._own.is_set() or (self._cancel is not None and self._cancel.is_set())
+
+
+def _side_by_side(function, items: list, workers: int, cancel=None) -> list:
+    """``function(item, stop)`` for every item, ``workers`` at a time (0: one per core), in
+    order. Compiled programs are built once under :meth:`NutsProgram._compile`'s lock, so the
+    threads may start together. If one raises (or the caller is interrupted), ``stop`` is set
+    so the others end at their next chunk, and the error propagates."""
+    stop = _Stop(cancel)
+    workers = workers or default_workers(len(items))
+    if workers <= 1 or len(items) <= 1:
+        return [function(item, stop) for item in items]
+    with ThreadPoolExecutor(max_workers=workers) as pool:
+        futures = [pool.submit(function, item, stop) for item in items]
+        try:
+            return [future.result() for future in futures]
+        except BaseException:
+            stop.set()
+            raise
 
 
 def _shapes(arguments) -> tuple:

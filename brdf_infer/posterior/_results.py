@@ -21,7 +21,7 @@ from brdf_infer.errors import BadInputError
 from brdf_infer.model import REFERENCE_FAMILY, ModelFamily, family
 from brdf_infer.params import PARAM_NAMES
 from brdf_infer.posterior._loo import pointwise_loo_terms
-from brdf_infer.posterior._model import NOISE_SITES, PosteriorModel
+from brdf_infer.posterior._model import NOISE_SITES, PosteriorModel, disjoint_columns
 from brdf_infer.posterior._samplers import Draws
 
 POSTERIOR_FILE, SUMMARY_FILE, BANDS_FILE = "posterior.nc", "summary.json", "bands.json"
@@ -58,7 +58,11 @@ def loo_terms(model, sites: dict[str, np.ndarray]):
     chains, n_draws = next(iter(sites.values())).shape[:2]
     parts = model.draw_parts(flatten_draws(sites))
     log_lik, cdf = pointwise_loo_terms(
-        model.data.rows.log_reflectance, parts.mean, parts.factor, parts.diagonal
+        model.data.rows.log_reflectance,
+        parts.mean,
+        parts.factor,
+        parts.diagonal,
+        disjoint=disjoint_columns(model.data),
     )
     shape = (chains, n_draws, -1)
     return np.asarray(log_lik).reshape(shape), np.asarray(cdf).reshape(shape)

@@ -192,6 +192,7 @@ def write_report(run: Path, progress=print) -> tuple[Path, list[str]]:
         + "</p>",
         _result_box(summary, bands, scene.band_theta_i_deg(rows), member.name),
         *(_html.figure(png, caption) for name, caption, png in figures if name == "brdf_bands"),
+        _studies_line(run),
         "<h2>The run</h2>",
         _html.table(
             ["item", "value"],
@@ -298,6 +299,23 @@ def write_report(run: Path, progress=print) -> tuple[Path, list[str]]:
     path = atomic_write_bytes(run / REPORT_FILE, document.encode())
     progress(f"report written in {time.perf_counter() - started:.1f} s")
     return path, failures
+
+
+def _studies_line(run: Path) -> str:
+    """One line naming the studies this run left out and how to add them (``studies.json``
+    of ``run``; empty for a ``posterior`` folder)."""
+    path = run / "studies.json"
+    if not path.exists():
+        return ""
+    left_out = json.loads(path.read_text()).get("not_run", [])
+    if not left_out:
+        return ""
+    return (
+        "<p class='studies'>Not run: "
+        + _html.escape("; ".join(left_out))
+        + ". Add them with a <code>[studies]</code> table in the scene, or all at once with "
+        "<code>brdf-infer run --full</code>.</p>"
+    )
 
 
 def _compare_section(run: Path) -> list[str]:
