@@ -21,6 +21,7 @@ import numpy as np
 
 from brdf_infer._cli_compare import add_compare_arguments, command_compare
 from brdf_infer._cli_export import add_export_arguments, command_export
+from brdf_infer._device import DEVICES, placement
 from brdf_infer._outdir import check_output_dir
 from brdf_infer.errors import BadInputError
 
@@ -495,25 +496,23 @@ def _command_run(args: argparse.Namespace) -> None:
     _headless()
     from brdf_infer.workflow import RunSettings, run
 
-    for option, value in (("--chains", args.chains), ("--draws", args.draws)):
-        if value < 1:
-            raise BadInputError(f"must be at least 1, got {value}", field=option)
-    if args.warmup < 0:
-        raise BadInputError(f"must be >= 0, got {args.warmup}", field="--warmup")
     _checked_model(args.model)
     scene, measurements = _scene_and_measurements(args.scene, args.instrument)
+    settings = RunSettings(
+        chains=args.chains,
+        draws=args.draws,
+        warmup=args.warmup,
+        seed=args.seed,
+        model=args.model,
+        studies=_requested_studies(args, scene),
+    )
+    _checked_settings(settings)
     out = check_output_dir(args.out or Path("reports") / scene.name)
     result = run(
         scene,
         measurements,
         out,
-        RunSettings(
-            chains=args.chains,
-            draws=args.draws,
-            warmup=args.warmup,
-            seed=args.seed,
-            model=args.model,
-        ),
+        settings,
         example=Path(args.example) if args.example else None,
         progress=_progress,
     )
@@ -538,6 +537,59 @@ def _command_run(args: argparse.Namespace) -> None:
     print(f"verdict: {'; '.join(result.verdict) or 'every diagnostic passes'}")
     print(f"report: {result.report}")
     print(f"done in {result.seconds:.1f} s")
+
+
+_RUN_FLAGS = {"chains": "--chains", "draws": "--draws", "warmup": "--warmup"}
+
+
+def _checked_settings(settings) -> None:
+    """``settings.check()`` with the record's field names mapped to this command's flags."""
+    try:
+        settings.check()
+    except BadInputError as error:
+        flag = _RUN_FLAGS.get(error.field or "")
+        if flag is None:
+            raise
+        raise BadInputError(error.problem, field=flag) from None
+
+
+def _requested_studies(args: argparse.Namespace, scene):
+    """The studies the options ask for (None: none given, the scene's ``[studies]``)."""
+    from brdf_infer.error_model import ERROR_MODELS
+    from brdf_infer.instrument import INSTRUMENT_MODELS
+    from brdf_infer.model import FAMILY_NAMES
+    from brdf_infer.scene import Studies
+    from brdf_infer.workflow import full_studies
+
+    if args.full:
+        return full_studies(scene)
+    given = (args.error_models, args.instruments, args.compare)
+    if all(value is None for value in given) and not args.raytrace:
+        return None
+    for option, values, known in (
+        ("--error-models", args.error_models, ERROR_MODELS),
+        ("--instruments", args.instruments, INSTRUMENT_MODELS),
+        ("--compare", args.compare, FAMILY_NAMES),
+    ):
+        for value in values or ():
+            if value not in known:
+                raise BadInputError(
+                    f"unknown name {value!r} (known: {', '.join(known)})", field=option
+                )
+    if args.compare is not None and len(set(args.compare)) < 2:
+        raise BadInputError("name at least two families to compare", field="--compare")
+    if args.raytrace and scene.raytrace is None:
+        raise BadInputError(
+            "the scene has no [raytrace] table to ray-trace with",
+            file=scene.path,
+            field="--raytrace",
+        )
+    return Studies(
+        error_models=tuple(args.error_models or ()),
+        instruments=tuple(args.instruments or ()),
+        raytrace=args.raytrace,
+        compare=tuple(dict.fromkeys(args.compare or ())),
+    )
 
 
 def _require_raytrace(scene) -> None:
@@ -767,7 +819,7 @@ def _command_sbc(args: argparse.Namespace) -> None:
 
 def _command_batch(args: argparse.Namespace) -> None:
     _headless()
-    from brdf_infer.batch import BatchSettings, run_batch
+    from brdf_infer.batch import BatchInterrupted, BatchSettings, run_batch_until_signalled
 
     _checked_model(args.model)
     settings = BatchSettings(
@@ -780,7 +832,17 @@ def _command_batch(args: argparse.Namespace) -> None:
     )
     settings.check()
     out = check_output_dir(args.out or Path("reports") / "batch")
-    result = run_batch(args.scenes, out, settings, model=args.model, progress=_progress)
+    try:  # SIGINT and SIGTERM stop the batch, keeping the complete run folders
+        result = run_batch_until_signalled(
+            args.scenes, out, settings, model=args.model, progress=_progress
+        )
+    except BatchInterrupted as interrupted:
+        # the complete run folders and batch.json are on disk, nothing half-written is left;
+        # end now: the batch's threads may still run (they cannot be joined), and the
+        # interpreter's teardown with JAX loaded alone takes seconds
+        print(f"brdf-infer: {interrupted.message(out)}", file=sys.stderr, flush=True)
+        sys.stdout.flush()
+        os._exit(interrupted.exit_code)
     if args.json:
         _emit_json({"out": str(out), **result.as_json()})
         return
@@ -829,9 +891,13 @@ def _command_report(args: argparse.Namespace) -> None:
 
 def _command_bench(args: argparse.Namespace) -> None:
     _headless()
-    from brdf_infer.bench import write_report
+    from brdf_infer.bench import write_report, write_speed_report
 
-    path = write_report(Path(args.out), args.quick, progress=_progress)
+    if args.speed:
+        out = Path(args.out or "reports/benchmarks-speed.md")
+        path = write_speed_report(out, args.quick, progress=_progress)
+    else:
+        path = write_report(Path(args.out or "reports/benchmarks.md"), args.quick, _progress)
     print(f"benchmark report written to {path}")
 
 
@@ -849,6 +915,8 @@ class _HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``brdf-infer`` argument parser."""
+    from brdf_infer.workflow import RunSettings
+
     parser = _Parser(
         prog="brdf-infer",
         description="Bayesian BRDF/TIS inference for black coatings (Strumik et al. 2024).",
@@ -864,6 +932,14 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="do not use the persistent compilation cache (BRDF_INFER_CACHE, else "
         "~/.cache/brdf_infer) for this run",
+    )
+    common.add_argument(
+        "--device",
+        choices=DEVICES,
+        default="auto",
+        help="where to compute: auto keeps single-scene work (run, posterior, fit, ...) on "
+        "the CPU, where a small posterior is fastest, and gives batch, sbc, raytrace and "
+        "bench the accelerator when JAX has one",
     )
 
     def command(name: str, help_text: str) -> argparse.ArgumentParser:
@@ -882,14 +958,36 @@ def build_parser() -> argparse.ArgumentParser:
         return parser
 
     run = scene_command(
-        "run", "main job: paper fit, least squares, NUTS posterior and report in reports/<scene>/"
+        "run",
+        "main job: paper fit, least squares, NUTS posterior and report in reports/<scene>/, "
+        "plus the studies the scene's [studies] table or the options below ask for",
     )
+    defaults = RunSettings()
     run.add_argument("--out", help="output directory (default: reports/<scene>)")
     run.add_argument("--example", help="also write the small committed example report here")
-    run.add_argument("--chains", type=int, default=4, help="NUTS chains")
-    run.add_argument("--draws", type=int, default=1000, help="NUTS draws per chain")
-    run.add_argument("--warmup", type=int, default=1000, help="NUTS warmup per chain")
-    run.add_argument("--seed", type=int, default=0, help="random seed")
+    run.add_argument("--chains", type=int, default=defaults.chains, help="NUTS chains")
+    run.add_argument("--draws", type=int, default=defaults.draws, help="NUTS draws per chain")
+    run.add_argument("--warmup", type=int, default=defaults.warmup, help="NUTS warmup per chain")
+    run.add_argument("--seed", type=int, default=defaults.seed, help="random seed")
+    studies = run.add_argument_group(
+        "studies (default: the scene's [studies] table; any of these replaces it)"
+    )
+    studies.add_argument(
+        "--full",
+        action="store_true",
+        help="every study the scene can run (other error model, instrument models, ray "
+        "traces, model comparison)",
+    )
+    studies.add_argument(
+        "--error-models", nargs="+", metavar="NAME", help="posteriors under these error models"
+    )
+    studies.add_argument(
+        "--instruments", nargs="+", metavar="NAME", help="posteriors under these instrument models"
+    )
+    studies.add_argument("--raytrace", action="store_true", help="ray-trace the posterior")
+    studies.add_argument(
+        "--compare", nargs="+", metavar="FAMILY", help="model families compared by PSIS-LOO"
+    )
     _model_argument(run)
     _instrument_argument(run)
     run.set_defaults(handler=_command_run)
@@ -1073,7 +1171,17 @@ def build_parser() -> argparse.ArgumentParser:
 
     bench = command("bench", "error-against-run-time benchmarks of every numerical method")
     bench.add_argument("--quick", action="store_true", help="small sizes, a couple of minutes")
-    bench.add_argument("--out", default="reports/benchmarks.md", help="Markdown report path")
+    bench.add_argument(
+        "--out",
+        help="Markdown report path (default: reports/benchmarks.md, with --speed "
+        "reports/benchmarks-speed.md)",
+    )
+    bench.add_argument(
+        "--speed",
+        action="store_true",
+        help="only the main job's speed: run and posterior cold and warm, the gradient, the "
+        "peers on the same posterior",
+    )
     bench.set_defaults(handler=_command_bench)
 
     scenes = command("scenes", "list the built-in scenes")
@@ -1098,7 +1206,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         disable_compilation_cache()
     try:
         require_float64()
-        args.handler(args)
+        with placement(args.command, getattr(args, "device", "auto")):
+            args.handler(args)
     except (BadInputError, Float32Error) as error:
         print(f"brdf-infer: error: {error}", file=sys.stderr)
         return EXIT_BAD_INPUT

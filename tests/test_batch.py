@@ -50,13 +50,32 @@ def _scaled_rows(folder, factor: float):
     return path
 
 
+def _fewer_rows(folder, name: str, factor: float = 1.0):
+    """The bundled rows without samples 5 and 6 and without series II above θi = 50° (23 of
+    42 rows, 5 of 7 samples, 1 of 3 rotation settings), each reflectance × ``factor``."""
+    lines = _scaled_rows(folder, factor).read_text().splitlines()
+    header = lines[0].split(",")
+    series, sample, theta_i = (header.index(k) for k in ("series", "sample", "theta_i_deg"))
+    kept = [lines[0]]
+    for line in lines[1:]:
+        cells = line.split(",")
+        if cells[sample] in ("5", "6") or (cells[series] == "II" and float(cells[theta_i]) > 50):
+            continue
+        kept.append(line)
+    path = folder / f"{name}.csv"
+    path.write_text("\n".join(kept) + "\n")
+    return path
+
+
 @pytest.fixture(scope="module")
 def batch_run(tmp_path_factory):
-    """Two scenes of one structure (different data), one of fewer rows, and a broken one."""
+    """Two scenes of one structure (different data), one of fewer rows and samples (padded
+    into the same group), and a broken one."""
     folder = tmp_path_factory.mktemp("batch")
     scenes = [
         _scene(folder, "a"),
         _scene(folder, "b", _scaled_rows(folder, 1.3)),
+        _scene(folder, "c", _fewer_rows(folder, "rows_c", 0.8)),
     ]
     (folder / "broken.toml").write_text(
         'name = "broken"\nmeasurements = "nowhere.csv"\n'
@@ -75,11 +94,11 @@ def test_batch_json_contract_and_a_broken_scene_is_skipped(batch_run):
     assert set(payload) >= {"scenes", "groups", "devices", "seconds"}
     assert payload["groups"] == 1 and payload["devices"] >= 1
     by_name = {Path(entry["source"]).stem: entry for entry in payload["scenes"]}
-    assert set(by_name) == {"a", "b", "broken"}
+    assert set(by_name) == {"a", "b", "c", "broken"}
     assert by_name["a"]["scene"] == "a"  # a scene that could not be read keeps its source
     broken = by_name["broken"]
     assert broken["error"] and "nowhere.csv" in broken["error"] and broken["out"] is None
-    for name in ("a", "b"):
+    for name in ("a", "b", "c"):
         entry = by_name[name]
         assert entry["error"] is None
         assert set(entry) >= {"out", "r_hat_max", "ess_min", "divergences", "tis"}
@@ -102,6 +121,116 @@ def test_a_batch_scene_has_the_draws_of_its_own_posterior_run(batch_run, tmp_pat
     theirs = az.from_netcdf(single / "posterior.nc").posterior
     for name in ("brdf0", "alpha", "theta_s0", "repeatability"):
         np.testing.assert_array_equal(np.asarray(ours[name]), np.asarray(theirs[name]))
+
+
+def test_a_padded_scene_samples_its_own_posterior_and_reports_its_own_rows(
+    batch_run, tmp_path, capsys
+):
+    """Scene c (23 rows, 5 samples) ran padded to a's 42 rows and 7 samples: a program of
+    another shape, so other draws, but the same posterior; its run folder is computed from
+    its own rows only."""
+    folder, out, _ = batch_run
+    summary = json.loads((out / "c" / "summary.json").read_text())
+    assert summary["n_points"] == 23
+    idata = az.from_netcdf(out / "c" / "posterior.nc")
+    assert idata.log_likelihood["obs"].shape[-1] == 23
+    assert idata.observed_data["obs"].shape == (23,)
+    assert idata.posterior_predictive["obs"].shape[-1] == 23
+    assert summary["diagnostics"]["divergences"] == 0
+    single = tmp_path / "single"
+    code, _, err = run_cli(
+        "posterior", str(folder / "c.toml"), *SMALL, "--out", str(single), capsys=capsys
+    )
+    assert code == 0, err
+    ours = az.from_netcdf(out / "c" / "posterior.nc").posterior
+    theirs = az.from_netcdf(single / "posterior.nc").posterior
+    assert set(ours.data_vars) == set(theirs.data_vars)  # no site of the padded shape
+    assert all(ours[name].shape == theirs[name].shape for name in theirs.data_vars)
+    for name in ("brdf0", "alpha", "theta_s0", "repeatability"):
+        a, b = np.asarray(ours[name]).ravel(), np.asarray(theirs[name]).ravel()
+        # 2 × 150 draws each: medians agree to a fraction of the posterior sd
+        assert abs(np.median(a) - np.median(b)) < 0.5 * np.std(b), name
+        assert 0.6 < np.std(a) / np.std(b) < 1.6, name
+
+
+def _potential_cases():
+    """(label, scene, full measurements, fewer measurements, family)."""
+    import dataclasses
+
+    from brdf_infer.scene import load_scene
+
+    lya = load_scene("lya")
+    rows = lya.load_measurements()
+    kept = ~np.isin(rows.sample, ["5", "6"]) & ~((rows.series == "II") & (rows.theta_i_deg > 50))
+    fewer = rows.subset(kept)
+    spread = dataclasses.replace(lya, errors=dataclasses.replace(lya.errors, model="spread"))
+    aperture = dataclasses.replace(
+        lya, instrument=dataclasses.replace(lya.instrument, model="aperture")
+    )
+    # out of the plane of incidence: series II at φs = 150° (in-plane rows NaN)
+    phi = np.where(rows.series == "II", 150.0, np.nan)
+    outside = dataclasses.replace(rows, phi_s_deg=phi)
+    outside_fewer = outside.subset(kept)
+    return [
+        ("generative", lya, rows, fewer, None),
+        ("spread", spread, rows, fewer, None),
+        ("abg", lya, rows, fewer, "abg"),
+        ("aperture kernel", aperture, rows, fewer, None),
+        ("out of plane", lya, outside, outside_fewer, None),
+    ]
+
+
+@pytest.mark.parametrize("case", range(5))
+def test_padding_leaves_the_log_density_exactly(case):
+    """The potential of a scene padded to another scene's rows and member columns equals its
+    own at random points (the padding rows are masked out, the member columns all zero)."""
+    import jax
+
+    from brdf_infer.posterior import build_model
+    from brdf_infer.posterior._padding import member_counts, pad_datasets, row_count
+    from brdf_infer.posterior._potential import FlatPotential
+
+    label, scene, rows, fewer, family = _potential_cases()[case]
+    full, small = build_model(scene, rows, family), build_model(scene, fewer, family)
+    padded = pad_datasets([full.data, small.data])
+    assert padded[0] is full.data  # the largest is left as it is
+    assert row_count(padded[1]) == row_count(full.data) > row_count(small.data)
+    assert member_counts(padded[1]) == member_counts(full.data) != member_counts(small.data)
+    assert float(np.sum(padded[1].mask)) == row_count(small.data)
+    flat = FlatPotential(small)
+    points = np.random.default_rng(case).uniform(-2, 2, (6, flat.dimension))
+    potential = jax.jit(jax.vmap(flat.potential, (0, None)))
+    own, in_padding = potential(points, small.data), potential(points, padded[1])
+    assert np.all(np.isfinite(own)), label
+    np.testing.assert_allclose(in_padding, own, rtol=1e-10, atol=0, err_msg=label)
+
+
+def test_sixteen_scenes_of_two_sizes_run_as_one_compiled_group(tmp_path):
+    """8 scenes of 42 rows (7 samples) and 8 of 23 rows (5 samples): one group, each run
+    folder complete and of its own rows."""
+    from brdf_infer.batch import BatchSettings, run_batch
+
+    scenes = []
+    for k in range(8):
+        factor = 1.0 + 0.05 * k
+        scenes.append(_scene(tmp_path, f"full{k}", _scaled_rows(tmp_path, factor)))
+        scenes.append(_scene(tmp_path, f"fewer{k}", _fewer_rows(tmp_path, f"f{k}", factor)))
+    out = tmp_path / "out"
+    settings = BatchSettings(chains=2, warmup=30, draws=20)
+    result = run_batch(scenes, out, settings)
+    assert result.groups == 1 and not result.interrupted and result.complete == 16
+    assert sorted(p.name for p in out.iterdir()) == sorted(
+        [*(f"full{k}" for k in range(8)), *(f"fewer{k}" for k in range(8)), "batch.json"]
+    )
+    for entry in result.entries:
+        rows = 42 if entry.scene.name.startswith("full") else 23
+        assert entry.error is None and entry.summary["n_points"] == rows
+        assert entry.summary["settings"]["batch"]["scenes"] == 16
+        assert set(p.name for p in entry.out.iterdir()) == {
+            "posterior.nc",
+            "summary.json",
+            "bands.json",
+        }
 
 
 def test_readers_of_run_folders_take_a_batch_scene(batch_run, capsys):
@@ -183,3 +312,119 @@ def test_vmapped_batch_of_one_scene(tmp_path, capsys):
     entry = json.loads((out / "batch.json").read_text())["scenes"][0]
     assert entry["error"] is None and entry["divergences"] == 0
     assert np.isfinite(entry["r_hat_max"]) and len(entry["tis"]["median"]) > 0
+
+
+def _start_batch(folder: Path, out: Path) -> tuple:
+    """``python -m brdf_infer batch`` of two groups of 6 scenes (unequal sizes; the second
+    with the ``spread`` error model), in the background; (process, stderr file)."""
+    import subprocess
+    import sys
+
+    scenes = []
+    for k in range(6):
+        factor = 1.0 + 0.1 * k
+        rows = _scaled_rows(folder, factor) if k % 2 else _fewer_rows(folder, f"r{k}", factor)
+        scenes.append(_scene(folder, f"g{k}", rows))
+    for k in range(6):
+        path = Path(_scene(folder, f"s{k}", _scaled_rows(folder, 1.0 + 0.1 * k)))
+        path.write_text(path.read_text() + '[errors]\nmodel = "spread"\n')
+        scenes.append(str(path))
+    with (folder / "stderr.txt").open("w") as stderr:  # the process keeps its own copy
+        process = subprocess.Popen(
+            [sys.executable, "-m", "brdf_infer", "batch", *scenes, "--out", str(out), *SMALL],
+            stdout=subprocess.DEVNULL,
+            stderr=stderr,
+        )
+    return process, folder / "stderr.txt"
+
+
+def _wait_for(condition, timeout: float, process) -> float:
+    """Poll ``condition`` until true (seconds waited); fails if the process ends first."""
+    import time
+
+    started = time.monotonic()
+    while not condition():
+        assert process.poll() is None, "the batch ended before it could be interrupted"
+        assert time.monotonic() - started < timeout, "timed out"
+        time.sleep(0.05)
+    return time.monotonic() - started
+
+
+def _seconds_to_stop(process) -> float:
+    """Seconds from now until ``process`` ends (killed after 30 s)."""
+    import subprocess
+    import time
+
+    sent = time.monotonic()
+    try:
+        process.wait(timeout=30)
+    except subprocess.TimeoutExpired:
+        process.kill()
+        raise
+    return time.monotonic() - sent
+
+
+def _check_interrupted_folder(out: Path, code: int, stderr: str) -> int:
+    """Only complete run folders and batch.json in ``out``, listed as such; returns their
+    number."""
+    assert "Traceback" not in stderr
+    assert not [p.name for p in out.iterdir() if p.name.startswith(".")]  # no partial folder
+    folders = sorted(p for p in out.iterdir() if p.is_dir())
+    for folder in folders:
+        assert {p.name for p in folder.iterdir()} == {"posterior.nc", "summary.json", "bands.json"}
+        assert json.loads((folder / "summary.json").read_text())["diagnostics"]
+        assert az.from_netcdf(folder / "posterior.nc").posterior["brdf0"].size > 0
+    payload = json.loads((out / "batch.json").read_text())
+    assert payload["interrupted"] is True and len(payload["scenes"]) == 12
+    done = [e for e in payload["scenes"] if e["error"] is None]
+    assert sorted(Path(e["out"]).name for e in done) == [f.name for f in folders]
+    assert all(
+        e["out"] is None and "interrupted" in e["error"]
+        for e in payload["scenes"]
+        if e["error"] is not None
+    )
+    last = stderr.strip().splitlines()[-1]
+    assert last == (
+        f"brdf-infer: interrupted ({'SIGINT' if code == 130 else 'SIGTERM'}): "
+        f"{len(folders)} of 12 scene(s) complete in {out} (listed in batch.json); "
+        "no partial folder left"
+    )
+    return len(folders)
+
+
+def test_sigterm_stops_a_batch_keeping_the_complete_folders(tmp_path):
+    """SIGTERM once the first run folder is in place: the batch ends within seconds with
+    143, the complete folders intact and nothing half-written."""
+    import signal
+
+    out = tmp_path / "out"
+    process, stderr = _start_batch(tmp_path, out)
+    _wait_for(
+        lambda: (
+            out.is_dir() and any(p.is_dir() and not p.name.startswith(".") for p in out.iterdir())
+        ),
+        600,
+        process,
+    )
+    process.send_signal(signal.SIGTERM)
+    seconds = _seconds_to_stop(process)
+    assert process.returncode == 143, stderr.read_text()
+    assert seconds < 5.0, seconds  # measured 3.3 s (0.2 s when stopped between chunks)
+    complete = _check_interrupted_folder(out, 143, stderr.read_text())
+    assert 1 <= complete < 12
+
+
+def test_sigint_while_sampling_stops_a_batch_at_once(tmp_path):
+    """SIGINT while the first group compiles or samples: 130 within seconds, no folder."""
+    import signal
+    import time
+
+    out = tmp_path / "out"
+    process, stderr = _start_batch(tmp_path, out)
+    _wait_for(lambda: "group 1/2" in stderr.read_text(), 600, process)
+    time.sleep(2.0)
+    process.send_signal(signal.SIGINT)
+    seconds = _seconds_to_stop(process)
+    assert process.returncode == 130, stderr.read_text()
+    assert seconds < 5.0, seconds  # measured 3.3 s (0.2 s when stopped between chunks)
+    assert _check_interrupted_folder(out, 130, stderr.read_text()) == 0

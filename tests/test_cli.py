@@ -84,6 +84,19 @@ def test_run_is_the_main_job_and_its_verdict_passes(tmp_path, capsys, settings):
         assert (out_dir / name).is_file()
     assert not list(out_dir.rglob("*.tmp"))
     assert "TIS(70 deg)" in out and "done in" in out
+    # one posterior: the studies run only when asked, and the report says how to add them
+    studies = json.loads((out_dir / "studies.json").read_text())
+    assert studies["run"] == [] and "ray traces" in studies["not_run"]
+    assert not (out_dir / "variants").exists() and not (out_dir / "instruments.json").exists()
+    assert "brdf-infer run --full" in (out_dir / "report.html").read_text()
+
+
+@pytest.mark.slow
+def test_run_with_the_instrument_study_samples_each_model_side_by_side(tmp_path, capsys):
+    out_dir = tmp_path / "out"
+    argv = ["--out", str(out_dir), "--warmup", "500", "--draws", "500"]
+    code, _, err = run_cli("run", *argv, "--instruments", "aperture", "image", capsys=capsys)
+    assert code == 0, err
     instruments = json.loads((out_dir / "instruments.json").read_text())
     assert [m["instrument"] for m in instruments["models"]] == ["point", "aperture", "image"]
     for model in instruments["models"]:
@@ -92,9 +105,41 @@ def test_run_is_the_main_job_and_its_verdict_passes(tmp_path, capsys, settings):
         )
         assert np.isfinite(model["elpd_loo"]) and model["raytrace"]["rms_ln_image_ratio"] > 0
     assert "<h2>Instrument models</h2>" in (out_dir / "report.html").read_text()
+    assert json.loads((out_dir / "studies.json").read_text())["run"] == [
+        "instrument model aperture",
+        "instrument model image",
+    ]
+
+
+@pytest.mark.parametrize(
+    ("argv", "field"),
+    [
+        (["--instruments", "lens"], "--instruments"),
+        (["--error-models", "student"], "--error-models"),
+        (["--compare", "abg"], "--compare"),
+    ],
+)
+def test_run_refuses_unknown_studies_before_any_work(tmp_path, capsys, argv, field):
+    out_dir = tmp_path / "out"
+    code, stdout, err = run_cli("run", "--out", str(out_dir), *argv, capsys=capsys)
+    assert code == 2 and stdout == "" and f"'{field}'" in err
+    assert not out_dir.exists()
 
 
 def test_json_stdout_is_one_object_in_a_real_process():
     result = run_cli_process("tis", "--theta-i", "0", "--json")
     assert result.returncode == 0, result.stderr
     assert json.loads(result.stdout)["tis"][0] == pytest.approx(0.0358, abs=2e-4)
+
+
+def test_single_scene_commands_compute_on_the_cpu_and_batch_on_the_default_device():
+    import jax
+    import jax.numpy as jnp
+
+    from brdf_infer._device import placement
+
+    cpu = jax.devices("cpu")[0]
+    with placement("posterior"):
+        assert jnp.zeros(1).devices() == {cpu}
+    with placement("batch"):
+        assert jnp.zeros(1).devices() == {jax.devices()[0]}

@@ -146,7 +146,9 @@ def test_scene_lists_the_families_run_compares(lya, tmp_path):
         "[series.I]\naperture_diameter_mm = 7.2\naperture_distance_mm = 103.8\n"
         "[series.II]\naperture_diameter_mm = 7.5\naperture_distance_mm = 106.0\n"
     )
-    assert load_scene(path).compare == ("strumik2024", "abg")
+    assert load_scene(path).studies.compare == ("strumik2024", "abg")
+    path.write_text(path.read_text().replace("compare = ", "[studies]\ncompare = ", 1))
+    assert load_scene(path).studies.compare == ("strumik2024", "abg")
 
 
 def test_a_row_with_the_left_out_sigma_carries_no_information(lya):

@@ -364,3 +364,26 @@ def test_bad_sampler_settings_are_clear_errors(lya, capsys):
         "posterior", "--sampler", "emcee", "--resume", "--out", "/tmp/none-here", capsys=capsys
     )
     assert code == 2 and "no checkpoint to resume from" in err and out == ""
+
+
+def test_chains_side_by_side_give_the_draws_of_chains_one_after_another(lya):
+    """Threads share the one compiled program and each chain keeps its key: bit for bit."""
+    import threading
+
+    from brdf_infer.posterior import build_model
+    from brdf_infer.posterior._nuts import Cancelled, NutsProgram, chain_keys
+
+    scene, measurements = lya
+    model = build_model(scene, measurements)
+    program = NutsProgram(model, warmup=30)
+    keys = chain_keys(3, 1, 4)[0]
+    one_by_one = program.run(model.data, keys, 20, workers=1)
+    side_by_side = program.run(model.data, keys, 20, workers=4)
+    for name, values in one_by_one.sites.items():
+        np.testing.assert_array_equal(values, side_by_side.sites[name], err_msg=name)
+    for name, values in one_by_one.stats.items():
+        np.testing.assert_array_equal(values, side_by_side.stats[name], err_msg=name)
+    cancel = threading.Event()
+    cancel.set()
+    with pytest.raises(Cancelled):
+        program.run(model.data, keys, 20, workers=2, cancel=cancel)

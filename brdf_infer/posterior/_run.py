@@ -245,6 +245,19 @@ def run_posterior(
     return complete_run(model, measurements, result, seed, out, started)
 
 
+class _StepClock:
+    """Wall time of consecutive steps [s], by name."""
+
+    def __init__(self):
+        self.steps: dict[str, float] = {}
+        self._last = time.perf_counter()
+
+    def lap(self, name: str) -> None:
+        now = time.perf_counter()
+        self.steps[name] = now - self._last
+        self._last = now
+
+
 def complete_run(
     model: PosteriorModel | FamilyPosteriorModel,
     measurements: Measurements,
@@ -257,8 +270,11 @@ def complete_run(
     diagnostics and the summary, written to ``out`` (when given) atomically; ``started``: the
     ``time.perf_counter()`` at the start of the run (its total time)."""
     scene, name = model.scene, model_name(model)
+    clock = _StepClock()
     log_lik, cdf = loo_terms(model, result.sites)  # once: for PSIS-LOO and the LOO-PIT
+    clock.lap("loo_terms")
     idata = inference_data(model, result, seed, log_lik)
+    clock.lap("inference_data")
     theta_i_band = scene.band_theta_i_deg(measurements)
     if name == REFERENCE_FAMILY:
         params = draws_params(result.sites)
@@ -278,7 +294,9 @@ def complete_run(
         parameters, fixed = model.family.parameters, ()
         medians = {n: float(np.median(v)) for n, v in physical.items()}
         units, pi_brdf0 = dict(model.family.units), None
+    clock.lap("bands")
     checks = diagnostics(idata, result, parameters, fixed)
+    clock.lap("diagnostics")
     tis_70 = None
     if "tis" in bands:
         at = bands["tis"]["theta_i_deg"].index(70.0)
@@ -301,8 +319,11 @@ def complete_run(
         "predictive": predictive_checks(idata, log_lik, cdf),
         "tis_70deg": tis_70,
         "pi_brdf0": pi_brdf0,
-        "seconds": {**result.seconds, "total": time.perf_counter() - started},
+        "seconds": dict(result.seconds),
     }
+    clock.lap("predictive")
+    summary["seconds"]["after_sampling"] = clock.steps  # the files are written after this
+    summary["seconds"]["total"] = time.perf_counter() - started
     if out is not None:
         write_results(out, idata, summary, bands)
         if result.sampler == "emcee":
