@@ -80,11 +80,12 @@ def test_low_rank_normal_matches_scipy_and_its_gradient_finite_differences(disjo
     diagonal = rng.uniform(0.01, 0.05, 40)
     mean = rng.normal(size=40)
     value = mean + rng.normal(size=40) * 0.2
-    expected = stats.multivariate_normal(mean, np.diag(diagonal) + factor @ factor.T).logpdf(
-        value
-    )
+    expected = stats.multivariate_normal(mean, np.diag(diagonal) + factor @ factor.T).logpdf(value)
     got = low_rank_normal_log_density(
-        jnp.asarray(value), jnp.asarray(mean), jnp.asarray(factor), jnp.asarray(diagonal),
+        jnp.asarray(value),
+        jnp.asarray(mean),
+        jnp.asarray(factor),
+        jnp.asarray(diagonal),
         disjoint=disjoint,
     )
     np.testing.assert_allclose(float(got), expected, rtol=1e-11)

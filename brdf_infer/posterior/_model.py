@@ -140,9 +140,7 @@ def whitened_coefficients(
     precision = jnp.diag(1.0 / prior_sd**2) + gram[:free, :free]
     rhs = prior_mean / prior_sd**2 + gram[:free, free]
     cholesky_factor = cholesky(precision)
-    values = solve_upper_transposed(
-        cholesky_factor, solve_lower(cholesky_factor, rhs) + standard
-    )
+    values = solve_upper_transposed(cholesky_factor, solve_lower(cholesky_factor, rhs) + standard)
     return values, -jnp.sum(jnp.log(jnp.diagonal(cholesky_factor)))
 
 
