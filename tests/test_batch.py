@@ -275,6 +275,7 @@ _SHARDED = textwrap.dedent(
 )
 
 
+@pytest.mark.slow  # compiles the sharded program in a child process
 def test_sharded_over_two_forced_cpu_devices_gives_the_results_of_one(tmp_path):
     """Three data sets (padded to four) over two devices against one device: the same keys,
     the same draws to rounding. Only to rounding: the partitioned program is compiled apart,

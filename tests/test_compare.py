@@ -53,7 +53,7 @@ def synthetic(scene, measurements, truth: str, seed: int):
     return dataclasses.replace(measurements, reflectance=reflectance, reflectance_err=errors_column)
 
 
-@pytest.mark.parametrize("truth", ["abg", "strumik2024"])
+@pytest.mark.parametrize("truth", [pytest.param("abg", marks=pytest.mark.slow), "strumik2024"])
 def test_compare_ranks_the_family_that_generated_the_data_first(lya, truth):
     scene, measurements = lya
     data = synthetic(scene, measurements, truth, seed=4)

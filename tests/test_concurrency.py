@@ -7,6 +7,7 @@ program executes, they can leave every pool thread waiting for work queued behin
 in a fresh process with a compilation cache folder of its own; a repetition that outlives its
 timeout has its stacks read, its process group killed, and the test fails with what it printed.
 
+Signals that stop a batch are tested in ``tests/test_batch.py``.
 ``BRDF_INFER_STRESS_REPEATS`` sets the repetitions per path (default 1; the benchmark runs 20
 through :func:`brdf_infer.bench._stress.stress_rows`). The first repetition of a path compiles
 into its fresh cache folder, the others load from it.
@@ -15,11 +16,6 @@ into its fresh cache folder, the others load from it.
 from __future__ import annotations
 
 import json
-import os
-import signal
-import subprocess
-import sys
-import time
 from pathlib import Path
 
 import pytest
@@ -27,7 +23,6 @@ import pytest
 from brdf_infer.bench._stress import (
     PATHS,
     StressSettings,
-    child_environment,
     repeats_from_environment,
     run_path,
     write_scenes,
@@ -68,6 +63,7 @@ def test_batch_in_threads_does_not_deadlock(tmp_path, scenes):
     assert [entry["error"] for entry in payload["scenes"]] == [None] * SETTINGS.scenes
 
 
+@pytest.mark.slow  # compiles the sharded program; 20 repetitions run in the benchmark
 def test_batch_vmapped_over_two_forced_cpu_devices_does_not_deadlock(tmp_path, scenes):
     folder = _with_scenes(tmp_path, scenes)
     _repeat("batch vmap, 2 forced CPU devices", folder)
@@ -76,6 +72,7 @@ def test_batch_vmapped_over_two_forced_cpu_devices_does_not_deadlock(tmp_path, s
     assert [entry["error"] for entry in payload["scenes"]] == [None] * SETTINGS.scenes
 
 
+@pytest.mark.slow  # every posterior test runs its chains side by side; 20 runs in the benchmark
 def test_posterior_does_not_deadlock(tmp_path):
     _repeat("posterior lya", tmp_path)
     assert (tmp_path / "out-posterior" / "posterior.nc").is_file()
@@ -85,51 +82,6 @@ def test_two_threads_evaluating_the_compiled_posterior_do_not_deadlock(tmp_path)
     """The deadlock's own pattern on the project's programs: two threads each executing the
     posterior's jitted, vmapped constraining map and potential many times."""
     _repeat("potential, threads", tmp_path)
-
-
-# ---------------------------------------------------------------------------- signals
-
-
-def _start_batch(folder: Path, scenes: Path) -> subprocess.Popen:
-    sources = sorted(str(p) for p in scenes.glob("scene_*.toml"))
-    argv = [sys.executable, "-m", "brdf_infer", "batch", *sources, "--mode", "threads"]
-    argv += ["--chains", "2", "--draws", "5000", "--warmup", "200", "--out", str(folder / "out")]
-    return subprocess.Popen(
-        argv,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        stdin=subprocess.DEVNULL,
-        text=True,
-        env=child_environment(folder / "cache"),
-        cwd=folder,
-        start_new_session=True,
-    )
-
-
-@pytest.mark.xfail(
-    strict=False,
-    reason="batch installs no signal handling yet: SIGTERM/SIGINT wait for the running "
-    "compiled programs (and never end a deadlocked one); clean handling is being added",
-)
-@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT], ids=["SIGTERM", "SIGINT"])
-def test_a_signal_stops_a_running_batch_within_seconds(tmp_path, scenes, signum):
-    process = _start_batch(tmp_path, scenes)
-    try:
-        time.sleep(25)  # imported, compiling or sampling
-        assert process.poll() is None, process.communicate()[0][-4000:]
-        sent = time.perf_counter()
-        process.send_signal(signum)
-        try:
-            output, _ = process.communicate(timeout=10)
-        except subprocess.TimeoutExpired:
-            pytest.fail(f"{signum.name}: batch still running 10 s after the signal")
-        waited = time.perf_counter() - sent
-        assert process.returncode != 0, output[-4000:]
-        assert waited < 10
-    finally:
-        if process.poll() is None:
-            os.killpg(process.pid, signal.SIGKILL)
-            process.communicate()
 
 
 def test_every_stress_path_is_covered():

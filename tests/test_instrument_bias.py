@@ -35,6 +35,7 @@ def test_traced_truth_is_the_kernels_quantity(lya):
     assert abs(np.mean(np.log(traced / kernel))) < 0.01
 
 
+@pytest.mark.slow  # the image kernel's posterior: benchmark set
 def test_point_posterior_is_biased_as_the_ray_tracer_predicts(image_experiment):
     """On image-ratio data the Eq. (6) posterior of BRDF0 misses the truth on the side of
     its large-data limit (the point fit to the noise-free traced values) and lies closer to
@@ -46,6 +47,7 @@ def test_point_posterior_is_biased_as_the_ray_tracer_predicts(image_experiment):
     assert abs(point["median"] - limit) < abs(point["median"] - truth)
 
 
+@pytest.mark.slow  # the image kernel's posterior: benchmark set
 def test_kernel_posterior_covers_the_truth(image_experiment):
     fit = next(f for f in image_experiment["fits"] if f["instrument"] == "image")
     assert all(fit["covers"].values()), fit

@@ -68,6 +68,7 @@ def test_brdf_rows_out_of_plane_are_read_with_their_azimuth(tmp_path):
     assert np.all(scene.log_conversion(rows) == 0.0)  # BRDF rows: no aperture, no cos θs
 
 
+@pytest.mark.slow  # a posterior on a large out-of-plane table
 def test_lsq_and_posterior_recover_strumik2024_from_out_of_plane_brdf_rows(tmp_path):
     theta_i, theta, phi = _geometry()
     truth = np.asarray(brdf_hemisphere(theta_i, theta, phi, UV_PAPER, True))
@@ -217,7 +218,13 @@ def test_bsdf_scene_keys_are_checked(tmp_path):
     assert json.dumps(str(error.value))
 
 
-@pytest.mark.parametrize("name", [pytest.param("abg", marks=pytest.mark.slow), "lambertian+abg"])
+@pytest.mark.parametrize(
+    "name",
+    [
+        pytest.param("abg", marks=pytest.mark.slow),
+        pytest.param("lambertian+abg", marks=pytest.mark.slow),
+    ],
+)
 def test_a_bsdf_table_of_another_family_is_fitted_and_sampled_back(tmp_path, name):
     """A .BSDF file tabulating a family's BRDF (a vendor's ABg table, say), read as a scene's
     measurements (thinned): lsq returns its parameters, NUTS covers them."""

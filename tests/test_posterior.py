@@ -209,6 +209,7 @@ def emcee_command(steps: int, *extra: str) -> list[str]:
     ]
 
 
+@pytest.mark.slow  # two emcee runs of 20k steps: benchmark set
 def test_emcee_resume_after_kill_reproduces_the_uninterrupted_run(tmp_path):
     command = emcee_command(1500, "--json")
     reference = subprocess.run(
