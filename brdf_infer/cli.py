@@ -891,9 +891,12 @@ def _command_report(args: argparse.Namespace) -> None:
 
 def _command_bench(args: argparse.Namespace) -> None:
     _headless()
-    from brdf_infer.bench import write_report, write_speed_report
+    from brdf_infer.bench import write_report, write_speed_report, write_stress_report
 
-    if args.speed:
+    if args.stress:
+        out = Path(args.out or "reports/benchmarks-stress.md")
+        path = write_stress_report(out, args.quick, progress=_progress)
+    elif args.speed:
         out = Path(args.out or "reports/benchmarks-speed.md")
         path = write_speed_report(out, args.quick, progress=_progress)
     else:
@@ -1181,6 +1184,12 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="only the main job's speed: run and posterior cold and warm, the gradient, the "
         "peers on the same posterior",
+    )
+    bench.add_argument(
+        "--stress",
+        action="store_true",
+        help="only the concurrency stress paths, 20 repetitions each under a watchdog "
+        "(reports/benchmarks-stress.md)",
     )
     bench.set_defaults(handler=_command_bench)
 
