@@ -128,7 +128,7 @@ def inference_data(
             "scene": scene.name,
             "model": getattr(getattr(model, "family", None), "name", REFERENCE_FAMILY),
             "instrument": scene.instrument.model,
-            "scene_file": str(scene.path),
+            "scene_file": str(scene.path.resolve()),  # readers may run anywhere
             "scene_toml": scene.path.read_text(),
             "sampler": draws.sampler,
             "settings": json.dumps(draws.settings),
