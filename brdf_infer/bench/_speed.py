@@ -17,6 +17,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from brdf_infer.bench._report import _markdown_table
 from brdf_infer.posterior import build_model
 from brdf_infer.posterior._model import build_posterior_model
 from brdf_infer.posterior._potential import FlatPotential
@@ -132,11 +133,6 @@ def gradient_rows(scene: Scene, measurements) -> list[list[str]]:
         flat = FlatPotential(model)
         rows.append([label, f"{gradient_microseconds(flat, model.data):.1f}", "4000 x 5"])
     return rows
-
-
-def _markdown_table(headers: list[str], rows: list[list[str]]) -> str:
-    lines = ["| " + " | ".join(headers) + " |", "|" + "---|" * len(headers)]
-    return "\n".join(lines + ["| " + " | ".join(row) + " |" for row in rows])
 
 
 def write_speed_report(out: Path, quick: bool, progress=print) -> Path:
