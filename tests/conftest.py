@@ -8,8 +8,7 @@ from hypothesis import HealthCheck, settings
 import brdf_infer  # noqa: F401  (float64 for every test)
 from brdf_infer.posterior import run_posterior
 from brdf_infer.scene import load_scene
-
-REDUCED_NUTS = {"chains": 4, "warmup": 500, "draws": 500}
+from tests.helpers import REDUCED_NUTS
 
 # Property tests: random exploration locally; CI (the CI variable set, as .ci/run does)
 # replays the same examples every time so a run cannot fail by chance; "explore" searches

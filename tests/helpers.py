@@ -15,6 +15,22 @@ from brdf_infer.cli import main
 
 REPO = Path(__file__).resolve().parents[1]
 
+# Every NUTS run of the lya structure in the suite warms up for the same number of iterations:
+# a compiled NUTS program depends on the model's structure, the data's shape and the warmup
+# length (NumPyro builds its adaptation schedule in Python), so runs that agree on these share
+# one program, in a process and, through the persistent cache, across the test workers.
+SUITE_WARMUP = 500
+REDUCED_NUTS = {"chains": 4, "warmup": SUITE_WARMUP, "draws": 500}
+
+
+def lya_scene_text(measurements: Path | str, name: str = "lya") -> str:
+    """The bundled ``lya`` scene's TOML named ``name`` with another measurements file: the
+    same model structure as ``lya``, so the same compiled programs."""
+    from brdf_infer.bench._batch import scene_text_with_measurements
+    from brdf_infer.scene import load_scene
+
+    return scene_text_with_measurements(load_scene("lya"), Path(measurements), name)
+
 
 def assert_allclose(actual, desired, *, rtol: float | None = None, atol: float = 0.0) -> None:
     """``np.testing.assert_allclose`` with a float64 default of rtol = 1e-12."""

@@ -11,23 +11,18 @@ import numpy as np
 import pytest
 
 from brdf_infer._arviz import az
-from tests.helpers import run_cli, run_on_forced_cpu_devices
+from tests.helpers import SUITE_WARMUP, lya_scene_text, run_cli, run_on_forced_cpu_devices
 
-SMALL = ["--chains", "2", "--draws", "150", "--warmup", "150"]
+SMALL = ["--chains", "2", "--draws", "150", "--warmup", str(SUITE_WARMUP)]
 
 
 def _scene(folder, name: str, rows_from=None) -> str:
-    """A scene of the bundled rows (``rows_from``: another measurements CSV)."""
+    """The bundled scene named ``name``, of the rows in ``rows_from`` (another measurements
+    CSV; default the bundled rows)."""
     from brdf_infer.scene import load_scene
 
-    lya = load_scene("lya")
-    csv = rows_from or lya.measurements_path
     path = folder / f"{name}.toml"
-    path.write_text(
-        f'name = "{name}"\nmeasurements = "{csv.as_posix()}"\n'
-        "[series.I]\naperture_diameter_mm = 7.2\naperture_distance_mm = 103.8\n"
-        "[series.II]\naperture_diameter_mm = 7.5\naperture_distance_mm = 106.0\n"
-    )
+    path.write_text(lya_scene_text(rows_from or load_scene("lya").measurements_path, name))
     return str(path)
 
 
@@ -216,7 +211,7 @@ def test_sixteen_scenes_of_two_sizes_run_as_one_compiled_group(tmp_path):
         scenes.append(_scene(tmp_path, f"full{k}", _scaled_rows(tmp_path, factor)))
         scenes.append(_scene(tmp_path, f"fewer{k}", _fewer_rows(tmp_path, f"f{k}", factor)))
     out = tmp_path / "out"
-    settings = BatchSettings(chains=2, warmup=30, draws=20)
+    settings = BatchSettings(chains=2, warmup=SUITE_WARMUP, draws=20)
     result = run_batch(scenes, out, settings)
     assert result.groups == 1 and not result.interrupted and result.complete == 16
     assert sorted(p.name for p in out.iterdir()) == sorted(
@@ -295,6 +290,7 @@ def test_sharded_over_two_forced_cpu_devices_gives_the_results_of_one(tmp_path):
     assert not np.allclose(one["brdf0"][0], one["brdf0"][1])  # the data sets differ
 
 
+@pytest.mark.slow  # the accelerator path (a CPU batch runs threads); compiles the vmapped program
 def test_vmapped_batch_of_one_scene(tmp_path, capsys):
     """``--mode vmap`` with a single scene (the path every accelerator takes): its one data
     set keeps one data-set axis (a batch of one failed on a GPU before)."""
@@ -328,7 +324,7 @@ def _start_batch(folder: Path, out: Path) -> tuple:
         scenes.append(_scene(folder, f"g{k}", rows))
     for k in range(6):
         path = Path(_scene(folder, f"s{k}", _scaled_rows(folder, 1.0 + 0.1 * k)))
-        path.write_text(path.read_text() + '[errors]\nmodel = "spread"\n')
+        path.write_text(path.read_text().replace('model = "generative"', 'model = "spread"', 1))
         scenes.append(str(path))
     with (folder / "stderr.txt").open("w") as stderr:  # the process keeps its own copy
         process = subprocess.Popen(

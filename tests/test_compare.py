@@ -15,9 +15,9 @@ from brdf_infer.error_model import NoiseScales
 from brdf_infer.model import family
 from brdf_infer.params import UV_PAPER
 from brdf_infer.posterior import build_family_model, build_posterior_model
-from tests.helpers import run_cli
+from tests.helpers import SUITE_WARMUP, run_cli
 
-SMALL = CompareSettings(chains=2, warmup=300, draws=300, seed=1)
+SMALL = CompareSettings(chains=2, warmup=SUITE_WARMUP, draws=300, seed=1)
 ABG_TRUTH = {"A": 2.0e-3, "B": 5.0e-3, "g": 1.8}
 
 

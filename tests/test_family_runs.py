@@ -15,9 +15,9 @@ from brdf_infer.model import family
 from brdf_infer.params import PAPER_CONSTANTS
 from brdf_infer.posterior import family_bands, family_tis_band
 from tests import independent_bsdf as oracle
-from tests.helpers import run_cli
+from tests.helpers import SUITE_WARMUP, run_cli
 
-SMALL = ["--chains", "2", "--draws", "200", "--warmup", "200"]
+SMALL = ["--chains", "2", "--draws", "200", "--warmup", str(SUITE_WARMUP)]
 
 
 @pytest.fixture(scope="module")

@@ -81,7 +81,9 @@ def test_low_rank_normal_matches_scipy_and_its_gradient_finite_differences(disjo
     mean = rng.normal(size=40)
     value = mean + rng.normal(size=40) * 0.2
     expected = stats.multivariate_normal(mean, np.diag(diagonal) + factor @ factor.T).logpdf(value)
-    got = low_rank_normal_log_density(
+    # compiled: eager, the unrolled factorisation dispatches (and compiles) op by op
+    log_density = jax.jit(low_rank_normal_log_density, static_argnames="disjoint")
+    got = log_density(
         jnp.asarray(value),
         jnp.asarray(mean),
         jnp.asarray(factor),
@@ -90,9 +92,7 @@ def test_low_rank_normal_matches_scipy_and_its_gradient_finite_differences(disjo
     )
     np.testing.assert_allclose(float(got), expected, rtol=1e-11)
     check_grads(
-        lambda f, d: low_rank_normal_log_density(
-            jnp.asarray(value), jnp.asarray(mean), f, d, disjoint=disjoint
-        ),
+        lambda f, d: log_density(jnp.asarray(value), jnp.asarray(mean), f, d, disjoint=disjoint),
         (jnp.asarray(factor), jnp.asarray(diagonal)),
         order=1,
         modes=["rev"],
@@ -106,8 +106,9 @@ def test_leave_one_out_conditionals_with_a_diagonal_block_match_the_plain_ones()
     factor = jnp.asarray(_grouped_factor(rng, 25, 4, 2))
     diagonal = jnp.asarray(rng.uniform(0.01, 0.05, 25))
     value, mean = jnp.asarray(rng.normal(size=25)), jnp.zeros(25)
-    plain = leave_one_out_conditionals(value, mean, factor, diagonal)
-    blocked = leave_one_out_conditionals(value, mean, factor, diagonal, 4)
+    conditionals = jax.jit(leave_one_out_conditionals, static_argnames="disjoint")
+    plain = conditionals(value, mean, factor, diagonal)
+    blocked = conditionals(value, mean, factor, diagonal, disjoint=4)
     for a, b in zip(plain, blocked, strict=True):
         np.testing.assert_allclose(a, b, rtol=1e-12)
 
@@ -152,10 +153,10 @@ def test_potential_equals_the_earlier_lapack_implementation(lya_potentials, monk
     model, flat = lya_potentials
     rng = np.random.default_rng(5)
     points = jnp.asarray(rng.uniform(-1.5, 1.5, (20, flat.dimension)))
-    ours = jax.vmap(lambda z: flat.potential(z, model.data))(points)
+    ours = jax.jit(jax.vmap(lambda z: flat.potential(z, model.data)))(points)
     monkeypatch.setattr(posterior_model, "whitened_coefficients", _lapack_whitened_coefficients)
     monkeypatch.setattr(posterior_model, "LowRankNormal", _LapackLowRankNormal)
-    reference = jax.vmap(lambda z: FlatPotential(model).potential(z, model.data))(points)
+    reference = jax.jit(jax.vmap(lambda z: FlatPotential(model).potential(z, model.data)))(points)
     assert np.all(np.isfinite(ours))
     np.testing.assert_allclose(ours, reference, rtol=1e-10)
 

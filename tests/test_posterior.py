@@ -26,7 +26,7 @@ from brdf_infer.posterior._results import write_inference_data
 from brdf_infer.posterior._run import run_fingerprint
 from brdf_infer.scene import load_scene
 from brdf_infer.synthetic import simulate_measurements
-from tests.helpers import REPO, run_cli
+from tests.helpers import REPO, SUITE_WARMUP, run_cli
 
 REDUCED_EMCEE = {"walkers": 24, "steps": 16000, "warmup": 3000}
 
@@ -376,7 +376,7 @@ def test_chains_side_by_side_give_the_draws_of_chains_one_after_another(lya):
 
     scene, measurements = lya
     model = build_model(scene, measurements)
-    program = NutsProgram(model, warmup=30)
+    program = NutsProgram(model, warmup=SUITE_WARMUP)  # the suite's lya program
     keys = chain_keys(3, 1, 4)[0]
     one_by_one = program.run(model.data, keys, 20, workers=1)
     side_by_side = program.run(model.data, keys, 20, workers=4)

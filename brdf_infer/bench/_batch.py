@@ -45,15 +45,11 @@ class BatchRow:
 
 
 def synthetic_scenes(scene: Scene, count: int, folder: Path) -> list[str]:
-    """``count`` scenes of ``scene``'s rows, reflectances (and their σ) scaled by 0.7, 0.8, …"""
+    """``count`` copies of ``scene`` (its model structure, so its compiled programs), each of
+    its rows with the reflectances (and their σ) scaled by 0.7, 0.8, …"""
     lines = scene.measurements_path.read_text().splitlines()
     header = lines[0].split(",")
     columns = [header.index("reflectance"), header.index("reflectance_err")]
-    series = "".join(
-        f"[series.{name}]\naperture_diameter_mm = {s.aperture_diameter_mm}\n"
-        f"aperture_distance_mm = {s.aperture_distance_mm}\n"
-        for name, s in scene.series.items()
-    )
     paths = []
     for k in range(count):
         factor = 0.7 + 0.05 * (k % 13)
@@ -67,9 +63,24 @@ def synthetic_scenes(scene: Scene, count: int, folder: Path) -> list[str]:
         csv = folder / f"rows_{k}.csv"
         csv.write_text("\n".join(rows) + "\n")
         path = folder / f"scene_{k}.toml"
-        path.write_text(f'name = "s{k}"\nmeasurements = "{csv.as_posix()}"\n{series}')
+        path.write_text(scene_text_with_measurements(scene, csv, f"s{k}"))
         paths.append(str(path))
     return paths
+
+
+def scene_text_with_measurements(scene: Scene, measurements: Path, name: str) -> str:
+    """``scene``'s TOML text named ``name`` and measuring ``measurements``: the same model
+    structure, so the same compiled programs. The files it names become absolute paths, so
+    the text may be written anywhere."""
+    text = scene.path.read_text()
+    text = text.replace(f'name = "{scene.name}"', f'name = "{name}"', 1)
+    text = text.replace(
+        f'"{scene.measurements_path.name}"', f'"{measurements.resolve().as_posix()}"', 1
+    )
+    reference = scene.outputs.tis_reference
+    if reference is not None:
+        text = text.replace(f'"{reference.name}"', f'"{reference.resolve().as_posix()}"', 1)
+    return text
 
 
 def _separate_run(path: str, out: Path) -> float:
