@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from brdf_infer.measurements import Measurements
+from brdf_infer.plausibility import Implausible
 from brdf_infer.scene import Scene, Studies
 from brdf_infer.verdict import Verdict
 
@@ -135,7 +136,7 @@ class RunResult:
         return payload
 
 
-def fit_checks(scene: Scene, measurements: Measurements, fit: dict[str, Any]) -> list:
+def fit_checks(scene: Scene, measurements: Measurements, fit: dict[str, Any]) -> list[Implausible]:
     """The plausibility checks (:mod:`brdf_infer.plausibility`) of a fit summary
     (:func:`paper_fit_summary`, :func:`lsq_summary` or a family's ``as_json``): π·BRDF0 and
     the TIS at the scene's incidence angles."""
