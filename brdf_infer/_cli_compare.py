@@ -77,6 +77,18 @@ def command_compare(
     if args.json:
         print(json.dumps(payload))
         return
+    print(f"PSIS-LOO comparison on scene '{scene.name}' (best first)")
+    print(comparison_table(payload, table))
+    print(f"{result.seconds:.1f} s")
+    if out is not None:
+        print(f"written: {out / COMPARE_FILE}, {out / 'compare.png'}")
+
+
+def comparison_table(
+    payload: dict, table: Callable[[Sequence[str], Sequence[Sequence[str]]], str]
+) -> str:
+    """The human table of ``compare``'s JSON (best first): each family's rank with its
+    sampler diagnostics beside it, and a line for each family whose diagnostics fail."""
     rows = [
         [
             row["name"],
@@ -85,13 +97,32 @@ def command_compare(
             f"{row['weight']:.2f}",
             f"{row['p_loo']:.1f}",
             f"{row['pareto_k_max']:.2f}",
+            f"{row['r_hat_max']:.3f}",
+            f"{row['ess_bulk_min']:.0f}",
+            str(row["divergences"]),
+            "ok" if row["sampler_ok"] else "FAIL",
             "{median:.4f} ({lo95:.4f}–{hi95:.4f})".format(**row["tis70"]),
         ]
         for row in payload["models"]
     ]
-    headers = ["model", "elpd_loo ± se", "Δelpd ± dse", "weight", "p_loo", "k max", "TIS(70°)"]
-    print(f"PSIS-LOO comparison on scene '{scene.name}' (best first)")
-    print(table(headers, rows))
-    print(f"{result.seconds:.1f} s")
-    if out is not None:
-        print(f"written: {out / COMPARE_FILE}, {out / 'compare.png'}")
+    headers = [
+        "model",
+        "elpd_loo ± se",
+        "Δelpd ± dse",
+        "weight",
+        "p_loo",
+        "k max",
+        "R-hat max",
+        "ESS bulk min",
+        "div.",
+        "sampler",
+        "TIS(70°)",
+    ]
+    lines = [table(headers, rows)]
+    lines += [
+        f"{row['name']}: sampler diagnostics fail ({', '.join(row['sampler_failures'])}): its "
+        "place in the ranking is not to be trusted"
+        for row in payload["models"]
+        if not row["sampler_ok"]
+    ]
+    return "\n".join(lines)

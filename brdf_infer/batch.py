@@ -23,7 +23,9 @@ scene's name is always a complete run. A batch stops within seconds when cancell
 :func:`run_batch_until_signalled`), keeping the folders that were complete and no partial one.
 
 A scene that fails to load or validate is reported with its error and skipped; it never takes
-the batch down.
+the batch down. So is a scene whose rows fail a plausibility check (values that look like
+percent, angles that look like radians; :mod:`brdf_infer.plausibility`), unless
+``BatchSettings(force=True)``: then it runs and its verdict names the check.
 """
 
 from __future__ import annotations
@@ -38,7 +40,7 @@ import signal
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -47,6 +49,7 @@ import numpy as np
 
 from brdf_infer._atomic import atomic_write_json
 from brdf_infer.errors import BadInputError
+from brdf_infer.plausibility import measurement_checks, require_plausible
 from brdf_infer.posterior import NutsProgram, build_model, chain_keys, model_name
 from brdf_infer.posterior._nuts import Cancelled, stack_data
 from brdf_infer.posterior._padding import pad_datasets, paddable, padded_signature, row_count
@@ -68,7 +71,8 @@ def _silent(message: str) -> None:
 @dataclass(frozen=True)
 class BatchSettings:
     """NUTS settings shared by every scene of a batch (``seed``: each scene's chains get the
-    keys ``posterior --seed`` gives them)."""
+    keys ``posterior --seed`` gives them; ``force``: run scenes that fail a plausibility
+    check)."""
 
     chains: int = 4
     draws: int = 1000
@@ -76,6 +80,7 @@ class BatchSettings:
     seed: int = 0
     target_accept: float = 0.8
     mode: str = "auto"
+    force: bool = False
 
     def check(self) -> None:
         """Raises BadInputError naming the option that is out of range."""
@@ -109,6 +114,7 @@ class SceneEntry:
     tis: dict[str, list] | None = None
     error: str | None = None
     done: bool = False
+    forced: list[str] = field(default_factory=list)
 
     def as_json(self) -> dict[str, Any]:
         diagnostics = (self.summary or {}).get("diagnostics", {})
@@ -122,6 +128,7 @@ class SceneEntry:
             "r_hat_max": diagnostics.get("r_hat_max"),
             "ess_min": None if None in ess else min(ess),
             "divergences": diagnostics.get("divergences"),
+            "verdict": None if self.summary is None else self.summary["verdict"],
             "tis": self.tis,
             "error": INTERRUPTED if unfinished else self.error,
         }
@@ -345,6 +352,9 @@ class Batch:
             try:
                 entry.scene = load_scene(entry.source)
                 measurements = entry.scene.load_measurements()
+                implausible = measurement_checks(entry.scene, measurements)
+                require_plausible(implausible, self.settings.force)
+                entry.forced = [found.record for found in implausible]
                 posterior_model = build_model(entry.scene, measurements, self.family)
             except BadInputError as error:
                 entry.error = str(error)
@@ -434,7 +444,9 @@ class Batch:
             self._partials.add(partial)
         try:
             _remove(partial)
-            run = complete_run(model, measurements, draws, self.settings.seed, partial, begun)
+            run = complete_run(
+                model, measurements, draws, self.settings.seed, partial, begun, forced=entry.forced
+            )
             self._publish(partial, target)  # complete: kept even if the batch is cancelled now
         finally:
             _remove(partial)

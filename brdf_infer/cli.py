@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import signal
 import sys
@@ -51,10 +52,12 @@ def _emit_json(content: dict[str, Any]) -> None:
     print(json.dumps(content))
 
 
-def _scene_and_measurements(name: str, instrument: str | None = None):
+def _scene_and_measurements(name: str, instrument: str | None = None, force: bool | None = None):
     """The scene (every file it names checked; predicting through ``instrument`` when given)
-    and its rows; unit-plausibility warnings on stderr."""
-    from brdf_infer.plausibility import measurement_warnings
+    and its rows, checked for plausibility (:mod:`brdf_infer.plausibility`): a failed check
+    stops the command unless ``force`` (:func:`_forced` then reports it); a command without
+    ``--force`` (``force=None``) only warns. Other warnings on stderr."""
+    from brdf_infer.plausibility import measurement_checks, measurement_warnings, require_plausible
     from brdf_infer.scene import check_instrument, load_scene
 
     _checked_instrument(instrument)
@@ -62,9 +65,35 @@ def _scene_and_measurements(name: str, instrument: str | None = None):
     if instrument is not None:
         scene = check_instrument(scene, instrument)
     measurements = scene.load_measurements()
-    for warning in measurement_warnings(measurements):
+    implausible = measurement_checks(scene, measurements)
+    if force is None:
+        warnings = [found.message for found in implausible]
+    else:
+        require_plausible(implausible, force)
+        warnings = []
+    for warning in warnings + measurement_warnings(measurements):
         _progress(f"warning: {warning}")
     return scene, measurements
+
+
+def _forced(scene, measurements) -> list[str]:
+    """The input checks a ``--force`` command goes past, one line each (also on stderr)."""
+    from brdf_infer.plausibility import measurement_checks
+
+    lines = [found.record for found in measurement_checks(scene, measurements)]
+    for line in lines:
+        _progress(f"warning: forced past a plausibility check: {line}")
+    return lines
+
+
+def _force_argument(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--force",
+        action="store_true",
+        help="go on past a failed plausibility check (values that look like percent, angles "
+        "that look like radians, a fit whose pi*BRDF0 or TIS exceeds 1); the verdict then "
+        "names it",
+    )
 
 
 def _checked_model(name: str | None) -> None:
@@ -112,13 +141,28 @@ def _print_params_table(params: dict[str, float]) -> None:
     )
 
 
-def _print_lsq(payload: dict[str, Any]) -> None:
-    print(f"least-squares fit of scene '{payload['scene']}' ({payload['solver']})")
+def _sigma_table(payload: dict[str, Any], digits: int = 4) -> str:
+    """Parameters with the unscaled 1σ and the 1σ scaled by sqrt(chi2/dof), side by side."""
+    factor = math.sqrt(payload["chi2_dof"]) if payload.get("covariance_scaled") else 1.0
     rows = [
-        [name, f"{value:.4g}", f"{payload['sigma'][name]:.2g}"]
+        [
+            name,
+            f"{value:.{digits}g}",
+            f"{payload['sigma'][name] / factor:.2g}",
+            f"{payload['sigma_scaled'][name]:.2g}",
+        ]
         for name, value in payload["params"].items()
     ]
-    print(_table(["parameter", "value", "1 sigma"], rows))
+    return _table(["parameter", "value", "1 sigma", "1 sigma x sqrt(chi2/dof)"], rows)
+
+
+def _print_fit_quality(payload: dict[str, Any]) -> None:
+    print(f"fit quality: {payload['fit_quality']}")
+
+
+def _print_lsq(payload: dict[str, Any]) -> None:
+    print(f"least-squares fit of scene '{payload['scene']}' ({payload['solver']})")
+    print(_sigma_table(payload))
     print(
         _table(
             ["points", "chi2", "chi2 (paper fit)", "cond(J)", "starts at best", "time [s]"],
@@ -147,13 +191,16 @@ def _print_lsq(payload: dict[str, Any]) -> None:
 
 def _command_fit(args: argparse.Namespace) -> None:
     from brdf_infer.model import FAMILY_NAMES, REFERENCE_FAMILY, family
+    from brdf_infer.plausibility import require_plausible
+    from brdf_infer.workflow import fit_checks
 
     if args.model is not None and args.model not in FAMILY_NAMES:
         raise BadInputError(
             f"unknown model family {args.model!r} (known: {', '.join(FAMILY_NAMES)})",
             field="--model",
         )
-    scene, measurements = _scene_and_measurements(args.scene, args.instrument)
+    scene, measurements = _scene_and_measurements(args.scene, args.instrument, args.force)
+    forced = _forced(scene, measurements)
     args.model = args.model or scene.model.family
     if args.model != REFERENCE_FAMILY and args.method != "lsq":
         raise BadInputError(
@@ -164,23 +211,10 @@ def _command_fit(args: argparse.Namespace) -> None:
         from brdf_infer.family_fit import fit_family_lsq
 
         _progress(f"least squares of {args.model}: {args.starts} starts ...")
-        result = fit_family_lsq(
+        payload = fit_family_lsq(
             scene, measurements, family(args.model), starts=args.starts, seed=args.seed
-        )
-        payload = result.as_json(scene.name)
-        if args.json:
-            _emit_json(payload)
-            return
-        print(f"least-squares fit of {args.model} to scene '{scene.name}'")
-        print(
-            _table(
-                ["parameter", "value", "1 sigma"],
-                [[n, f"{v:.6g}", f"{result.sigma[n]:.2g}"] for n, v in result.params.items()],
-            )
-        )
-        print(f"chi2 = {result.cost:.2f} for {result.n_points} points in {result.seconds:.1f} s")
-        return
-    if args.method == "lsq":
+        ).as_json(scene.name)
+    elif args.method == "lsq":
         from brdf_infer.workflow import lsq_summary
 
         payload = lsq_summary(
@@ -192,21 +226,36 @@ def _command_fit(args: argparse.Namespace) -> None:
             scale_covariance=args.scale_covariance,
             progress=_progress,
         )
-        if args.json:
-            _emit_json(payload)
-        else:
-            _print_lsq(payload)
-        return
-    if args.grid:
+    elif args.grid:
         payload = _grid_payload(scene, measurements, args.selection)
     else:
         from brdf_infer.workflow import paper_fit_summary
 
         payload = paper_fit_summary(scene, measurements, args.selection)
+    implausible = fit_checks(scene, measurements, payload)
+    require_plausible(implausible, args.force)
+    payload["implausible"] = forced + [found.record for found in implausible]
+    for found in implausible:
+        _progress(f"warning: forced past a plausibility check: {found.record}")
     if args.json:
         _emit_json(payload)
-        return
-    print(f"paper fit (Sec. 4.2) of scene '{scene.name}', selection '{payload['selection']}'")
+    elif args.model != REFERENCE_FAMILY:
+        print(f"least-squares fit of {args.model} to scene '{scene.name}'")
+        print(_sigma_table(payload, digits=6))
+        print(
+            f"chi2 = {payload['cost']:.2f} for {payload['n_points']} points "
+            f"({payload['dof']} dof) in {payload['seconds']:.1f} s"
+        )
+        _print_fit_quality(payload)
+    elif args.method == "lsq":
+        _print_lsq(payload)
+        _print_fit_quality(payload)
+    else:
+        _print_paper_fit(scene.name, payload)
+
+
+def _print_paper_fit(scene_name: str, payload: dict[str, Any]) -> None:
+    print(f"paper fit (Sec. 4.2) of scene '{scene_name}', selection '{payload['selection']}'")
     _print_params_table(payload["params"])
     print(
         _table(
@@ -221,7 +270,7 @@ def _command_fit(args: argparse.Namespace) -> None:
             ],
         )
     )
-    if args.grid:
+    if "sigma_tre" in payload:
         print(f"grid search: least total relative error {100 * payload['sigma_tre']:.2f} %")
 
 
@@ -352,7 +401,8 @@ def _command_posterior(args: argparse.Namespace) -> None:
     from brdf_infer.posterior import run_posterior
 
     _checked_model(args.model)
-    scene, measurements = _scene_and_measurements(args.scene, args.instrument)
+    scene, measurements = _scene_and_measurements(args.scene, args.instrument, args.force)
+    forced = _forced(scene, measurements)
     out = check_output_dir(args.out or Path("reports") / scene.name / args.sampler)
     if args.warmup is None:
         args.warmup = 1000 if args.sampler == "nuts" else 4000
@@ -372,12 +422,19 @@ def _command_posterior(args: argparse.Namespace) -> None:
         model=args.model,
         target_accept=args.target_accept,
         announce=lambda what: _progress(what + " ..."),
+        forced=forced,
     )
     summary = run.summary
     if args.json:
         _emit_json({"out": str(out), **summary})
         return
     _print_posterior_summary(summary, out)
+    _print_verdict(summary["verdict"])
+
+
+def _print_verdict(verdict: dict[str, Any]) -> None:
+    """The run's one verdict (:mod:`brdf_infer.verdict`), as its report shows it."""
+    print(f"verdict: {verdict['text']}")
 
 
 def _print_posterior_summary(summary: dict[str, Any], out: Path) -> None:
@@ -403,9 +460,7 @@ def _print_posterior_summary(summary: dict[str, Any], out: Path) -> None:
             f"TIS(70 deg) = {100 * tis70['median']:.2f} % "
             f"(95 %: {100 * tis70['lo95']:.2f}-{100 * tis70['hi95']:.2f} %)"
         )
-    verdict = "; ".join(diagnostics["failures"]) or "all diagnostics pass"
     seconds = summary["seconds"]
-    print(f"diagnostics: {verdict}")
     print(
         f"sampling {seconds['sampling']:.1f} s, total {seconds['total']:.1f} s; results in {out}/"
     )
@@ -428,12 +483,13 @@ def _command_export(args: argparse.Namespace) -> None:
 
 def _command_compare(args: argparse.Namespace) -> None:
     _headless()
-    command_compare(
-        args,
-        lambda name: _scene_and_measurements(name, args.instrument),
-        _table,
-        _progress,
-    )
+
+    def scene_and_measurements(name: str):
+        scene, measurements = _scene_and_measurements(name, args.instrument, args.force)
+        _forced(scene, measurements)
+        return scene, measurements
+
+    command_compare(args, scene_and_measurements, _table, _progress)
 
 
 def _command_brdf(args: argparse.Namespace) -> None:
@@ -497,7 +553,8 @@ def _command_run(args: argparse.Namespace) -> None:
     from brdf_infer.workflow import RunSettings, run
 
     _checked_model(args.model)
-    scene, measurements = _scene_and_measurements(args.scene, args.instrument)
+    # the input checks stop here, the fits' in run(); run() reports what it is forced past
+    scene, measurements = _scene_and_measurements(args.scene, args.instrument, args.force)
     settings = RunSettings(
         chains=args.chains,
         draws=args.draws,
@@ -505,6 +562,7 @@ def _command_run(args: argparse.Namespace) -> None:
         seed=args.seed,
         model=args.model,
         studies=_requested_studies(args, scene),
+        force=args.force,
     )
     _checked_settings(settings)
     out = check_output_dir(args.out or Path("reports") / scene.name)
@@ -528,13 +586,21 @@ def _command_run(args: argparse.Namespace) -> None:
         )
     print(
         f"least squares: chi2 = {lsq['cost']:.2f} for {lsq['n_points']} points "
-        f"({lsq['starts_converged']}/{lsq['starts']} starts at the optimum)"
+        f"({lsq['starts_converged']}/{lsq['starts']} starts at the optimum); "
+        f"fit quality {lsq['fit_quality']}"
     )
     _print_posterior_summary(result.posterior, out)
     if result.comparison is not None:
         best = result.comparison["models"][0]
-        print(f"model comparison: {best['name']} first (PSIS-LOO, see the report)")
-    print(f"verdict: {'; '.join(result.verdict) or 'every diagnostic passes'}")
+        untrusted = [m["name"] for m in result.comparison["models"] if not m["sampler_ok"]]
+        caveat = (
+            f"; sampler diagnostics fail for {', '.join(untrusted)}: not to be trusted in the "
+            "ranking"
+            if untrusted
+            else ""
+        )
+        print(f"model comparison: {best['name']} first (PSIS-LOO, see the report){caveat}")
+    _print_verdict(result.verdict.as_json())
     print(f"report: {result.report}")
     print(f"done in {result.seconds:.1f} s")
 
@@ -829,6 +895,7 @@ def _command_batch(args: argparse.Namespace) -> None:
         seed=args.seed,
         target_accept=args.target_accept,
         mode=args.mode,
+        force=args.force,
     )
     settings.check()
     out = check_output_dir(args.out or Path("reports") / "batch")
@@ -850,7 +917,7 @@ def _command_batch(args: argparse.Namespace) -> None:
     for entry in result.entries:
         item = entry.as_json()
         if entry.error is not None:
-            rows.append([item["scene"], "skipped", "", "", "", entry.error])
+            rows.append([item["scene"], "skipped", "", "", "", "", entry.error])
             continue
         at = item["tis"]["theta_i_deg"].index(70.0) if item["tis"] else None
         tis70 = (
@@ -866,10 +933,12 @@ def _command_batch(args: argparse.Namespace) -> None:
                 f"{item['r_hat_max']:.3f}",
                 f"{item['ess_min']:.0f}",
                 str(item["divergences"]),
+                "pass" if item["verdict"]["ok"] else f"{len(item['verdict']['lines'])} failed",
                 f"TIS(70°) {tis70} %; {item['out']}",
             ]
         )
-    print(_table(["scene", "model", "R-hat max", "ESS min", "divergences", "result"], rows))
+    headers = ["scene", "model", "R-hat max", "ESS min", "divergences", "verdict", "result"]
+    print(_table(headers, rows))
     print(
         f"{len(result.entries)} scene(s) in {result.groups} compiled group(s) on "
         f"{result.devices} device(s): {result.seconds:.1f} s ({result.compile_seconds:.1f} s "
@@ -881,11 +950,11 @@ def _command_report(args: argparse.Namespace) -> None:
     _headless()
     from brdf_infer.report import write_report
 
-    path, failures = write_report(Path(args.run_dir), progress=_progress)
+    path, verdict = write_report(Path(args.run_dir), progress=_progress)
     if args.json:
-        _emit_json({"report": str(path), "verdict": failures})
+        _emit_json({"report": str(path), "verdict": verdict.as_json()})
         return
-    print(f"verdict: {'; '.join(failures) or 'every diagnostic passes'}")
+    _print_verdict(verdict.as_json())
     print(f"report: {path}")
 
 
@@ -993,6 +1062,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _model_argument(run)
     _instrument_argument(run)
+    _force_argument(run)
     run.set_defaults(handler=_command_run)
 
     fit = scene_command(
@@ -1011,6 +1081,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     fit.add_argument("--selection", help="data selection for --method paper (default: scene's)")
     fit.add_argument("--grid", action="store_true", help="grid search over (alpha, theta_s0)")
+    _force_argument(fit)
     fit.set_defaults(handler=_command_fit)
 
     posterior = scene_command("posterior", "sample the posterior with NUTS or emcee")
@@ -1042,6 +1113,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _model_argument(posterior)
     _instrument_argument(posterior)
+    _force_argument(posterior)
     posterior.set_defaults(handler=_command_posterior)
 
     batch = command("batch", "posteriors of many scenes, one compiled program per model structure")
@@ -1064,6 +1136,7 @@ def build_parser() -> argparse.ArgumentParser:
     batch.add_argument("--out", help="output directory (default: reports/batch)")
     batch.add_argument("--json", action="store_true", help="one JSON object on stdout")
     _model_argument(batch)
+    _force_argument(batch)
     batch.set_defaults(handler=_command_batch)
 
     tis = command("tis", "total integrated scatter, Eq. (9), of a parameter set or a run")
@@ -1164,6 +1237,7 @@ def build_parser() -> argparse.ArgumentParser:
         "compare", "rank model families (Eq. 7, ABg, Harvey–Shack, Lambertian, …) by PSIS-LOO"
     )
     add_compare_arguments(compare)
+    _force_argument(compare)
     _instrument_argument(compare)
     compare.set_defaults(handler=_command_compare)
 

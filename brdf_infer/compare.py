@@ -8,6 +8,12 @@ p(yᵢ | y₋ᵢ, θ) (the rows are correlated through the sample, calibration a
 with its standard error, the difference to the best with the standard error of the
 difference, stacking weights, p_loo and the largest Pareto k.
 
+Each family's sampler diagnostics stand next to its rank: a family whose NUTS run fails the
+thresholds a posterior run is held to (R-hat ≤ 1.01, bulk ESS ≥ 400, no divergent
+transitions; :data:`brdf_infer.posterior.THRESHOLDS`) is marked ``sampler_ok: false`` with the
+failures in words, and its place in the ranking is not to be trusted: its elpd comes from draws
+that may not represent its posterior.
+
 Where Pareto k > 0.7 the importance-sampling estimate of a row is unreliable; that row's
 term is then computed exactly by refitting without it (leave-one-out by refit, i.e. K-fold
 with one row per fold for those rows). Refitting needs no new compilation: the row is left
@@ -33,6 +39,7 @@ from brdf_infer.errors import BadInputError
 from brdf_infer.measurements import Measurements
 from brdf_infer.model import FAMILY_NAMES, family
 from brdf_infer.posterior import (
+    THRESHOLDS,
     NutsProgram,
     build_model,
     chain_keys,
@@ -88,6 +95,18 @@ class FamilyResult:
     exact_elpd: dict[int, float]
     seconds: float
 
+    @property
+    def sampler_failures(self) -> list[str]:
+        """The sampler diagnostics that failed their threshold, in words (empty: all pass)."""
+        failures = []
+        if not self.r_hat_max <= THRESHOLDS["r_hat"]:
+            failures.append(f"R-hat {self.r_hat_max:.3f} > {THRESHOLDS['r_hat']}")
+        if not self.ess_bulk_min >= THRESHOLDS["ess"]:
+            failures.append(f"bulk ESS {self.ess_bulk_min:.0f} < {THRESHOLDS['ess']}")
+        if self.divergences:
+            failures.append(f"{self.divergences} divergent transitions")
+        return failures
+
 
 @dataclass
 class ComparisonResult:
@@ -110,6 +129,8 @@ class ComparisonResult:
                     "r_hat_max": fit.r_hat_max,
                     "ess_bulk_min": fit.ess_bulk_min,
                     "divergences": fit.divergences,
+                    "sampler_ok": not fit.sampler_failures,
+                    "sampler_failures": fit.sampler_failures,
                     "refitted_rows": fit.refitted_rows,
                 }
             )
@@ -233,8 +254,11 @@ def rank_families(fits: dict[str, FamilyResult]) -> tuple[list[dict[str, Any]], 
                 f"{name}: Pareto k > {PARETO_K_LIMIT} for rows {fit.refitted_rows} "
                 "(LOO by refit there)"
             )
-        if fit.divergences:
-            notes.append(f"{name}: {fit.divergences} divergent transitions")
+        if fit.sampler_failures:
+            notes.append(
+                f"{name}: sampler diagnostics fail ({', '.join(fit.sampler_failures)}): its "
+                "place in the ranking is not to be trusted"
+            )
         table.append(
             {
                 "name": name,

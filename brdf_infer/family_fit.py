@@ -24,6 +24,7 @@ import numpy as np
 import optimistix as optx
 
 from brdf_infer.error_model import value_sigma
+from brdf_infer.fit_quality import FitQuality, scaled_sigma
 from brdf_infer.measurements import Measurements
 from brdf_infer.model import ModelFamily
 from brdf_infer.observations import build_observation_model, through_instrument
@@ -68,15 +69,24 @@ class FamilyFit:
     starts_converged: int
     seconds: float
 
+    @property
+    def quality(self) -> FitQuality:
+        """χ²/dof and its statement (:mod:`brdf_infer.fit_quality`)."""
+        return FitQuality(self.cost, self.n_points - len(self.params))
+
     def as_json(self, scene_name: str) -> dict[str, Any]:
+        """``sigma``: the unscaled 1σ; ``sigma_scaled``: times √(χ²/dof)."""
+        quality = self.quality
         return {
             "method": "lsq",
             "model": self.family,
             "scene": scene_name,
             "params": self.params,
             "sigma": self.sigma,
+            "sigma_scaled": scaled_sigma(self.sigma, quality.sigma_factor),
             "cost": self.cost,
             "reduced_chi2": self.cost / max(self.n_points - len(self.params), 1),
+            **quality.as_json(),
             "n_points": self.n_points,
             "starts": self.starts,
             "starts_converged": self.starts_converged,

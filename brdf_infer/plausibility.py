@@ -1,63 +1,203 @@
-"""Plausibility warnings: values that look like the wrong unit (not errors; printed on stderr).
+"""Plausibility checks: inputs in the wrong unit and answers that scatter more than they receive.
 
-Angles are in degrees, reflectance and TIS are fractions, BRDF is in sr⁻¹. A table whose
-angles all lie within ±π/2 was probably written in radians; a reflectance that implies a TIS or
-π·BRDF0 above 1 was probably given in percent, or its aperture is wrong.
+Angles are in degrees, reflectance and TIS are fractions, BRDF is in sr⁻¹. Three kinds of
+value are implausible enough to stop a job before any sampling (unless the user insists with
+``--force``, and then the verdict turns red, :mod:`brdf_infer.verdict`):
+
+- **Angles in radians**: every |θi| and |θs| lies within π/2 ≈ 1.571 and there are at least two
+  distinct non-zero values (a table in degrees that never leaves ±1.6° of the normal does not
+  exist in practice; one non-zero value is too little to tell).
+- **Values in percent**: every row of a series implies π·BRDF > 1, through Eq. (6) for raw
+  reflectance (R = BRDF·Ω·cos θs) or as it stands for a BRDF series, i.e. the coating is
+  brighter than a white diffuser (π·BRDF = 1) in *every* measured direction. A real surface can
+  exceed 1/π only near its specular peak; the dimmest row of the bundled Lyman-α series is at
+  π·BRDF = 0.048 (I) and 0.073 (II), 100 times less in percent would be 4.8 and 7.3. (A glossy
+  sample measured at its specular peak only can pass this line legitimately: ``--force``.)
+- **An answer above 1**: a fit's or a posterior's π·BRDF0 (the near-normal TIS, Sec. 7) or its
+  TIS at the scene's incidence angles above 1, more light scattered than received.
+
+A σ column larger than its values is only warned about (:func:`measurement_warnings`).
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
+from brdf_infer.errors import BadInputError
 from brdf_infer.measurements import Measurements
-from brdf_infer.params import HemisphereConstants, Params
+from brdf_infer.scene import Scene
+
+RADIANS_LIMIT = math.pi / 2  # every |angle| within this: radians, not degrees
+RADIANS_DISTINCT = 2  # ... with at least this many distinct non-zero values
+PERCENT_ROWS = 2  # a series needs this many rows before all of them can look like percent
+FORCE_HINT = "insist with --force to go on anyway"
+
+
+@dataclass(frozen=True)
+class Implausible:
+    """One failed plausibility check: what is wrong, in which file and field, and what the
+    user may have done (the hint)."""
+
+    problem: str
+    file: str | None = None
+    field: str | None = None
+    hint: str = ""
+
+    @property
+    def record(self) -> str:
+        """The check in one line naming the file and field (what a forced run's verdict
+        lists)."""
+        return str(BadInputError(self.problem, file=self.file, field=self.field))
+
+    @property
+    def message(self) -> str:
+        """:attr:`record` with the hint (what a refusal says)."""
+        return f"{self.record}; {self.hint}" if self.hint else self.record
+
+
+def value_field(measurements: Measurements) -> str:
+    """The column holding the measured values: ``reflectance`` or ``brdf``."""
+    return "reflectance" if measurements.quantity == "raw_reflectance" else "brdf"
+
+
+def measurement_checks(scene: Scene, measurements: Measurements) -> list[Implausible]:
+    """Angles that look like radians and series whose values look like percent (module
+    docstring), each naming the measurement file and the column."""
+    found = []
+    where = str(measurements.path)
+    angles = np.abs(np.concatenate([measurements.theta_i_deg, measurements.theta_s_deg]))
+    distinct = np.unique(angles[angles > 0])
+    if distinct.size >= RADIANS_DISTINCT and distinct.max() <= RADIANS_LIMIT:
+        found.append(
+            Implausible(
+                f"every angle lies within ±π/2 (largest {distinct.max():.3g}): they look like "
+                "radians",
+                where,
+                "theta_i_deg/theta_s_deg",
+                "brdf_infer reads degrees",
+            )
+        )
+    pi_brdf = math.pi * np.exp(scene.measured_log_brdf(measurements))
+    bright = {}
+    for series in dict.fromkeys(measurements.series.tolist()):
+        values = pi_brdf[measurements.series == series]
+        if values.size >= PERCENT_ROWS and values.min() > 1:
+            bright[series] = float(values.min())
+    if bright:
+        through = " through Eq. (6)" if measurements.quantity == "raw_reflectance" else ""
+        found.append(
+            Implausible(
+                f"every row of series {', '.join(bright)} implies π·BRDF > 1{through} "
+                f"(smallest {min(bright.values()):.3g}): the values look like percent",
+                where,
+                value_field(measurements),
+                "brdf_infer reads fractions (π·BRDF = 1 is a white diffuser)",
+            )
+        )
+    return found
+
+
+def answer_checks(
+    what: str,
+    theta_i_deg: Sequence[float],
+    tis_values: Sequence[float] | None,
+    pi_brdf0: float | None = None,
+    *,
+    file: str | None = None,
+    field: str | None = None,
+) -> list[Implausible]:
+    """π·BRDF0 above 1, or TIS above 1 at any of ``theta_i_deg`` [deg], of an answer (one
+    finding naming both where both fail).
+
+    Args:
+        what: the answer, in words (e.g. "the least-squares fit").
+        theta_i_deg: incidence angles of ``tis_values`` [deg].
+        tis_values: TIS [-] at those angles (None: the answer has no TIS).
+        pi_brdf0: π·BRDF0 [-] (None: the family has no BRDF0).
+        file, field: where the user should look (the measurement file and its value column).
+    """
+    above = []
+    if pi_brdf0 is not None and pi_brdf0 > 1:
+        above.append(f"π·BRDF0 = {pi_brdf0:.3g}")
+    if tis_values is not None:
+        angles = np.asarray(theta_i_deg, float)
+        values = np.asarray(tis_values, float)
+        if (values > 1).any():
+            listed = ", ".join(f"{a:g}" for a in angles[values > 1])
+            above.append(f"TIS up to {values.max():.3g} at θi = {listed} deg")
+    if not above:
+        return []
+    return [
+        Implausible(
+            f"{what} scatters more light than it receives: {' and '.join(above)}, above 1",
+            file,
+            field,
+            "is the reflectance in percent, or an aperture wrong?",
+        )
+    ]
+
+
+def fit_checks(scene: Scene, measurements: Measurements, params, what: str) -> list[Implausible]:
+    """:func:`answer_checks` of an Eq. (7) parameter set at the scene's incidence angles
+    (the TIS only where the scene has the out-of-plane model of Eq. 8)."""
+    from brdf_infer.model import tis
+
+    angles = scene.band_theta_i_deg(measurements)
+    values = (
+        np.asarray(tis(np.asarray(angles, float), params, True, scene.model.constants))
+        if scene.model.out_of_plane
+        else None
+    )
+    return answer_checks(
+        what,
+        angles,
+        values,
+        math.pi * float(params.brdf0),
+        file=str(measurements.path),
+        field=value_field(measurements),
+    )
+
+
+def family_fit_checks(
+    scene: Scene, measurements: Measurements, member, physical: dict[str, float], what: str
+) -> list[Implausible]:
+    """:func:`answer_checks` of another family's parameters: its TIS at the scene's angles."""
+    angles = scene.band_theta_i_deg(measurements)
+    values = np.asarray(member.tis_curve(np.asarray(angles, float), physical))[0]
+    return answer_checks(
+        what, angles, values, file=str(measurements.path), field=value_field(measurements)
+    )
+
+
+def require_plausible(found: Sequence[Implausible], force: bool) -> None:
+    """Stop on the first failed check unless ``force``.
+
+    Raises:
+        BadInputError: naming the first check's file and field (and how many more failed).
+    """
+    if not found or force:
+        return
+    first = found[0]
+    more = f"; {len(found) - 1} more check(s) failed" if len(found) > 1 else ""
+    hint = f"; {first.hint}" if first.hint else ""
+    raise BadInputError(
+        f"{first.problem}{hint}{more} ({FORCE_HINT})", file=first.file, field=first.field
+    )
 
 
 def measurement_warnings(measurements: Measurements) -> list[str]:
-    """Warnings about a measurement table whose values look like the wrong unit."""
-    warnings = []
-    where = str(measurements.path)
-    angles = np.abs(np.concatenate([measurements.theta_i_deg, measurements.theta_s_deg]))
-    if angles.size and angles.max() <= math.pi / 2 and angles.max() > 0:
-        warnings.append(
-            f"{where}: every angle lies within ±π/2 (largest {angles.max():.3g}): are they in "
-            "radians? brdf_infer reads degrees"
-        )
-    if measurements.reflectance_err is not None:
-        large = np.flatnonzero(measurements.reflectance_err > measurements.reflectance)
-        if large.size:
-            rows = ", ".join(str(k + 1) for k in large[:5]) + (" ..." if large.size > 5 else "")
-            warnings.append(
-                f"{where}: {large.size} row(s) have reflectance_err larger than the value "
-                f"(rows {rows}): is the σ column in other units than the values?"
-            )
-    return warnings
-
-
-def parameter_warnings(
-    params: Params,
-    theta_i_deg,
-    constants: HemisphereConstants,
-    what: str = "the fitted parameters",
-) -> list[str]:
-    """Warnings when ``params`` scatter more than they receive: π·BRDF0 or TIS above 1."""
-    from brdf_infer.model import tis
-
-    warnings = []
-    if math.pi * float(params.brdf0) > 1:
-        warnings.append(
-            f"π·BRDF0 = {math.pi * float(params.brdf0):.3g} > 1 at {what}: more light scattered "
-            "than received; is the reflectance in percent, or an aperture wrong?"
-        )
-    angles = np.asarray(theta_i_deg, float)
-    values = np.asarray(tis(angles, params, True, constants))
-    above = angles[values > 1]
-    if above.size:
-        listed = ", ".join(f"{a:g}" for a in above)
-        warnings.append(
-            f"TIS > 1 at θi = {listed} deg at {what}: these parameters are not physical; is "
-            "the reflectance in percent, or an aperture wrong?"
-        )
-    return warnings
+    """Warnings (not errors) about a table: a σ column larger than its values."""
+    if measurements.reflectance_err is None:
+        return []
+    large = np.flatnonzero(measurements.reflectance_err > measurements.reflectance)
+    if not large.size:
+        return []
+    rows = ", ".join(str(k + 1) for k in large[:5]) + (" ..." if large.size > 5 else "")
+    return [
+        f"{measurements.path}: {large.size} row(s) have reflectance_err larger than the value "
+        f"(rows {rows}): is the σ column in other units than the values?"
+    ]

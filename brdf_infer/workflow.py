@@ -12,7 +12,12 @@ traces (whose surface scatters by Eq. 7) are left out.
     from brdf_infer.workflow import run
     scene = load_scene("lya")
     result = run(scene, scene.load_measurements(), Path("reports/lya"))
-    result.verdict, result.posterior["tis"]
+    result.verdict.text, result.posterior["tis_70deg"]
+
+Before anything is written or sampled, :func:`run` checks the rows and then the fits for
+plausibility (:mod:`brdf_infer.plausibility`: angles in radians, values in percent, a fit
+whose π·BRDF0 or TIS exceeds 1) and stops on the first that fails, unless
+``RunSettings(force=True)``; then the run goes on and its verdict names every failed check.
 
 The fit summaries (:func:`paper_fit_summary`, :func:`lsq_summary`) are the JSON objects of
 ``brdf-infer fit --json``.
@@ -27,7 +32,9 @@ from pathlib import Path
 from typing import Any
 
 from brdf_infer.measurements import Measurements
+from brdf_infer.plausibility import Implausible
 from brdf_infer.scene import Scene, Studies
+from brdf_infer.verdict import Verdict
 
 STUDIES_FILE = "studies.json"
 
@@ -43,7 +50,8 @@ def _silent(message: str) -> None:
 @dataclass(frozen=True)
 class RunSettings:
     """NUTS settings of the main job, the least-squares starts, the model family (None: the
-    scene's ``[model] family``) and the studies (None: the scene's ``[studies]``)."""
+    scene's ``[model] family``), the studies (None: the scene's ``[studies]``) and ``force``:
+    go on past failed plausibility checks (the verdict then names them)."""
 
     chains: int = 4
     draws: int = 1000
@@ -52,6 +60,7 @@ class RunSettings:
     lsq_starts: int = 16
     model: str | None = None
     studies: Studies | None = None
+    force: bool = False
 
     def check(self) -> None:
         """Raises BadInputError naming the setting that is out of range."""
@@ -93,7 +102,7 @@ class RunResult:
         out: the run folder.
         report: the HTML report.
         model: the model family sampled.
-        verdict: the diagnostics that failed (empty: every one passes).
+        verdict: the run's one verdict (:mod:`brdf_infer.verdict`), as the report shows it.
         paper_fit, lsq: the fit summaries (``paper_fit``: the article's regression of Eq. 7,
             None when another family is run).
         posterior: the posterior summary (``summary.json``).
@@ -104,7 +113,7 @@ class RunResult:
     out: Path
     report: Path
     model: str
-    verdict: list[str]
+    verdict: Verdict
     paper_fit: dict[str, Any] | None
     lsq: dict[str, Any]
     posterior: dict[str, Any]
@@ -116,7 +125,7 @@ class RunResult:
             "out": str(self.out),
             "report": str(self.report),
             "model": self.model,
-            "verdict": self.verdict,
+            "verdict": self.verdict.as_json(),
             "paper_fit": self.paper_fit,
             "lsq": self.lsq,
             "posterior": self.posterior,
@@ -127,14 +136,22 @@ class RunResult:
         return payload
 
 
-def fit_warnings(scene: Scene, measurements: Measurements, params, what: str) -> list[str]:
-    """Unit-plausibility warnings about a fitted parameter set (π·BRDF0, TIS above 1)."""
-    from brdf_infer.plausibility import parameter_warnings
+def fit_checks(scene: Scene, measurements: Measurements, fit: dict[str, Any]) -> list[Implausible]:
+    """The plausibility checks (:mod:`brdf_infer.plausibility`) of a fit summary
+    (:func:`paper_fit_summary`, :func:`lsq_summary` or a family's ``as_json``): π·BRDF0 and
+    the TIS at the scene's incidence angles."""
+    from brdf_infer import plausibility
+    from brdf_infer.model import REFERENCE_FAMILY, family
+    from brdf_infer.params import Params
 
-    if not scene.model.out_of_plane:
-        return []
-    angles = scene.band_theta_i_deg(measurements)
-    return parameter_warnings(params, angles, scene.model.constants, what)
+    name = fit.get("model", REFERENCE_FAMILY)
+    what = "the paper fit" if fit["method"] == "paper" else "the least-squares fit"
+    if name == REFERENCE_FAMILY:
+        return plausibility.fit_checks(scene, measurements, Params(**fit["params"]), what)
+    member = family(name, scene.model.fold, scene.model.constants)
+    return plausibility.family_fit_checks(
+        scene, measurements, member, fit["params"], f"{what} of {name}"
+    )
 
 
 def paper_fit_summary(
@@ -170,7 +187,10 @@ def lsq_summary(
     progress: Callable[[str], None] = _silent,
 ) -> dict[str, Any]:
     """The least-squares fit as the JSON of ``fit --method lsq`` (warnings also to
-    ``progress``)."""
+    ``progress``): ``sigma`` is the 1σ as asked (scaled by √(χ²/dof) with
+    ``scale_covariance``), ``sigma_scaled`` always the scaled one, next to ``chi2_dof`` and
+    the ``fit_quality`` statement (:mod:`brdf_infer.fit_quality`)."""
+    from brdf_infer.fit_quality import FitQuality, scaled_sigma
     from brdf_infer.lsq import fit_lsq
     from brdf_infer.observations import build_observation_model
     from brdf_infer.paper_fit import paper_fit
@@ -185,11 +205,11 @@ def lsq_summary(
         seed=seed,
         scale_covariance=scale_covariance,
     )
-    warnings = result.warnings + fit_warnings(
-        scene, measurements, result.params, "the least-squares optimum"
-    )
-    for warning in warnings:
+    for warning in result.warnings:
         progress(f"warning: {warning}")
+    dof = result.n_points - len(result.free)
+    learned = scene.errors.model == "generative" and scene.errors.learns_repeatability
+    quality = FitQuality(result.cost, dof, result.repeatability if learned and dof > 0 else None)
     model = build_observation_model(scene, measurements).with_sigma(result.row_sigma)
     paper_cost = float(model.chi2(paper_fit(scene, measurements).params))
     return {
@@ -198,8 +218,12 @@ def lsq_summary(
         "params": params_to_dict(result.params),
         "cost": result.cost,
         "reduced_chi2": result.reduced_chi2,
+        **quality.as_json(),
         "paper_fit_cost": paper_cost,
         "sigma": result.sigma,
+        "sigma_scaled": result.sigma
+        if result.covariance_scaled
+        else scaled_sigma(result.sigma, quality.sigma_factor),
         "correlation": result.correlation.tolist(),
         "correlation_names": list(PARAM_NAMES),
         "internal": result.internal,
@@ -218,7 +242,7 @@ def lsq_summary(
         "row_sigma": result.row_sigma.tolist(),
         "repeatability": result.repeatability,
         "reweightings": result.reweightings,
-        "warnings": warnings,
+        "warnings": result.warnings,
     }
 
 
@@ -258,12 +282,17 @@ def run(
         scene: the scene.
         measurements: its rows.
         out: the run folder (created; result files are written atomically).
-        settings: NUTS and least-squares settings, and the studies.
+        settings: NUTS and least-squares settings, the studies, and ``force``.
         example: also write the small committed example report here.
         progress: called with one line per step.
+
+    Raises:
+        BadInputError: a setting out of range, an unknown family or study, or (without
+            ``settings.force``) a failed plausibility check; nothing is written then.
     """
     from brdf_infer._atomic import atomic_write_json
     from brdf_infer.model import REFERENCE_FAMILY
+    from brdf_infer.plausibility import measurement_checks, require_plausible
     from brdf_infer.posterior import build_model, run_posterior
     from brdf_infer.report import write_example, write_report
 
@@ -278,7 +307,8 @@ def run(
     instruments = instruments if reference else []
     traces = studies.raytrace and scene.raytrace is not None and reference
     _check_studies(scene, instruments)
-    out.mkdir(parents=True, exist_ok=True)
+    implausible = measurement_checks(scene, measurements)
+    require_plausible(implausible, settings.force)
     steps = 4 + len(error_models) + bool(instruments) + traces + bool(studies.compare)
     step = iter(range(1, steps + 1))
     paper = None
@@ -287,7 +317,8 @@ def run(
             f"[{next(step)}/{steps}] paper fit of scene '{scene.name}' ({len(measurements)} rows)"
         )
         paper = paper_fit_summary(scene, measurements)
-        atomic_write_json(out / "fit_paper.json", paper)
+        implausible += fit_checks(scene, measurements, paper)
+        require_plausible(implausible, settings.force)  # before the least squares' compile
     else:
         progress(f"[{next(step)}/{steps}] model {name}: no paper fit (it is Eq. 7's regression)")
     progress(f"[{next(step)}/{steps}] least-squares fit of all free parameters of {name}")
@@ -302,6 +333,14 @@ def run(
         lsq = fit_family_lsq(
             scene, measurements, family(name), starts=settings.lsq_starts, seed=settings.seed
         ).as_json(scene.name)
+    implausible += fit_checks(scene, measurements, lsq)
+    require_plausible(implausible, settings.force)  # before anything is written or sampled
+    forced = [found.record for found in implausible]
+    for line in forced:
+        progress(f"warning: forced past a plausibility check: {line}")
+    out.mkdir(parents=True, exist_ok=True)
+    if paper is not None:
+        atomic_write_json(out / "fit_paper.json", paper)
     atomic_write_json(out / "fit_lsq.json", lsq)
     progress(f"[{next(step)}/{steps}] NUTS posterior ({settings.chains} chains x {settings.draws})")
     options = {
@@ -311,7 +350,7 @@ def run(
         "seed": settings.seed,
         "model": name,
     }
-    posterior = run_posterior(scene, measurements, out=out, **options)
+    posterior = run_posterior(scene, measurements, out=out, forced=forced, **options)
     for error_model in error_models:
         progress(f"[{next(step)}/{steps}] NUTS posterior with the {error_model} error model")
         run_posterior(
@@ -319,6 +358,7 @@ def run(
             measurements,
             error_model=error_model,
             out=out / "variants" / error_model,
+            forced=forced,
             **options,
         )
     if instruments:
@@ -357,14 +397,14 @@ def run(
         {"run": studies.requested(), "not_run": not_run(scene, studies) if reference else []},
     )
     progress(f"[{next(step)}/{steps}] report")
-    report, failures = write_report(out, progress=_silent)
+    report, verdict = write_report(out, progress=_silent)
     if example is not None:
-        write_example(out, example, failures)
+        write_example(out, example)
     return RunResult(
         out=out,
         report=report,
         model=name,
-        verdict=failures,
+        verdict=verdict,
         paper_fit=paper,
         lsq=lsq,
         posterior=posterior.summary,

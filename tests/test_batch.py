@@ -65,12 +65,13 @@ def _fewer_rows(folder, name: str, factor: float = 1.0):
 @pytest.fixture(scope="module")
 def batch_run(tmp_path_factory):
     """Two scenes of one structure (different data), one of fewer rows and samples (padded
-    into the same group), and a broken one."""
+    into the same group), a broken one and one in percent (skipped: no --force)."""
     folder = tmp_path_factory.mktemp("batch")
     scenes = [
         _scene(folder, "a"),
         _scene(folder, "b", _scaled_rows(folder, 1.3)),
         _scene(folder, "c", _fewer_rows(folder, "rows_c", 0.8)),
+        _scene(folder, "percent", _scaled_rows(folder, 100.0)),
     ]
     (folder / "broken.toml").write_text(
         'name = "broken"\nmeasurements = "nowhere.csv"\n'
@@ -89,14 +90,19 @@ def test_batch_json_contract_and_a_broken_scene_is_skipped(batch_run):
     assert set(payload) >= {"scenes", "groups", "devices", "seconds"}
     assert payload["groups"] == 1 and payload["devices"] >= 1
     by_name = {Path(entry["source"]).stem: entry for entry in payload["scenes"]}
-    assert set(by_name) == {"a", "b", "c", "broken"}
+    assert set(by_name) == {"a", "b", "c", "broken", "percent"}
     assert by_name["a"]["scene"] == "a"  # a scene that could not be read keeps its source
     broken = by_name["broken"]
     assert broken["error"] and "nowhere.csv" in broken["error"] and broken["out"] is None
+    percent = by_name["percent"]
+    assert "look like percent" in percent["error"] and "--force" in percent["error"]
+    assert percent["out"] is None and not (out / "percent").exists()
     for name in ("a", "b", "c"):
         entry = by_name[name]
         assert entry["error"] is None
-        assert set(entry) >= {"out", "r_hat_max", "ess_min", "divergences", "tis"}
+        assert set(entry) >= {"out", "r_hat_max", "ess_min", "divergences", "verdict", "tis"}
+        summary = json.loads((out / name / "summary.json").read_text())
+        assert entry["verdict"] == summary["verdict"] and summary["forced"] == []
         assert set(entry["tis"]) == {"theta_i_deg", "median", "lo95", "hi95"}
         assert (out / name / "posterior.nc").is_file() and (out / name / "summary.json").is_file()
     # different data, different posteriors: b's rows are 1.3 × a's

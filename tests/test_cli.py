@@ -1,5 +1,6 @@
 """The command line's JSON contracts (README, "Command line") and human output."""
 
+import html
 import json
 
 import numpy as np
@@ -74,16 +75,25 @@ def test_run_is_the_main_job_and_its_verdict_passes(tmp_path, capsys, settings):
     """The README's main job (with its default settings among the slow tests): the sampler's
     diagnostics pass; so does the verdict, except that PSIS-LOO may call one influential row
     unreliable (row 41's Pareto k is ≈ 0.7: 0.73 at 2000 draws, 0.81 at 800, above 0.7 also
-    at the default 4000 in a fresh clone), which the verdict must then say."""
+    at the default 4000 in a fresh clone), which the verdict must then say. One verdict,
+    the same on stdout and in the report."""
     out_dir = tmp_path / "out"
     code, out, err = run_cli("run", "--out", str(out_dir), *settings, capsys=capsys)
     assert code == 0, err
-    assert "diagnostics: all diagnostics pass" in out
-    verdict = next(line for line in out.splitlines() if line.startswith("verdict: "))
+    summary = json.loads((out_dir / "summary.json").read_text())
+    assert summary["diagnostics"]["failures"] == [] and summary["forced"] == []
+    verdicts = [line for line in out.splitlines() if line.startswith(("verdict", "diagnostics"))]
+    assert len(verdicts) == 1, verdicts
+    verdict = verdicts[0]
     assert verdict == "verdict: every diagnostic passes" or verdict.startswith(
         "verdict: 1 measurement(s) with Pareto k > 0.7"
     ), verdict
-    assert (out_dir / "report.html").is_file()
+    text = verdict.removeprefix("verdict: ")
+    assert summary["verdict"]["text"] == text
+    report = (out_dir / "report.html").read_text()
+    assert f"<strong>Verdict: {html.escape(text)}</strong>" in report
+    assert ('class="verdict pass"' in report) == (text == "every diagnostic passes")
+    assert "fit quality ok:" in out  # the least squares state their quality
     assert json.loads((out_dir / "fit_paper.json").read_text())["n_points"] == 19
     assert json.loads((out_dir / "fit_lsq.json").read_text())["starts"] == 16
     for name in ("posterior.nc", "summary.json", "bands.json"):

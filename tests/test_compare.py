@@ -10,11 +10,13 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from brdf_infer._cli_compare import comparison_table
 from brdf_infer.compare import CompareSettings, compare_families
 from brdf_infer.error_model import NoiseScales
 from brdf_infer.model import family
 from brdf_infer.params import UV_PAPER
 from brdf_infer.posterior import build_family_model, build_posterior_model
+from brdf_infer.report._compare import compare_frame
 from tests.helpers import SUITE_WARMUP, run_cli
 
 SMALL = CompareSettings(chains=2, warmup=SUITE_WARMUP, draws=300, seed=1)
@@ -100,6 +102,19 @@ def test_compare_command_json_contract_and_files(tmp_path, capsys):
     assert payload["seconds"] > 0
     assert json.loads((tmp_path / "cmp" / "compare.json").read_text())["models"]
     assert (tmp_path / "cmp" / "compare.png").stat().st_size > 0
+    # one chain of 100 draws cannot reach a bulk ESS of 400 (and has no R-hat: NaN, which
+    # fails as in a posterior run): every family's sampler diagnostics fail, stand next to
+    # its rank, and mark it not to be trusted
+    for entry in payload["models"]:
+        assert np.isnan(entry["r_hat_max"]) and entry["ess_bulk_min"] < 400
+        assert isinstance(entry["divergences"], int)
+        assert entry["sampler_ok"] is False
+        assert any(f.startswith("bulk ESS") for f in entry["sampler_failures"]), entry
+    assert any("not to be trusted" in note for note in payload["warnings"])
+    text = comparison_table(payload, lambda head, rows: "\n".join(map(" | ".join, [head, *rows])))
+    assert "R-hat max" in text and "ESS bulk min" in text and "FAIL" in text
+    assert text.count("its place in the ranking is not to be trusted") == 2
+    assert all("(sampler diagnostics fail)" in name for name in compare_frame(payload).index)
 
 
 @pytest.mark.parametrize(
@@ -189,6 +204,22 @@ def test_fit_lsq_of_another_family_gives_its_parameters_in_json(capsys):
     assert set(payload["params"]) == {"A", "B", "g"} and payload["model"] == "abg"
     assert all(np.isfinite(v) and v > 0 for v in payload["params"].values())
     assert payload["n_points"] == 42
+    # ABg has one value at specular for every θi while the data grow 100-fold there: its
+    # χ²/dof is far above 2 and the fit says so, with the 1σ scaled by sqrt(χ²/dof) beside
+    # the unscaled one
+    assert payload["dof"] == 39 and payload["chi2_dof"] == pytest.approx(payload["cost"] / 39)
+    assert payload["chi2_dof"] > 100 and payload["poor_fit"]
+    assert payload["fit_quality"].startswith("poor: χ²/dof = ")
+    factor = np.sqrt(payload["chi2_dof"])
+    for name, sigma in payload["sigma"].items():
+        assert payload["sigma_scaled"][name] == pytest.approx(factor * sigma, rel=1e-12)
+
+
+def test_fit_lsq_of_another_family_states_its_quality_beside_its_table(capsys):
+    code, out, err = run_cli("fit", "--method", "lsq", "--model", "abg", capsys=capsys)
+    assert code == 0, err
+    assert "1 sigma x sqrt(chi2/dof)" in out and "(39 dof)" in out
+    assert "fit quality: poor: χ²/dof = " in out
 
 
 @pytest.mark.parametrize(

@@ -175,6 +175,11 @@ def test_cli_lsq_json_contract(capsys):
     assert list(payload["params"]) == list(PARAM_NAMES) == list(payload["sigma"])
     assert np.array(payload["correlation"]).shape == (6, 6)
     assert payload["starts"] == 4 and payload["solver"] == "lm"
+    # the learned repeatability makes chi2/dof 1 (Paule–Mandel), and the fit says so
+    assert payload["dof"] == 42 - 6 and payload["chi2_dof"] == pytest.approx(1.0, abs=1e-6)
+    assert not payload["poor_fit"] and payload["fit_quality"].startswith("ok:")
+    assert "by construction" in payload["fit_quality"] and payload["implausible"] == []
+    assert payload["sigma_scaled"] == pytest.approx(payload["sigma"], rel=1e-6)
 
 
 def test_cli_rejects_bad_solver_and_starts(capsys):

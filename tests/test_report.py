@@ -87,12 +87,14 @@ def test_report_is_self_contained_and_every_image_decodes(good_report, nuts_run)
         assert (nuts_run.out / "figures" / f"{png}.png").stat().st_size > 5000, png
 
 
-def test_report_opens_with_the_verdict_then_the_sections(good_report):
-    path, failures = good_report
+def test_report_opens_with_the_verdict_then_the_sections(good_report, nuts_run):
+    path, verdict = good_report
     page = parse(path)
-    assert page.classes[0] == ("verdict fail" if failures else "verdict pass")
-    for failure in failures:  # reduced settings: a Pareto k may cross 0.7 (row 45°/60°)
-        assert html.escape(failure) in path.read_text()
+    assert page.classes[0] == ("verdict pass" if verdict.ok else "verdict fail")
+    # the verdict the run recorded, rendered as it stands (reduced settings: a Pareto k may
+    # cross 0.7, row 45°/60°)
+    assert verdict.as_json() == nuts_run.summary["verdict"]
+    assert f"Verdict: {html.escape(verdict.text)}</strong>" in path.read_text()
     text = path.read_text()
     order = [
         text.index(h)
@@ -150,10 +152,43 @@ def test_deliberately_bad_run_lists_its_failures(lya, tmp_path, capsys):
     code, out, err = run_cli("report", str(tmp_path), "--json", capsys=capsys)
     assert code == 0, err
     verdict = json.loads(out)["verdict"]
-    assert any("ESS" in failure for failure in verdict), verdict
+    assert not verdict["ok"] and any("ESS" in line for line in verdict["lines"]), verdict
+    assert verdict["text"] == "; ".join(verdict["lines"])
     page = parse(tmp_path / "report.html")
     assert page.classes[0] == "verdict fail"
     assert "do not trust" in (tmp_path / "report.html").read_text()
+
+
+def test_a_run_started_with_a_relative_scene_path_is_read_from_any_directory(
+    tmp_path, capsys, monkeypatch
+):
+    """``posterior`` started in the scene's folder with a relative path; ``report RUN_DIR``
+    and ``tis --run RUN_DIR`` from another working directory (the run names its scene file
+    by an absolute path)."""
+    import shutil
+
+    from brdf_infer.scene import scene_file
+
+    data = tmp_path / "data"
+    data.mkdir()
+    for name in ("lya.scene.toml", "lya_measurements.csv", "lya_tis_reference.csv"):
+        shutil.copy(scene_file("lya").parent / name, data / name)
+    monkeypatch.chdir(data)
+    # chains and warmup as in the deliberately bad run above: its compiled program is reused
+    argv = ["--chains", "1", "--warmup", "500", "--draws", "20", "--out", "run"]
+    code, _, err = run_cli("posterior", "lya.scene.toml", *argv, capsys=capsys)
+    assert code == 0, err
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    run = data / "run"
+    code, out, err = run_cli("report", str(run), capsys=capsys)
+    assert code == 0, err
+    assert out.startswith("verdict: ") and (run / "report.html").is_file()
+    code, out, err = run_cli("tis", "--run", str(run), "--theta-i", "70", "--json", capsys=capsys)
+    assert code == 0, err
+    assert 0 < json.loads(out)["median"][0] < 1
+    assert not list(elsewhere.iterdir())  # nothing written where the readers ran
 
 
 def test_report_of_a_folder_without_a_run_is_a_clear_error(tmp_path, capsys):
@@ -202,9 +237,24 @@ def test_report_shows_a_model_comparison_written_into_its_run(nuts_run, tmp_path
         model.update(
             weight=weight, p_loo=6.0, pareto_k_max=0.4, pareto_k_max_after_refit=0.4, tis70=band
         )
+    # the issue's case: a ranked family with R-hat 1.04 and ESS 124
+    models[0].update(
+        r_hat_max=1.002, ess_bulk_min=1800.0, divergences=0, sampler_ok=True, sampler_failures=[]
+    )
+    failures = ["R-hat 1.040 > 1.01", "bulk ESS 124 < 400"]
+    models[1].update(
+        r_hat_max=1.04,
+        ess_bulk_min=124.0,
+        divergences=0,
+        sampler_ok=False,
+        sampler_failures=failures,
+    )
     (run / COMPARE_FILE).write_text(json.dumps({"models": models, "seconds": 1.0}))
     write_report(run, progress=lambda message: None)
     text = (run / "report.html").read_text()
     assert "<h2>Model comparison (PSIS-LOO)</h2>" in text
     assert "Best: <b>strumik2024</b>" in text and "148.6 ± 9.8" in text
     assert text.index("<td>strumik2024</td>") < text.index("<td>abg</td>")
+    assert "<td>1.040</td><td>124</td>" in text and "<td>1.002</td><td>1800</td>" in text
+    assert text.count("rank not to be trusted") == 1
+    assert "R-hat 1.040 &gt; 1.01, bulk ESS 124 &lt; 400" in text

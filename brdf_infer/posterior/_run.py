@@ -6,7 +6,7 @@ import dataclasses
 import hashlib
 import json
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -39,6 +39,7 @@ from brdf_infer.posterior._samplers import (
     run_nuts,
 )
 from brdf_infer.scene import Scene
+from brdf_infer.verdict import PARETO_K_LIMIT, posterior_verdict
 
 CHECKPOINT_FILE = "emcee_checkpoint.npz"
 
@@ -124,7 +125,8 @@ def run_fingerprint(model: PosteriorModel, measurements: Measurements) -> dict[s
 
 
 def predictive_checks(idata: az.InferenceData, log_lik: np.ndarray, cdf: np.ndarray) -> dict:
-    """PSIS-LOO (elpd with its standard error, p_loo, largest Pareto k) and the LOO-PIT of
+    """PSIS-LOO (elpd with its standard error, p_loo, largest Pareto k and the number of rows
+    above :data:`~brdf_infer.verdict.PARETO_K_LIMIT`) and the LOO-PIT of
     every row with a Kolmogorov–Smirnov test of its uniformity, from the leave-one-out terms
     of :func:`loo_terms` (``idata`` holds the same ``log_lik``)."""
     import warnings
@@ -138,6 +140,7 @@ def predictive_checks(idata: az.InferenceData, log_lik: np.ndarray, cdf: np.ndar
         "se": float(loo.se),
         "p_loo": float(loo.p_loo),
         "pareto_k_max": float(np.max(loo.pareto_k)),
+        "pareto_k_high": int(np.sum(np.asarray(loo.pareto_k) > PARETO_K_LIMIT)),
         "loo_pit": pit.tolist(),
         "loo_pit_ks_p": uniformity_p_value(pit),
     }
@@ -161,6 +164,7 @@ def run_posterior(
     model: str | None = None,
     progress: bool | None = None,
     announce: Callable[[str], None] | None = None,
+    forced: Sequence[str] = (),
 ) -> PosteriorRun:
     """Sample the scene's posterior and write posterior.nc, summary.json, bands.json.
 
@@ -180,6 +184,8 @@ def run_posterior(
         progress: progress bar on stderr (default: when stderr is a terminal).
         announce: called with a one-line description of the run once every setting (and a
             checkpoint to resume) has been checked, before any sampling.
+        forced: the plausibility checks (:mod:`brdf_infer.plausibility`) the caller went past
+            with ``--force``, one line each: they open the run's verdict.
 
     Raises:
         BadInputError: a setting out of range, or a checkpoint that this run did not write.
@@ -242,7 +248,7 @@ def run_posterior(
             fingerprint=run_fingerprint(model, measurements),
             progress=progress,
         )
-    return complete_run(model, measurements, result, seed, out, started)
+    return complete_run(model, measurements, result, seed, out, started, forced=forced)
 
 
 class _StepClock:
@@ -265,10 +271,13 @@ def complete_run(
     seed: int,
     out: Path | None,
     started: float,
+    *,
+    forced: Sequence[str] = (),
 ) -> PosteriorRun:
     """From a sampler's draws to the run: InferenceData, PSIS-LOO and LOO-PIT, bands,
-    diagnostics and the summary, written to ``out`` (when given) atomically; ``started``: the
-    ``time.perf_counter()`` at the start of the run (its total time)."""
+    diagnostics, the summary and its verdict (:mod:`brdf_infer.verdict`; ``forced``: the
+    plausibility checks the run went past), written to ``out`` (when given) atomically;
+    ``started``: the ``time.perf_counter()`` at the start of the run (its total time)."""
     scene, name = model.scene, model_name(model)
     clock = _StepClock()
     log_lik, cdf = loo_terms(model, result.sites)  # once: for PSIS-LOO and the LOO-PIT
@@ -320,7 +329,9 @@ def complete_run(
         "tis_70deg": tis_70,
         "pi_brdf0": pi_brdf0,
         "seconds": dict(result.seconds),
+        "forced": list(forced),
     }
+    summary["verdict"] = posterior_verdict(summary, bands, theta_i_band, forced).as_json()
     clock.lap("predictive")
     summary["seconds"]["after_sampling"] = clock.steps  # the files are written after this
     summary["seconds"]["total"] = time.perf_counter() - started

@@ -1,6 +1,6 @@
 """The HTML diagnostic report of a posterior run, and its figures (imports matplotlib)."""
 
-from brdf_infer.report._build import FIGURE_DIR, REPORT_FILE, verdict, write_example, write_report
+from brdf_infer.report._build import FIGURE_DIR, REPORT_FILE, write_example, write_report
 from brdf_infer.report._compare import compare_figure, compare_table_html
 from brdf_infer.report._figures import brdf_bands as plot_brdf_bands
 from brdf_infer.report._figures import hemisphere_maps as plot_hemisphere_maps
@@ -25,7 +25,6 @@ __all__ = [
     "png",
     "sbc_figures",
     "sbc_page",
-    "verdict",
     "write_example",
     "write_report",
 ]

@@ -28,11 +28,11 @@ from brdf_infer.report._export import abg_table, load_exports, plot_export
 from brdf_infer.report._instruments import MEANINGS, instruments_section
 from brdf_infer.report._raytrace import figure_png, plot_detector_images, plot_raytrace
 from brdf_infer.scene import load_scene
+from brdf_infer.verdict import PARETO_K_LIMIT, Verdict
 
 REPORT_FILE = "report.html"
 RAYTRACE_FILE = "raytrace.json"
 FIGURE_DIR = "figures"
-PARETO_K_LIMIT = 0.7
 
 
 def _load(run: Path):
@@ -47,22 +47,17 @@ def _load(run: Path):
         bands = json.loads((run / BANDS_FILE).read_text())
     except (OSError, ValueError) as error:
         raise BadInputError(f"cannot read the run: {error}", file=run) from None
+    if "verdict" not in summary:
+        raise BadInputError(
+            "no verdict in this run's summary (written by an earlier brdf_infer): run it again",
+            file=run / SUMMARY_FILE,
+        )
     return idata, summary, bands
 
 
-def verdict(summary: dict, loo) -> list[str]:
-    """Every diagnostic that failed its threshold, in words (empty when all pass)."""
-    failures = list(summary["diagnostics"]["failures"])
-    bad = int(np.sum(np.asarray(loo.pareto_k) > PARETO_K_LIMIT))
-    if bad:
-        failures.append(
-            f"{bad} measurement(s) with Pareto k > {PARETO_K_LIMIT} (PSIS-LOO unreliable there)"
-        )
-    return failures
-
-
-def write_report(run: Path, progress=print) -> tuple[Path, list[str]]:
-    """Write ``run/report.html`` and ``run/figures/*.png``; returns the path and the failures."""
+def write_report(run: Path, progress=print) -> tuple[Path, Verdict]:
+    """Write ``run/report.html`` and ``run/figures/*.png``; returns the path and the run's
+    verdict (the one the run recorded, rendered as it stands)."""
     started = time.perf_counter()
     idata, summary, bands = _load(run)
     attrs = idata.posterior.attrs
@@ -73,7 +68,7 @@ def write_report(run: Path, progress=print) -> tuple[Path, list[str]]:
     with warnings.catch_warnings():  # high Pareto k are reported in the verdict instead
         warnings.simplefilter("ignore", UserWarning)
         loo = az.loo(idata, pointwise=True)
-    failures = verdict(summary, loo)
+    verdict = Verdict.from_json(summary["verdict"])  # recorded when the run completed
     figures: list[tuple[str, str, object]] = []
 
     def add(name: str, caption: str, make) -> None:
@@ -182,7 +177,7 @@ def write_report(run: Path, progress=print) -> tuple[Path, list[str]]:
         round_to="none",
     )
     sections = [
-        _html.verdict_box(failures),
+        _html.verdict_box(verdict),
         "<p>Thresholds: "
         + _html.escape(
             f"R-hat ≤ {THRESHOLDS['r_hat']}, bulk and tail ESS ≥ {THRESHOLDS['ess']}, "
@@ -298,7 +293,7 @@ def write_report(run: Path, progress=print) -> tuple[Path, list[str]]:
     document = _html.page(title, sections)
     path = atomic_write_bytes(run / REPORT_FILE, document.encode())
     progress(f"report written in {time.perf_counter() - started:.1f} s")
-    return path, failures
+    return path, verdict
 
 
 def _studies_line(run: Path) -> str:
@@ -329,7 +324,10 @@ def _compare_section(run: Path) -> list[str]:
         "<h2>Model comparison (PSIS-LOO)</h2>",
         f"<p>Every family sampled by NUTS on the same rows and error model; ranked by the "
         f"leave-one-out log predictive density (higher is better). Best: <b>{best}</b>. A "
-        f"difference is clear when Δelpd is several times its se.</p>",
+        f"difference is clear when Δelpd is several times its se. A family whose sampler "
+        f"diagnostics fail (R-hat > {THRESHOLDS['r_hat']}, bulk ESS < {THRESHOLDS['ess']}, "
+        f"divergences) is marked: its draws may not represent its posterior, so its rank is "
+        f"not to be trusted.</p>",
         compare_table_html(payload),
         _html.figure(
             compare_figure(payload),
@@ -603,9 +601,10 @@ def _comparison(run: Path, idata) -> str:
 EXAMPLE_FIGURES = ("brdf_bands", "tis_band", "hemisphere", "predictive", "raytrace")
 
 
-def write_example(run: Path, example: Path, failures: list[str]) -> Path:
-    """A small committed example: the key PNGs of ``run`` and a README with the verdict."""
+def write_example(run: Path, example: Path) -> Path:
+    """A small committed example: the key PNGs of ``run`` and a README with its verdict."""
     summary = json.loads((run / SUMMARY_FILE).read_text())
+    verdict = Verdict.from_json(summary["verdict"])
     bands = json.loads((run / BANDS_FILE).read_text())
     names = [name for name in EXAMPLE_FIGURES if (run / FIGURE_DIR / f"{name}.png").is_file()]
     for name in names:
@@ -618,10 +617,8 @@ def write_example(run: Path, example: Path, failures: list[str]) -> Path:
         "Regenerate with `./dev run --example reports/example` (the full HTML report is written to",
         "`reports/lya/report.html`, which is not committed).",
         "",
-        "**Verdict:** "
-        + ("; ".join(failures) if failures else "every diagnostic passes its threshold")
-        + f" (max R-hat {diagnostics['r_hat_max']:.3f}, min bulk/tail ESS "
-        f"{diagnostics['ess_bulk_min']:.0f}/{diagnostics['ess_tail_min']:.0f}, "
+        f"**Verdict:** {verdict.text} (max R-hat {diagnostics['r_hat_max']:.3f}, min "
+        f"bulk/tail ESS {diagnostics['ess_bulk_min']:.0f}/{diagnostics['ess_tail_min']:.0f}, "
         f"{diagnostics.get('divergences', 0)} divergences).",
         "",
         *(

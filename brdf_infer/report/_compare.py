@@ -11,6 +11,15 @@ import pandas as pd
 from matplotlib.figure import Figure
 
 from brdf_infer._arviz import az
+from brdf_infer.report._html import escape
+
+UNTRUSTED = "sampler diagnostics fail"
+
+
+def label(row: dict[str, Any]) -> str:
+    """A family's name, marked where its sampler diagnostics fail (its rank is then not to be
+    trusted)."""
+    return row["name"] if row["sampler_ok"] else f"{row['name']} ({UNTRUSTED})"
 
 
 def compare_frame(payload: dict[str, Any]) -> pd.DataFrame:
@@ -28,12 +37,13 @@ def compare_frame(payload: dict[str, Any]) -> pd.DataFrame:
             "warning": [row["pareto_k_max_after_refit"] > 0.7 for row in rows],
             "scale": ["log"] * len(rows),
         },
-        index=[row["name"] for row in rows],
+        index=[label(row) for row in rows],
     )
 
 
 def compare_figure(payload: dict[str, Any], dpi: int = 90) -> bytes:
-    """PNG: ArviZ's compare plot (elpd_loo ± se, Δelpd ± dse) beside each family's TIS(70°)."""
+    """PNG: ArviZ's compare plot (elpd_loo ± se, Δelpd ± dse) beside each family's TIS(70°);
+    a family whose sampler diagnostics fail is marked in both."""
     figure = Figure(figsize=(10.0, 0.6 * len(payload["models"]) + 1.8))
     left, right = figure.subplots(1, 2, gridspec_kw={"width_ratios": [3, 2]})
     with warnings.catch_warnings():  # ArviZ's own use of a deprecated pandas keyword
@@ -41,7 +51,7 @@ def compare_figure(payload: dict[str, Any], dpi: int = 90) -> bytes:
         az.plot_compare(compare_frame(payload), ax=left, insample_dev=False, legend=False)
     left.set_xlabel("elpd_loo (log predictive density, higher is better) [nats]")
     left.set_title("PSIS-LOO, best on top: elpd_loo ± se", fontsize=9)
-    names = [row["name"] for row in payload["models"]]
+    names = [label(row) for row in payload["models"]]
     medians = np.array([row["tis70"]["median"] for row in payload["models"]])
     low = np.array([row["tis70"]["lo95"] for row in payload["models"]])
     high = np.array([row["tis70"]["hi95"] for row in payload["models"]])
@@ -60,16 +70,26 @@ def compare_figure(payload: dict[str, Any], dpi: int = 90) -> bytes:
 
 
 def compare_table_html(payload: dict[str, Any]) -> str:
-    """The comparison as an HTML table (best first)."""
+    """The comparison as an HTML table (best first), each family's sampler diagnostics next to
+    its rank; a family whose diagnostics fail is marked not to be trusted."""
     head = (
         "<tr><th>model</th><th>elpd_loo ± se</th><th>Δelpd ± dse</th><th>weight</th>"
-        "<th>p_loo</th><th>Pareto k max</th><th>TIS(70°) [%] (95 %)</th></tr>"
+        "<th>p_loo</th><th>Pareto k max</th><th>R-hat max</th><th>bulk ESS min</th>"
+        "<th>divergences</th><th>sampler</th><th>TIS(70°) [%] (95 %)</th></tr>"
     )
     body = "".join(
-        f"<tr><td>{row['name']}</td><td>{row['elpd_loo']:.1f} ± {row['se']:.1f}</td>"
+        f"<tr><td>{escape(row['name'])}</td><td>{row['elpd_loo']:.1f} ± {row['se']:.1f}</td>"
         f"<td>{row['d_elpd']:.1f} ± {row['dse']:.1f}</td><td>{row['weight']:.2f}</td>"
         f"<td>{row['p_loo']:.1f}</td><td>{row['pareto_k_max']:.2f}</td>"
-        f"<td>{100 * row['tis70']['median']:.2f} ({100 * row['tis70']['lo95']:.2f}–"
+        f"<td>{row['r_hat_max']:.3f}</td><td>{row['ess_bulk_min']:.0f}</td>"
+        f"<td>{row['divergences']}</td>"
+        + (
+            "<td>ok</td>"
+            if row["sampler_ok"]
+            else f"<td class='fail'>{UNTRUSTED} ({escape(', '.join(row['sampler_failures']))}): "
+            "rank not to be trusted</td>"
+        )
+        + f"<td>{100 * row['tis70']['median']:.2f} ({100 * row['tis70']['lo95']:.2f}–"
         f"{100 * row['tis70']['hi95']:.2f})</td></tr>"
         for row in payload["models"]
     )

@@ -6,6 +6,8 @@ import base64
 import html
 from collections.abc import Sequence
 
+from brdf_infer.verdict import Verdict
+
 STYLE = """
 body { font-family: system-ui, sans-serif; max-width: 1150px; margin: 2em auto; padding: 0 1em;
   color: #222; }
@@ -45,16 +47,17 @@ def figure(png: bytes, caption: str) -> str:
     )
 
 
-def verdict_box(failures: Sequence[str]) -> str:
-    if not failures:
+def verdict_box(verdict: Verdict) -> str:
+    """The run's verdict, its text exactly as the
+    command line prints it after ``verdict:``; red when any check failed."""
+    if verdict.ok:
         return (
-            '<div class="verdict pass"><strong>Verdict: every diagnostic passes its '
-            "threshold.</strong></div>"
+            f'<div class="verdict pass"><strong>Verdict: {escape(verdict.text)}</strong> '
+            "(every threshold below is met).</div>"
         )
-    items = "".join(f"<li>{escape(f)}</li>" for f in failures)
     return (
-        '<div class="verdict fail"><strong>Verdict: do not trust these bands yet — '
-        f"{len(failures)} diagnostic(s) failed:</strong><ul>{items}</ul></div>"
+        f'<div class="verdict fail"><strong>Verdict: {escape(verdict.text)}</strong>'
+        f"<p>{len(verdict.lines)} check(s) failed: do not trust these results yet.</p></div>"
     )
 
 
