@@ -20,14 +20,30 @@ settings.register_profile("explore", max_examples=2000, **_PROPERTY_DEFAULTS)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci" if os.environ.get("CI") else "dev"))
 
 
+# Fixtures computed once per module or session whose work is worth sharing (a NUTS or emcee
+# run, a batch, ray traces, a least-squares fit, compiled potentials), most shared first.
+SHARED_FIXTURES = (
+    "nuts_run",
+    "emcee_run",
+    "batch_run",
+    "abg_run",
+    "traced",
+    "params_export",
+    "lya_fit",
+    "lya_potentials",
+    "image_experiment",
+)
+
+
 def pytest_collection_modifyitems(items):
-    """Under pytest-xdist (``--dist loadgroup``), the tests sharing a session run go to one
-    worker, so that run is computed once."""
+    """Under pytest-xdist (``--dist loadgroup``), the tests sharing an expensive fixture go to
+    one worker, so that it is computed once (a module fixture is otherwise built again by every
+    worker that runs one of its tests)."""
     for item in items:
-        for shared in ("nuts_run", "emcee_run"):
-            if shared in getattr(item, "fixturenames", ()):
-                item.add_marker(pytest.mark.xdist_group(shared))
-                break
+        names = getattr(item, "fixturenames", ())
+        shared = next((name for name in SHARED_FIXTURES if name in names), None)
+        if shared is not None:
+            item.add_marker(pytest.mark.xdist_group(shared))
 
 
 @pytest.fixture(scope="session")

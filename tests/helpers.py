@@ -71,6 +71,52 @@ def params_from_unit_scale(unit_vector, reference):
     return type(reference)(*(unit_vector * jnp.asarray(reference)))
 
 
+def lya_scene_file(folder, name: str, rows_from=None) -> str:
+    """The bundled scene named ``name``, of the rows in ``rows_from`` (another measurements
+    CSV; default the bundled rows)."""
+    from brdf_infer.scene import load_scene
+
+    path = folder / f"{name}.toml"
+    path.write_text(lya_scene_text(rows_from or load_scene("lya").measurements_path, name))
+    return str(path)
+
+
+def scaled_rows(folder, factor: float):
+    """The bundled rows with every reflectance (and its σ) multiplied by ``factor``."""
+    from brdf_infer.scene import load_scene
+
+    lines = load_scene("lya").measurements_path.read_text().splitlines()
+    header = lines[0].split(",")
+    value, error = header.index("reflectance"), header.index("reflectance_err")
+    out = [lines[0]]
+    for line in lines[1:]:
+        cells = line.split(",")
+        for k in (value, error):
+            if cells[k]:
+                cells[k] = f"{float(cells[k]) * factor:.6e}"
+        out.append(",".join(cells))
+    path = folder / f"rows_{factor:g}.csv"
+    path.write_text("\n".join(out) + "\n")
+    return path
+
+
+def fewer_rows(folder, name: str, factor: float = 1.0):
+    """The bundled rows without samples 5 and 6 and without series II above θi = 50° (23 of
+    42 rows, 5 of 7 samples, 1 of 3 rotation settings), each reflectance × ``factor``."""
+    lines = scaled_rows(folder, factor).read_text().splitlines()
+    header = lines[0].split(",")
+    series, sample, theta_i = (header.index(k) for k in ("series", "sample", "theta_i_deg"))
+    kept = [lines[0]]
+    for line in lines[1:]:
+        cells = line.split(",")
+        if cells[sample] in ("5", "6") or (cells[series] == "II" and float(cells[theta_i]) > 50):
+            continue
+        kept.append(line)
+    path = folder / f"{name}.csv"
+    path.write_text("\n".join(kept) + "\n")
+    return path
+
+
 def run_cli(*argv: str, capsys) -> tuple[int, str, str]:
     """Run ``brdf-infer ARGV`` in-process; returns (exit code, stdout, stderr)."""
     try:

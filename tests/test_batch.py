@@ -11,55 +11,16 @@ import numpy as np
 import pytest
 
 from brdf_infer._arviz import az
-from tests.helpers import SUITE_WARMUP, lya_scene_text, run_cli, run_on_forced_cpu_devices
+from tests.helpers import (
+    SUITE_WARMUP,
+    fewer_rows,
+    lya_scene_file,
+    run_cli,
+    run_on_forced_cpu_devices,
+    scaled_rows,
+)
 
 SMALL = ["--chains", "2", "--draws", "150", "--warmup", str(SUITE_WARMUP)]
-
-
-def _scene(folder, name: str, rows_from=None) -> str:
-    """The bundled scene named ``name``, of the rows in ``rows_from`` (another measurements
-    CSV; default the bundled rows)."""
-    from brdf_infer.scene import load_scene
-
-    path = folder / f"{name}.toml"
-    path.write_text(lya_scene_text(rows_from or load_scene("lya").measurements_path, name))
-    return str(path)
-
-
-def _scaled_rows(folder, factor: float):
-    """The bundled rows with every reflectance (and its σ) multiplied by ``factor``."""
-    from brdf_infer.scene import load_scene
-
-    lines = load_scene("lya").measurements_path.read_text().splitlines()
-    header = lines[0].split(",")
-    value, error = header.index("reflectance"), header.index("reflectance_err")
-    out = [lines[0]]
-    for line in lines[1:]:
-        cells = line.split(",")
-        for k in (value, error):
-            if cells[k]:
-                cells[k] = f"{float(cells[k]) * factor:.6e}"
-        out.append(",".join(cells))
-    path = folder / f"rows_{factor:g}.csv"
-    path.write_text("\n".join(out) + "\n")
-    return path
-
-
-def _fewer_rows(folder, name: str, factor: float = 1.0):
-    """The bundled rows without samples 5 and 6 and without series II above θi = 50° (23 of
-    42 rows, 5 of 7 samples, 1 of 3 rotation settings), each reflectance × ``factor``."""
-    lines = _scaled_rows(folder, factor).read_text().splitlines()
-    header = lines[0].split(",")
-    series, sample, theta_i = (header.index(k) for k in ("series", "sample", "theta_i_deg"))
-    kept = [lines[0]]
-    for line in lines[1:]:
-        cells = line.split(",")
-        if cells[sample] in ("5", "6") or (cells[series] == "II" and float(cells[theta_i]) > 50):
-            continue
-        kept.append(line)
-    path = folder / f"{name}.csv"
-    path.write_text("\n".join(kept) + "\n")
-    return path
 
 
 @pytest.fixture(scope="module")
@@ -68,10 +29,10 @@ def batch_run(tmp_path_factory):
     into the same group), a broken one and one in percent (skipped: no --force)."""
     folder = tmp_path_factory.mktemp("batch")
     scenes = [
-        _scene(folder, "a"),
-        _scene(folder, "b", _scaled_rows(folder, 1.3)),
-        _scene(folder, "c", _fewer_rows(folder, "rows_c", 0.8)),
-        _scene(folder, "percent", _scaled_rows(folder, 100.0)),
+        lya_scene_file(folder, "a"),
+        lya_scene_file(folder, "b", scaled_rows(folder, 1.3)),
+        lya_scene_file(folder, "c", fewer_rows(folder, "rows_c", 0.8)),
+        lya_scene_file(folder, "percent", scaled_rows(folder, 100.0)),
     ]
     (folder / "broken.toml").write_text(
         'name = "broken"\nmeasurements = "nowhere.csv"\n'
@@ -206,34 +167,6 @@ def test_padding_leaves_the_log_density_exactly(case):
     np.testing.assert_allclose(in_padding, own, rtol=1e-10, atol=0, err_msg=label)
 
 
-def test_sixteen_scenes_of_two_sizes_run_as_one_compiled_group(tmp_path):
-    """8 scenes of 42 rows (7 samples) and 8 of 23 rows (5 samples): one group, each run
-    folder complete and of its own rows."""
-    from brdf_infer.batch import BatchSettings, run_batch
-
-    scenes = []
-    for k in range(8):
-        factor = 1.0 + 0.05 * k
-        scenes.append(_scene(tmp_path, f"full{k}", _scaled_rows(tmp_path, factor)))
-        scenes.append(_scene(tmp_path, f"fewer{k}", _fewer_rows(tmp_path, f"f{k}", factor)))
-    out = tmp_path / "out"
-    settings = BatchSettings(chains=2, warmup=SUITE_WARMUP, draws=20)
-    result = run_batch(scenes, out, settings)
-    assert result.groups == 1 and not result.interrupted and result.complete == 16
-    assert sorted(p.name for p in out.iterdir()) == sorted(
-        [*(f"full{k}" for k in range(8)), *(f"fewer{k}" for k in range(8)), "batch.json"]
-    )
-    for entry in result.entries:
-        rows = 42 if entry.scene.name.startswith("full") else 23
-        assert entry.error is None and entry.summary["n_points"] == rows
-        assert entry.summary["settings"]["batch"]["scenes"] == 16
-        assert set(p.name for p in entry.out.iterdir()) == {
-            "posterior.nc",
-            "summary.json",
-            "bands.json",
-        }
-
-
 def test_readers_of_run_folders_take_a_batch_scene(batch_run, capsys):
     _, out, payload = batch_run
     code, text, err = run_cli(
@@ -303,7 +236,7 @@ def test_vmapped_batch_of_one_scene(tmp_path, capsys):
     out = tmp_path / "out"
     code, _, err = run_cli(
         "batch",
-        _scene(tmp_path, "only"),
+        lya_scene_file(tmp_path, "only"),
         *SMALL,
         "--mode",
         "vmap",
@@ -326,10 +259,10 @@ def _start_batch(folder: Path, out: Path) -> tuple:
     scenes = []
     for k in range(6):
         factor = 1.0 + 0.1 * k
-        rows = _scaled_rows(folder, factor) if k % 2 else _fewer_rows(folder, f"r{k}", factor)
-        scenes.append(_scene(folder, f"g{k}", rows))
+        rows = scaled_rows(folder, factor) if k % 2 else fewer_rows(folder, f"r{k}", factor)
+        scenes.append(lya_scene_file(folder, f"g{k}", rows))
     for k in range(6):
-        path = Path(_scene(folder, f"s{k}", _scaled_rows(folder, 1.0 + 0.1 * k)))
+        path = Path(lya_scene_file(folder, f"s{k}", scaled_rows(folder, 1.0 + 0.1 * k)))
         path.write_text(path.read_text().replace('model = "generative"', 'model = "spread"', 1))
         scenes.append(str(path))
     with (folder / "stderr.txt").open("w") as stderr:  # the process keeps its own copy

@@ -6,10 +6,9 @@ program executes, they can leave every pool thread waiting for work queued behin
 2-core machine has two): the process hangs, idle, until killed. Here every concurrent path runs
 in a fresh process under a watchdog; a repetition that outlives its timeout has its stacks read,
 its process group killed, and the test fails with what it printed. The hang is in executing,
-not compiling, programs: the children here load the suite's compiled programs from its
-persistent cache and sample with the suite's warmup, as a user's second run would (the
-benchmark's stress report, ``brdf-infer bench --stress``, starts each path from an empty
-cache folder and compiles in its first repetition).
+not compiling, programs: the children here use the suite's persistent compilation cache, as
+a user's second run would (the benchmark's stress report, ``brdf-infer bench --stress``,
+starts each path from an empty cache folder and compiles in its first repetition).
 
 Signals that stop a batch are tested in ``tests/test_batch.py``.
 ``BRDF_INFER_STRESS_REPEATS`` sets the repetitions per path (default 1; the benchmark runs 20
@@ -25,25 +24,25 @@ from pathlib import Path
 
 import pytest
 
-from brdf_infer.bench._stress import (
-    PATHS,
-    StressSettings,
-    repeats_from_environment,
-    run_path,
-    write_scenes,
-)
-from tests.helpers import SUITE_WARMUP
+from brdf_infer.bench._stress import PATHS, StressSettings, repeats_from_environment, run_path
+from tests.helpers import fewer_rows, lya_scene_file, scaled_rows
 
 REPEATS = repeats_from_environment(default=1)
-SETTINGS = dataclasses.replace(StressSettings(), warmup=SUITE_WARMUP)
+# 16 scenes of two sizes (one compiled group); 2 chains × 500 draws make the constraining map's
+# batch large enough to be split over the thread pool (the deadlock needed that)
+SETTINGS = dataclasses.replace(StressSettings(), scenes=16, warmup=30, draws=500)
 CACHE = Path(os.environ["BRDF_INFER_CACHE"])  # the suite's (set in the root conftest.py)
 
 
 @pytest.fixture(scope="module")
 def scenes(tmp_path_factory) -> Path:
-    """Four synthetic scenes of one structure, shared by the batch paths."""
+    """8 scenes of the bundled 42 rows (7 samples) and 8 of 23 rows (5 samples), one model
+    structure, reflectances scaled: the batch paths' scenes (``scene_*.toml``)."""
     folder = tmp_path_factory.mktemp("stress_scenes")
-    write_scenes(folder, SETTINGS.scenes)
+    for k in range(SETTINGS.scenes // 2):
+        factor = 1.0 + 0.05 * k
+        lya_scene_file(folder, f"scene_full{k}", scaled_rows(folder, factor))
+        lya_scene_file(folder, f"scene_fewer{k}", fewer_rows(folder, f"f{k}", factor))
     return folder
 
 
@@ -63,11 +62,23 @@ def _with_scenes(tmp_path: Path, scenes: Path) -> Path:
     return tmp_path
 
 
-def test_batch_in_threads_does_not_deadlock(tmp_path, scenes):
+def test_sixteen_scenes_of_two_sizes_run_in_threads_as_one_group_without_deadlock(tmp_path, scenes):
+    """The 16 scenes are padded into one compiled group; each run folder is complete and of
+    its own rows."""
     folder = _with_scenes(tmp_path, scenes)
     _repeat("batch threads", folder)
-    payload = json.loads((folder / "out-threads" / "batch.json").read_text())
-    assert [entry["error"] for entry in payload["scenes"]] == [None] * SETTINGS.scenes
+    out = folder / "out-threads"
+    payload = json.loads((out / "batch.json").read_text())
+    assert payload["groups"] == 1 and payload["interrupted"] is False
+    assert len(payload["scenes"]) == SETTINGS.scenes
+    for entry in payload["scenes"]:
+        assert entry["error"] is None, entry
+        run = Path(entry["out"])
+        assert {p.name for p in run.iterdir()} == {"posterior.nc", "summary.json", "bands.json"}
+        summary = json.loads((run / "summary.json").read_text())
+        assert summary["n_points"] == (42 if run.name.startswith("scene_full") else 23)
+        assert summary["settings"]["batch"]["scenes"] == SETTINGS.scenes
+    assert not [p.name for p in out.iterdir() if p.name.startswith(".")]  # no partial folder
 
 
 @pytest.mark.slow  # compiles the sharded program; 20 repetitions run in the benchmark
