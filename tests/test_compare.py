@@ -19,7 +19,9 @@ from brdf_infer.posterior import build_family_model, build_posterior_model
 from brdf_infer.report._compare import compare_frame
 from tests.helpers import SUITE_WARMUP, run_cli
 
-SMALL = CompareSettings(chains=2, warmup=SUITE_WARMUP, draws=300, seed=1)
+# the posterior's target acceptance (compare's default is 0.9) and the suite's warmup: the
+# families' NUTS programs are those of the suite's posterior runs, compiled once
+SMALL = CompareSettings(chains=2, warmup=SUITE_WARMUP, draws=300, seed=1, target_accept=0.8)
 ABG_TRUTH = {"A": 2.0e-3, "B": 5.0e-3, "g": 1.8}
 
 

@@ -310,10 +310,10 @@ def test_the_earlier_spread_error_model_stays_reachable(lya, capsys, tmp_path):
 
 
 def test_resume_refuses_a_checkpoint_another_run_wrote(lya, tmp_path, capsys):
-    """A checkpoint of lya-fixed (other scene text, priors and dimension) is not resumed as
-    lya: exit 2, one line naming what differs, nothing written."""
-    fixed = load_scene("lya-fixed")
-    model = build_posterior_model(fixed, lya[1])
+    """A checkpoint of lya is not resumed as lya-fixed (other scene text, priors and
+    dimension), nor with another burn-in: exit 2, one line naming what differs, nothing
+    written. (The checkpoint is of lya, 16 walkers: the emcee program of the SIGTERM test.)"""
+    model = build_posterior_model(*lya)
     run_emcee(
         model,
         walkers=16,
@@ -327,14 +327,20 @@ def test_resume_refuses_a_checkpoint_another_run_wrote(lya, tmp_path, capsys):
     before = sorted(p.name for p in tmp_path.iterdir())
     arguments = ["--walkers", "16", "--steps", "100", "--warmup", "10", "--resume"]
     code, out, err = run_cli(
-        "posterior", "--sampler", "emcee", *arguments, "--out", str(tmp_path), capsys=capsys
+        "posterior",
+        "lya-fixed",
+        "--sampler",
+        "emcee",
+        *arguments,
+        "--out",
+        str(tmp_path),
+        capsys=capsys,
     )
     assert code == 2 and out == "" and err.count("\n") == 1 and "Traceback" not in err
     assert "differs in: scene, model options, dimension" in err
     assert sorted(p.name for p in tmp_path.iterdir()) == before
     code, _, err = run_cli(
         "posterior",
-        "lya-fixed",
         "--sampler",
         "emcee",
         *arguments[:4],
