@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from brdf_infer._cli_fold import add_fold_arguments, chosen_fold, refuse_fold
 from brdf_infer._outdir import check_output_dir
 from brdf_infer.errors import BadInputError
 
@@ -38,7 +39,7 @@ def add_export_arguments(parser: argparse.ArgumentParser) -> None:
         default=0,
         help="--run: also write this many single-draw .BSDF files (abg: draws fitted, 100)",
     )
-    parser.add_argument("--no-fold", action="store_true", help="leave out Eq. (10)")
+    add_fold_arguments(parser, "the scene's or the run's [model] fold, false unless set")
     parser.add_argument("--force", action="store_true", help="overwrite existing output files")
 
 
@@ -67,8 +68,7 @@ def _source(args: argparse.Namespace, scene_name: str):
         with contextlib.suppress(OSError, ValueError, KeyError):
             scene_name = json.loads((run / "summary.json").read_text())["scene"]
         if member.name != REFERENCE_FAMILY:
-            if args.no_fold:
-                raise BadInputError(f"a run of {member.name} has no Eq. (10)", field="--no-fold")
+            refuse_fold(args.fold, member.name)
             if args.format == "abg" and member.name != "abg":
                 raise BadInputError(
                     f"ABg rows are fitted to Eq. (7) or read from an abg run, not a run of "
@@ -76,8 +76,9 @@ def _source(args: argparse.Namespace, scene_name: str):
                     field="--format",
                 )
             return Source(str(run), None, True, False, None, scene_name, member, physical)
-        params, fold, constants = load_run_draws(run)
-        return Source(str(run), params, True, fold and not args.no_fold, constants, scene_name)
+        params, run_fold, constants = load_run_draws(run)
+        fold = chosen_fold(args.fold, run_fold)
+        return Source(str(run), params, True, fold, constants, scene_name)
     from brdf_infer.scene import load_scene
 
     scene = load_scene(scene_name)
@@ -85,7 +86,7 @@ def _source(args: argparse.Namespace, scene_name: str):
         args.params,
         resolve_params(args.params),
         False,
-        not args.no_fold,
+        chosen_fold(args.fold, scene.model.fold),
         scene.model.constants,
         scene.name,
     )
@@ -173,7 +174,10 @@ def _print_result(result: dict, table) -> None:
             for f in result["files"]
         ]
         print(table(["file", "kind", "TIS [%]", "max |table integral/TIS-1|"], rows))
+    from brdf_infer.model import fold_statement
+
     folder = Path(result["files"][0]["path"]).parent
+    print(fold_statement(result["fold"]))
     print(f"{len(result['files'])} files in {folder}/ ({result['seconds']:.1f} s)")
 
 

@@ -22,6 +22,7 @@ import numpy as np
 
 from brdf_infer._cli_compare import add_compare_arguments, command_compare
 from brdf_infer._cli_export import add_export_arguments, command_export
+from brdf_infer._cli_fold import add_fold_arguments, chosen_fold, refuse_fold
 from brdf_infer._device import DEVICES, placement
 from brdf_infer._outdir import check_output_dir
 from brdf_infer.errors import BadInputError
@@ -315,7 +316,7 @@ def _timed(function, *args, **kwargs):
 
 
 def _command_tis(args: argparse.Namespace) -> None:
-    from brdf_infer.model import tis_with_error
+    from brdf_infer.model import fold_statement, tis_with_error
     from brdf_infer.params import resolve_params
 
     theta_i = _angles(args.theta_i, "--theta-i", 0.0, 90.0, upper_open=True)
@@ -324,7 +325,8 @@ def _command_tis(args: argparse.Namespace) -> None:
         return
     args.params = args.params or "uv-paper"
     params = resolve_params(args.params)
-    (values, errors), first, second = _timed(tis_with_error, theta_i, params, fold=not args.no_fold)
+    fold = chosen_fold(args.fold)
+    (values, errors), first, second = _timed(tis_with_error, theta_i, params, fold=fold)
     values, errors = np.asarray(values), np.asarray(errors)
     warnings = _tis_warnings(theta_i, values)
     for warning in warnings:
@@ -335,14 +337,14 @@ def _command_tis(args: argparse.Namespace) -> None:
                 "theta_i_deg": theta_i.tolist(),
                 "tis": values.tolist(),
                 "abs_error": errors.tolist(),
-                "fold": not args.no_fold,
+                "fold": fold,
                 "warnings": warnings,
                 "seconds": second,
                 "compile_seconds": first - second,
             }
         )
         return
-    print(f"TIS, Eq. (9), parameters '{args.params}', folding {'off' if args.no_fold else 'on'}")
+    print(f"TIS, Eq. (9), parameters '{args.params}'; {fold_statement(fold)}")
     rows = [
         [f"{t:g}", f"{100 * v:.4f}", f"{e:.1e}"]
         for t, v, e in zip(theta_i, values, errors, strict=True)
@@ -366,28 +368,30 @@ TIS_RUN_FAMILY_DRAWS = 1000  # a lobe family's TIS is a 2-D quadrature (≈ 1 ms
 
 
 def _tis_from_run(args: argparse.Namespace, theta_i: np.ndarray) -> None:
-    from brdf_infer.model import REFERENCE_FAMILY
+    from brdf_infer.model import REFERENCE_FAMILY, fold_statement
     from brdf_infer.posterior import family_tis_band, load_run_draws, load_run_family, tis_band
 
     start = time.perf_counter()
     member, physical = load_run_family(Path(args.run))
     if member.name == REFERENCE_FAMILY:
-        params, fold, constants = load_run_draws(Path(args.run))
+        params, run_fold, constants = load_run_draws(Path(args.run))
+        fold = chosen_fold(args.fold, run_fold)
         band = {
-            **tis_band(params, theta_i, fold and not args.no_fold, constants),
+            **tis_band(params, theta_i, fold, constants),
             "draws": int(np.size(params.brdf0)),
         }
         what = "Eq. (9)"
     else:
-        if args.no_fold:
-            raise BadInputError(f"a run of {member.name} has no Eq. (10)", field="--no-fold")
+        refuse_fold(args.fold, member.name)
+        fold = False
         band = family_tis_band(member, physical, theta_i, TIS_RUN_FAMILY_DRAWS)
         what = member.name
     seconds = time.perf_counter() - start
     if args.json:
-        _emit_json({**band, "model": member.name, "seconds": seconds})
+        _emit_json({**band, "model": member.name, "fold": fold, "seconds": seconds})
         return
     print(f"TIS, {what}, over {band['draws']} posterior draws of {args.run}")
+    print(fold_statement(fold))
     rows = [
         [f"{t:g}", *(f"{100 * band[k][i]:.3f}" for k in ("median", "lo68", "hi68", "lo95", "hi95"))]
         for i, t in enumerate(theta_i)
@@ -458,7 +462,8 @@ def _print_posterior_summary(summary: dict[str, Any], out: Path) -> None:
     if tis70 is not None:
         print(
             f"TIS(70 deg) = {100 * tis70['median']:.2f} % "
-            f"(95 %: {100 * tis70['lo95']:.2f}-{100 * tis70['hi95']:.2f} %)"
+            f"(95 %: {100 * tis70['lo95']:.2f}-{100 * tis70['hi95']:.2f} %; "
+            f"{'with' if summary['fold'] else 'without'} Eq. (10) folding)"
         )
     seconds = summary["seconds"]
     print(
@@ -511,14 +516,16 @@ def _command_brdf(args: argparse.Namespace) -> None:
         raise BadInputError(
             "--theta-i, --theta-s and --phi need equal lengths (or length 1)", field="--theta-s"
         ) from None
+    fold = chosen_fold(args.fold)
     if phi is None:
-        values = brdf_inplane(arrays[0], arrays[1], params, fold=args.fold)
+        values = brdf_inplane(arrays[0], arrays[1], params, fold=fold)
     else:
-        values = brdf_hemisphere(arrays[0], arrays[1], arrays[2], params, fold=not args.no_fold)
+        values = brdf_hemisphere(arrays[0], arrays[1], arrays[2], params, fold=fold)
     payload = {
         "theta_i_deg": arrays[0].tolist(),
         "theta_s_deg": arrays[1].tolist(),
         "brdf": np.asarray(values).tolist(),
+        "fold": fold,
     }
     if phi is not None:
         payload["phi_deg"] = arrays[2].tolist()
@@ -1146,7 +1153,7 @@ def build_parser() -> argparse.ArgumentParser:
     tis.add_argument(
         "--theta-i", type=float, nargs="+", default=[0, 5, 30, 50, 70], help="θi [deg]"
     )
-    tis.add_argument("--no-fold", action="store_true", help="leave out the folding of Eq. (10)")
+    add_fold_arguments(tis, "a parameter set: no folding; a run: its scene's [model] fold")
     tis.add_argument("--json", action="store_true", help="one JSON object on stdout")
     tis.set_defaults(handler=_command_tis)
 
@@ -1163,8 +1170,7 @@ def build_parser() -> argparse.ArgumentParser:
     brdf.add_argument(
         "--phi", type=float, nargs="+", help="azimuth [deg] in [0, 360), forward plane at 180"
     )
-    brdf.add_argument("--fold", action="store_true", help="in-plane: apply Eq. (10)")
-    brdf.add_argument("--no-fold", action="store_true", help="hemisphere: leave out Eq. (10)")
+    add_fold_arguments(brdf, "no folding")
     brdf.add_argument("--json", action="store_true", help="one JSON object on stdout")
     brdf.set_defaults(handler=_command_brdf)
 

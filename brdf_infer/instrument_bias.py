@@ -71,13 +71,14 @@ def synthetic_data(
 
 
 def _quantities(scene: Scene, params: Params) -> dict[str, np.ndarray]:
-    """BRDF0, α and TIS(70°) (with Eq. 10's folding, as every TIS band of a run)."""
+    """BRDF0, α and TIS(70°) (with Eq. 10's folding where the scene's [model] fold has it, as
+    every TIS band of a run)."""
     from brdf_infer.model import tis
 
     return {
         "brdf0": np.asarray(params.brdf0),
         "alpha": np.asarray(params.alpha),
-        "tis_70deg": np.asarray(tis(70.0, params, True, scene.model.constants)),
+        "tis_70deg": np.asarray(tis(70.0, params, scene.model.fold, scene.model.constants)),
     }
 
 

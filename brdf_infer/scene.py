@@ -27,7 +27,9 @@ Schema (keys other than these are errors; defaults in brackets)::
     repeatability = "learned"                # ["learned"] or a fixed per-row 1σ [ln R]
     repeatability_sd_prior = 0.1             # [0.1] half-normal scale of its prior [ln R]
     [model]
-    fold = false                             # [false] Eq. (10) in in-plane predictions
+    fold = false                             # [false] Eq. (10), a measurement artefact, in
+                                             #   the likelihood and the run's products (bands,
+                                             #   TIS, maps, exports); false: physical BRDF
     out_of_plane = true                      # [true] Eq. (8): hemisphere products (TIS, maps)
     c1 = -0.95                               # [paper] Eq. (8) Δφ slope
     c2_deg = 90.5                            # [paper] Eq. (8) Δφ offset [deg]
@@ -126,7 +128,9 @@ class ModelSettings:
     """Which model components the scene uses, and the constants of Eqs. (8), (10).
 
     Attributes:
-        fold: apply the folding term of Eq. (10) to in-plane predictions.
+        fold: the one fold switch: the folding term of Eq. (10) in the likelihood's
+            predictions and in the run's products (BRDF and TIS bands, hemisphere maps,
+            exports). False (the default): the physical BRDF, conservative for stray light.
         out_of_plane: the full-hemisphere extension of Eq. (8) is on; without it no
             hemisphere product (TIS, maps) is built.
         constants: out-of-plane and folding constants.

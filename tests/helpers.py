@@ -53,12 +53,15 @@ def reference_brdf_inplane(theta_i: float, theta_s: float, p, fold: bool = False
     return value
 
 
-def reference_brdf_hemisphere(theta_i: float, theta: float, phi: float, p) -> float:
-    """Eq. (8) with Eq. (10), plain Python, paper constants (c1 = −0.95, c2 = 90.5°)."""
+def reference_brdf_hemisphere(
+    theta_i: float, theta: float, phi: float, p, fold: bool = False
+) -> float:
+    """Eq. (8) (with Eq. 10 when ``fold``), plain Python, paper constants (c1 = −0.95,
+    c2 = 90.5°)."""
     width = -0.95 * theta_i + 90.5
     distance = abs(phi - 180.0)
     weight = 1.0 - distance / width if distance < width else 0.0
-    forward = reference_brdf_inplane(theta_i, theta, p, fold=True)
+    forward = reference_brdf_inplane(theta_i, theta, p, fold=fold)
     backward = reference_brdf_inplane(theta_i, -theta, p)
     return weight * forward + (1.0 - weight) * backward
 

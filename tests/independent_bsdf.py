@@ -24,7 +24,9 @@ __all__ = [
     "strictness_problems",
 ]
 
-_SOURCES = {"measured": "Measured", "modeled": "Modeled"}
+# The spec's formatting notes: "There is currently only one option for the Source variable:
+# Measured" (no value exists for model-derived tables).
+_SOURCES = {"measured": "Measured"}
 _SYMMETRIES = {"planesymmetrical": "PlaneSymmetrical", "asymmetrical": "Asymmetrical"}
 _SCATTER_TYPES = {"brdf": "BRDF", "btdf": "BTDF"}
 _COUNT_KEYWORDS = ("SampleRotation", "AngleOfIncidence", "ScatterAzimuth", "ScatterRadial")

@@ -24,23 +24,49 @@ def test_fit_paper_json_contract(capsys):
     assert abs(payload["params"]["brdf0"] / 1.14e-2 - 1) < 0.05
 
 
-def test_tis_json_reproduces_table_three(capsys):
-    payload = json_of(capsys, "tis", "--params", "vis-paper", "--theta-i", "5", "30", "50", "70")
-    assert payload["theta_i_deg"] == [5.0, 30.0, 50.0, 70.0]
+def test_tis_json_reproduces_table_three_with_fold(capsys):
+    angles = ["--theta-i", "5", "30", "50", "70"]
+    payload = json_of(capsys, "tis", "--params", "vis-paper", *angles, "--fold")
+    assert payload["theta_i_deg"] == [5.0, 30.0, 50.0, 70.0] and payload["fold"] is True
     np.testing.assert_allclose(
         np.array(payload["tis"]) * 100, [0.816, 1.093, 1.686, 3.992], atol=5e-4
     )
+    # without --fold: the physical BRDF, 4.262 % at 70° (not Table 3's 3.992 %)
+    default = json_of(capsys, "tis", "--params", "vis-paper", *angles)
+    assert default["fold"] is False
+    np.testing.assert_allclose(default["tis"][-1] * 100, 4.262, atol=5e-4)
 
 
 def test_tis_no_fold_and_params_from_fit_json(tmp_path, capsys):
     fit = json_of(capsys, "fit")
     path = tmp_path / "fit.json"
     path.write_text(json.dumps(fit))
-    folded = json_of(capsys, "tis", "--params", str(path), "--theta-i", "70")["tis"][0]
-    unfolded = json_of(capsys, "tis", "--params", str(path), "--theta-i", "70", "--no-fold")["tis"][
-        0
-    ]
-    assert abs(folded - 0.058) < 5e-4 and unfolded > folded
+    argv = ["tis", "--params", str(path), "--theta-i", "70"]
+    folded = json_of(capsys, *argv, "--fold")
+    default, unfolded = json_of(capsys, *argv), json_of(capsys, *argv, "--no-fold")
+    assert abs(folded["tis"][0] - 0.058) < 5e-4  # Sec. 7's ~5.8 %, the article's folded model
+    assert default == {**unfolded, "seconds": default["seconds"],
+                       "compile_seconds": default["compile_seconds"]}  # fmt: skip
+    assert unfolded["tis"][0] > folded["tis"][0] and not unfolded["fold"] and folded["fold"]
+
+
+def test_tis_says_whether_it_folds_and_refuses_both_flags(capsys):
+    code, out, _ = run_cli("tis", "--theta-i", "85", capsys=capsys)
+    assert code == 0 and "Eq. (10) folding: not included (physical BRDF" in out
+    code, out, _ = run_cli("tis", "--theta-i", "85", "--fold", capsys=capsys)
+    assert code == 0 and "Eq. (10) folding: included" in out
+    code, out, err = run_cli("tis", "--fold", "--no-fold", capsys=capsys)
+    assert code == 2 and out == "" and "--no-fold" in err
+
+
+def test_brdf_is_unfolded_unless_asked_in_plane_and_on_the_hemisphere(capsys):
+    """Eq. (10) at θs = 88°: {1 − erf[0.35 (88 − 87)]}/2 = 0.31031 (erf(0.35) = 0.37938)."""
+    for where in (["--theta-s", "88"], ["--theta-s", "88", "--phi", "180"]):
+        argv = ["brdf", "--theta-i", "80", *where]
+        plain, folded = json_of(capsys, *argv), json_of(capsys, *argv, "--fold")
+        assert plain == json_of(capsys, *argv, "--no-fold") and plain["fold"] is False
+        assert folded["fold"] is True
+        assert folded["brdf"][0] / plain["brdf"][0] == pytest.approx(0.31031, rel=1e-4)
 
 
 def test_brdf_json_in_plane_and_hemisphere(capsys):

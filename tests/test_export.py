@@ -231,7 +231,9 @@ def test_abg_fits_preserve_the_tis_and_report_their_error(tmp_path, capsys):
     assert rows[0]["rms_log_error"] < 0.1 < rows[2]["rms_log_error"]
     header = (tmp_path / "abg.csv").read_text().splitlines()[0]
     assert header == "theta_i_deg,A,B,g,tis_model,tis_abg,rms_log_error"
-    assert json.loads((tmp_path / "abg.json").read_text())["rows"] == rows
+    stored = json.loads((tmp_path / "abg.json").read_text())
+    assert stored["rows"] == rows and stored["fold"] is False and payload["fold"] is False
+    assert stored["folding"].startswith("Eq. (10) folding: not included (physical BRDF")
 
 
 def test_abg_over_posterior_draws_gives_intervals(nuts_run, tmp_path, capsys):

@@ -59,12 +59,14 @@ def test_family_brdf_matches_its_textbook_definition_over_the_hemisphere(name):
     assert_allclose(values, expected, rtol=1e-12)
 
 
-def test_strumik2024_family_is_eqs_7_8_10():
-    member = family("strumik2024")
+@pytest.mark.parametrize("fold", [None, False, True])
+def test_strumik2024_family_is_eqs_7_8_and_10_only_when_folded(fold):
+    member = family("strumik2024") if fold is None else family("strumik2024", fold)
     physical = {k: jnp.asarray(v) for k, v in UV_PAPER._asdict().items()}
-    for theta_i, theta, phi in ((20.0, 40.0, 180.0), (60.0, 30.0, 0.0), (45.0, 50.0, 120.0)):
+    points = ((20.0, 40.0, 180.0), (60.0, 30.0, 0.0), (45.0, 50.0, 120.0), (80.0, 88.0, 180.0))
+    for theta_i, theta, phi in points:
         value = float(jnp.exp(member.log_brdf(theta_i, theta, phi, physical)))
-        expected = reference_brdf_hemisphere(theta_i, theta, phi, UV_PAPER)
+        expected = reference_brdf_hemisphere(theta_i, theta, phi, UV_PAPER, bool(fold))
         assert value == pytest.approx(expected, rel=1e-10)
 
 

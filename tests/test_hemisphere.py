@@ -48,30 +48,32 @@ def test_weight_integral_for_half_widths_beyond_180_and_below_zero():
     assert azimuthal_weight(0.0, 180.0, closed) == 0.0
 
 
-def test_specular_plane_reduces_to_the_two_branches():
+@pytest.mark.parametrize("fold", [False, True])
+def test_specular_plane_reduces_to_the_two_branches(fold):
     theta = np.array([0.0, 20.0, 60.0, 85.0, 90.0])
-    forward = brdf_hemisphere(70.0, theta, 180.0, UV_PAPER)
-    assert_allclose(forward, brdf_inplane(70.0, theta, UV_PAPER, fold=True), rtol=1e-13)
-    backward = brdf_hemisphere(70.0, theta, 0.0, UV_PAPER)
+    forward = brdf_hemisphere(70.0, theta, 180.0, UV_PAPER, fold)
+    assert_allclose(forward, brdf_inplane(70.0, theta, UV_PAPER, fold=fold), rtol=1e-13)
+    backward = brdf_hemisphere(70.0, theta, 0.0, UV_PAPER, fold)
     assert_allclose(backward, brdf_inplane(70.0, -theta, UV_PAPER), rtol=1e-13)
 
 
+@pytest.mark.parametrize("fold", [False, True])
 @pytest.mark.parametrize("params", [UV_PAPER, VIS_PAPER], ids=["uv", "vis"])
-def test_matches_independent_implementation(params):
+def test_matches_independent_implementation(params, fold):
     rng = np.random.default_rng(0)
     theta_i, theta, phi = rng.uniform(0, 89, 200), rng.uniform(0, 90, 200), rng.uniform(0, 360, 200)
     expected = [
-        reference_brdf_hemisphere(*args, params) for args in zip(theta_i, theta, phi, strict=True)
+        reference_brdf_hemisphere(*args, params, fold)
+        for args in zip(theta_i, theta, phi, strict=True)
     ]
-    assert_allclose(brdf_hemisphere(theta_i, theta, phi, params), expected, rtol=1e-12)
+    assert_allclose(brdf_hemisphere(theta_i, theta, phi, params, fold), expected, rtol=1e-12)
 
 
-def test_without_fold_forward_plane_is_eq7():
-    assert_allclose(
-        brdf_hemisphere(80.0, 88.0, 180.0, UV_PAPER, fold=False),
-        brdf_inplane(80.0, 88.0, UV_PAPER),
-        rtol=1e-13,
-    )
+def test_without_fold_forward_plane_is_eq7_and_that_is_the_default():
+    expected = brdf_inplane(80.0, 88.0, UV_PAPER)
+    assert_allclose(brdf_hemisphere(80.0, 88.0, 180.0, UV_PAPER, fold=False), expected, rtol=1e-13)
+    assert_allclose(brdf_hemisphere(80.0, 88.0, 180.0, UV_PAPER), expected, rtol=0)
+    assert brdf_hemisphere(80.0, 88.0, 180.0, UV_PAPER, fold=True) < 0.5 * expected
 
 
 @pytest.mark.parametrize(("theta", "phi"), [(0.0, 0.0), (90.0, 180.0), (12.0, 0.0), (45.0, 118.0)])

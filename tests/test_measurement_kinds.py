@@ -126,11 +126,13 @@ def test_every_family_is_recovered_from_out_of_plane_brdf_rows_by_lsq_and_nuts(t
 def test_a_bsdf_table_as_measurements_returns_the_parameters_that_made_it(tmp_path, capsys):
     """Export a parameter set as .BSDF, read it back as a scene's measurements (with trailing
     tabs on header lines, as vendor files have them) and fit: the parameters come back to the
-    file's 7 significant digits."""
+    file's 7 significant digits. The table folds by Eq. (10) like a scatterometer's (the
+    export's ``--fold``), and so does the scene that reads it."""
     code, _, err = run_cli(
         "export",
         "--params",
         "uv-paper",
+        "--fold",
         "--theta-i",
         "0",
         "20",

@@ -118,6 +118,18 @@ def test_report_opens_with_the_verdict_then_the_sections(good_report, nuts_run):
     assert "b2 = a2·90^(1+α)" in text  # the priors table names each prior's coordinate
 
 
+def test_report_says_its_tis_is_of_the_physical_brdf(good_report):
+    """The lya scene leaves [model] fold at false: right under the result, in the run table,
+    the TIS and hemisphere captions and the TIS table the report says Eq. (10) is left out."""
+    from brdf_infer.model import fold_statement
+
+    text = good_report[0].read_text()
+    statement = html.escape(fold_statement(False))
+    under_result = text.index(statement, text.index('<div class="result">'))
+    assert under_result < text.index("In-plane BRDF at the scene")
+    assert text.count(statement) >= 5 and "Eq. (10) folding: included" not in text
+
+
 def test_a_scene_without_a_reference_draws_no_reference(lya, tmp_path):
     """Captions and legends describe what is drawn: no reference curve, no reference words."""
     import dataclasses
@@ -216,6 +228,8 @@ def test_report_shows_the_exports_of_its_run(nuts_run, tmp_path, capsys):
     write_report(run, progress=lambda message: None)
     text = (run / "report.html").read_text()
     assert "<h2>Export</h2>" in text and "rms ln error" in text
+    export = text[text.index("<h2>Export</h2>") :]
+    assert export.count("Eq. (10) folding: not included (physical BRDF") >= 3  # entries, plot
     assert (run / "figures" / "export.png").stat().st_size > 0
 
 

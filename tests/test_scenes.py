@@ -72,9 +72,11 @@ def test_vis_scene_recovers_the_published_model_and_table_three(capsys):
     assert lsq["cost"] < 1e-10
     np.testing.assert_allclose(list(lsq["params"].values()), list(VIS_PAPER), rtol=1e-4)
     scene = load_scene("vis-532")
-    reference = [(a, v) for a, v, label in scene.load_tis_reference() if label == "Table 3 model"]
+    reference = [
+        (a, v) for a, v, label in scene.load_tis_reference() if label.startswith("Table 3 model")
+    ]
     angles, published = np.array(reference).T
-    np.testing.assert_allclose(np.asarray(tis(angles, VIS_PAPER)), published, atol=6e-4)
+    np.testing.assert_allclose(np.asarray(tis(angles, VIS_PAPER, fold=True)), published, atol=6e-4)
 
 
 def test_specular_plane_likelihood_contains_no_erf(lya):

@@ -434,8 +434,8 @@ def _run_ours(scene: str, out: Path, cache: Path, settings, env: dict):
 
 def physical_draws(sites: dict[str, np.ndarray], scene) -> dict[str, np.ndarray]:
     """BRDF0, α, θs0 and TIS(70°) of every draw, shape (chains, draws): from the paper-unit
-    parameters (ours) or from the internal sites (a peer's), TIS by Eq. (9) with the fold of
-    Eq. (10) as every TIS band of a run (``brdf_infer.posterior._bands``)."""
+    parameters (ours) or from the internal sites (a peer's), TIS by Eq. (9) with the scene's
+    fold switch, as every TIS band of a run (``brdf_infer.posterior._bands``)."""
     from brdf_infer.coordinates import from_internal
     from brdf_infer.model import tis
     from brdf_infer.params import Params
@@ -457,7 +457,8 @@ def physical_draws(sites: dict[str, np.ndarray], scene) -> dict[str, np.ndarray]
             )
         )
     flat = Params(*(np.broadcast_to(value, shape).reshape(-1) for value in params))
-    tis70 = np.asarray(tis(np.asarray(70.0), flat, True, scene.model.constants)).reshape(shape)
+    model = scene.model
+    tis70 = np.asarray(tis(np.asarray(70.0), flat, model.fold, model.constants)).reshape(shape)
     return {
         "brdf0": np.asarray(params.brdf0).reshape(shape),
         "alpha": np.broadcast_to(params.alpha, shape),

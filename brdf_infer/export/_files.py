@@ -17,6 +17,12 @@ A posterior run of another model family (``abg``, ``harvey-shack``, ``lambertian
 ``lambertian+abg``) exports the same .BSDF files from that family's BRDF and TIS (the TIS lines
 of a band from at most 400 evenly spaced draws, each TIS a 2-D quadrature); a run of ``abg``
 exports its own posterior A, B, g as the ABg rows.
+
+Every export says whether Eq. (10)'s folding is in it (a comment line of each .BSDF file,
+``"fold"`` in ``abg.json`` and in the returned JSON): by default it is not (the physical BRDF,
+conservative for a stray-light budget); a run's export follows its scene's ``[model] fold``.
+The .BSDF ``Source`` keyword reads ``Measured``, the only value the BSDF Data Interchange format
+defines; a comment line says that the tables are a model evaluated on a grid.
 """
 
 from __future__ import annotations
@@ -43,8 +49,8 @@ from brdf_infer.export._grid import (
     specular_frame_to_model,
     table_integral,
 )
-from brdf_infer.export._zemax import BsdfFile, write_bsdf
-from brdf_infer.model import ModelFamily, tis
+from brdf_infer.export._zemax import BSDF_SOURCE, BsdfFile, write_bsdf
+from brdf_infer.model import ModelFamily, fold_statement, tis
 from brdf_infer.params import HemisphereConstants, Params, params_to_dict
 from brdf_infer.posterior import family_tis_band, tis_band
 from brdf_infer.posterior._bands import FAMILY_TIS_DRAWS
@@ -74,7 +80,8 @@ class Source:
         label: the parameter set's name or the run folder, for the file comments.
         params: one parameter set (scalar fields) or every posterior draw (1-D fields).
         from_run: ``params`` holds posterior draws.
-        fold: the hemisphere BRDF includes Eq. (10) (as the paper's Eq. 9 does).
+        fold: the hemisphere BRDF includes Eq. (10) (the article's Table 3 does; False: the
+            physical BRDF; always False with ``family``).
         constants: Δφ and folding constants (None with ``family``).
         scene: the scene's name, for the file comments.
         family: a posterior run of another model family (``params`` is then None and
@@ -143,6 +150,9 @@ def _comments(source: Source, kind: str, grid: ScatterGrid, extra: list[str]) ->
             )
             + ")"
         ),
+        fold_statement(source.fold),
+        f"not measured: the model above evaluated on a grid ('Source {BSDF_SOURCE}' below is "
+        "the only Source value the BSDF Data Interchange format defines)",
         "angles in degrees; BSDF in 1/sr; scatter angles relative to the specular ray "
         "(azimuth 0 toward the surface normal); 0 below the horizon",
         f"grid: {grid.theta_i_deg.size} angles of incidence, azimuth step "
@@ -475,6 +485,8 @@ def export_abg(
         details = {"draws": len(fits), "of_draws": count}
     content = {
         "model": "BSDF = A / (B + |beta - beta0|^g), beta = projection on the surface [-]",
+        "fold": source.fold,
+        "folding": fold_statement(source.fold),
         "scene": source.scene,
         "source": source.label,
         **details,
@@ -495,18 +507,25 @@ def run_export(
     draws: int = 0,
     progress: Callable[[str], None] = lambda message: None,
 ) -> dict:
-    """Write the export and return the ``brdf-infer export --json`` object."""
+    """Write the export and return the ``brdf-infer export --json`` object (``"fold"``: Eq. 10
+    in the exported BRDF)."""
     start = time.perf_counter()
     if export_format == "abg":
         files, rows = export_abg(source, grid.theta_i_deg, out, draws or 100, progress)
         return {
             "format": export_format,
+            "fold": source.fold,
             "files": files,
             "rows": rows,
             "seconds": time.perf_counter() - start,
         }
     files = export_zemax(source, grid, out, draws, progress)
-    return {"format": export_format, "files": files, "seconds": time.perf_counter() - start}
+    return {
+        "format": export_format,
+        "fold": source.fold,
+        "files": files,
+        "seconds": time.perf_counter() - start,
+    }
 
 
 def record_export(run: Path, result: dict) -> Path:
@@ -520,6 +539,7 @@ def record_export(run: Path, result: dict) -> Path:
     folder = str(Path(result["files"][0]["path"]).parent.resolve())
     entry = {
         "format": result["format"],
+        "fold": result["fold"],
         "folder": folder,
         "files": [
             {"path": str(Path(f["path"]).resolve()), "kind": f["kind"]} for f in result["files"]

@@ -24,6 +24,12 @@ Layout (one keyword per line; ``#`` starts a comment line)::
 Values are tab-separated with no trailing whitespace (strict readers refuse anything else);
 BSDF values carry 7 significant digits, TIS values 11. Angles in degrees; the scatter
 angles are in the specular frame (``brdf_infer.export._grid``).
+
+``Source``: the format's specification (Radiant Imaging / Zemax, "BSDF Data Interchange File
+Format Specification") defines one value, ``Measured``; no value for model-derived tables
+exists, so the writer keeps ``Measured`` (a reader that checks the keyword accepts the file)
+and the exporter says in a comment line that its tables are a model on a grid. The reader
+keeps whatever a file says.
 """
 
 from __future__ import annotations
@@ -40,6 +46,7 @@ from brdf_infer.errors import BadInputError
 _BSDF_FORMAT = "{:.6e}"  # 7 significant digits
 _TIS_FORMAT = "{:.10e}"  # 11 significant digits
 _SYMMETRIES = ("PlaneSymmetrical", "Asymmetrical")
+BSDF_SOURCE = "Measured"  # the only Source value the format defines (module docstring)
 
 
 @dataclass
@@ -54,7 +61,7 @@ class BsdfFile:
         bsdf: tables [sr⁻¹], shape (n_rotation, n_aoi, n_azimuth, n_radial).
         symmetry: ``PlaneSymmetrical`` or ``Asymmetrical``.
         scatter_type: ``BRDF`` or ``BTDF``.
-        source: ``Measured`` or ``Modeled``.
+        source: the ``Source`` keyword (:data:`BSDF_SOURCE` when written; as read otherwise).
         sample_rotation_deg: sample rotations [deg], shape (n_rotation,).
         comments: comment lines without their ``#``.
     """
@@ -66,7 +73,7 @@ class BsdfFile:
     bsdf: np.ndarray
     symmetry: str = "PlaneSymmetrical"
     scatter_type: str = "BRDF"
-    source: str = "Measured"
+    source: str = BSDF_SOURCE
     sample_rotation_deg: np.ndarray = field(default_factory=lambda: np.zeros(1))
     comments: list[str] = field(default_factory=list)
 

@@ -1,7 +1,9 @@
 """The forward models: Strumik et al. 2024, Eqs. (6)–(10), and the ray tracers' scatter lobes
 (ABg, Harvey–Shack, Lambertian) behind one family interface, in JAX, angles in degrees.
 
-Every function is pure and float64, and goes through ``jit``, ``vmap`` and ``grad``.
+Every function is pure and float64, and goes through ``jit``, ``vmap`` and ``grad``. Eq. (10)'s
+folding (a measurement artefact, Sec. 5) is off unless ``fold=True`` is passed: the physical BRDF
+and its TIS are the defaults.
 """
 
 from brdf_infer.model._aperture import (
@@ -26,7 +28,13 @@ from brdf_infer.model._hemisphere import (
     brdf_hemisphere,
     log_brdf_hemisphere,
 )
-from brdf_infer.model._inplane import brdf_inplane, log_brdf_inplane, log_fold, positive_power
+from brdf_infer.model._inplane import (
+    brdf_inplane,
+    fold_statement,
+    log_brdf_inplane,
+    log_fold,
+    positive_power,
+)
 from brdf_infer.model._lobes import (
     CHECK_QUADRATURE,
     FIT_QUADRATURE,
@@ -63,6 +71,7 @@ __all__ = [
     "brdf_to_reflectance",
     "disk_integral",
     "family",
+    "fold_statement",
     "harvey_shack_integral",
     "harvey_shack_log_bsdf",
     "log_aperture_factor",

@@ -257,9 +257,10 @@ FAMILY_NAMES: tuple[str, ...] = (REFERENCE_FAMILY, *FAMILIES)
 
 
 def strumik_family(
-    fold: bool = True, constants: HemisphereConstants = PAPER_CONSTANTS
+    fold: bool = False, constants: HemisphereConstants = PAPER_CONSTANTS
 ) -> ModelFamily:
-    """``strumik2024``: Eqs. (7), (8), (10) with the scene's folding switch and constants.
+    """``strumik2024``: Eqs. (7), (8) (and (10) when ``fold``, the scene's switch) with the
+    scene's constants.
 
     Its coordinates are empty: its posterior samples the whitened coordinates of
     :mod:`brdf_infer.posterior` under the scene's ``[priors]``.
@@ -287,8 +288,9 @@ def strumik_family(
     )
 
 
-def family(name: str, fold: bool = True, constants: HemisphereConstants = PAPER_CONSTANTS):
-    """The family called ``name`` (``fold`` and ``constants`` serve ``strumik2024`` only).
+def family(name: str, fold: bool = False, constants: HemisphereConstants = PAPER_CONSTANTS):
+    """The family called ``name`` (``fold`` and ``constants`` serve ``strumik2024`` only: the
+    other families have no Eq. 10).
 
     Raises:
         KeyError: no such family.

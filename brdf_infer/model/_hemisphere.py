@@ -53,7 +53,7 @@ def log_brdf_hemisphere(
     theta_deg: ArrayLike,
     phi_deg: ArrayLike,
     params: Params,
-    fold: bool = True,
+    fold: bool = False,
     constants: HemisphereConstants = PAPER_CONSTANTS,
 ) -> jnp.ndarray:
     """ln BRDF(θi, θ, φ) of Eq. (8): ln[w·BRDF⁺ + (1 − w)·BRDF⁻].
@@ -67,7 +67,7 @@ def log_brdf_hemisphere(
         theta_deg: polar scattering angle θ ∈ [0, 90] [deg].
         phi_deg: azimuth φ [deg], forward-scattering plane at 180°.
         params: ``Params`` in paper units.
-        fold: include the folding term of Eq. (10) in BRDF⁺.
+        fold: include the folding term of Eq. (10) in BRDF⁺ (default: the physical BRDF).
         constants: Δφ and folding constants.
 
     Returns:
@@ -88,8 +88,9 @@ def brdf_hemisphere(
     theta_deg: ArrayLike,
     phi_deg: ArrayLike,
     params: Params,
-    fold: bool = True,
+    fold: bool = False,
     constants: HemisphereConstants = PAPER_CONSTANTS,
 ) -> jnp.ndarray:
-    """BRDF(θi, θ, φ) of Eqs. (8) and (10) [sr⁻¹]; see :func:`log_brdf_hemisphere`."""
+    """BRDF(θi, θ, φ) of Eq. (8) (with Eq. 10 when ``fold``) [sr⁻¹]; see
+    :func:`log_brdf_hemisphere`."""
     return jnp.exp(log_brdf_hemisphere(theta_i_deg, theta_deg, phi_deg, params, fold, constants))

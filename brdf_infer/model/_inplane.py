@@ -42,6 +42,18 @@ def log_fold(theta_s_deg: ArrayLike, constants: HemisphereConstants = PAPER_CONS
     return log_ndtr(-_SQRT2 * z)
 
 
+def fold_statement(fold: bool) -> str:
+    """What a product says about Eq. (10): its folding is a measurement artefact (Sec. 5 of
+    the article), added there only to compare with Table 3; without it the BRDF is the
+    physical one and its TIS the larger, conservative one for a stray-light budget."""
+    if fold:
+        return (
+            "Eq. (10) folding: included (the article's measurement artefact, as in its "
+            "Table 3; less scatter near grazing, not conservative for stray light)"
+        )
+    return "Eq. (10) folding: not included (physical BRDF, conservative for stray light)"
+
+
 def log_brdf_inplane(
     theta_i_deg: ArrayLike,
     theta_s_deg: ArrayLike,

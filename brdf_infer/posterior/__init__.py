@@ -27,6 +27,7 @@ from brdf_infer.posterior._results import (
     load_run_draws,
     load_run_family,
     loo_terms,
+    run_fold,
 )
 from brdf_infer.posterior._run import (
     CHECKPOINT_FILE,
@@ -70,6 +71,7 @@ __all__ = [
     "model_name",
     "pointwise_loo_terms",
     "run_emcee",
+    "run_fold",
     "run_nuts",
     "run_posterior",
     "tis_band",

@@ -1,5 +1,10 @@
 """Credible bands (median, 68 %, 95 %) for the in-plane BRDF, TIS and π·BRDF0 of a
-``strumik2024`` run, and for the in-plane BRDF and TIS of a run of any other family."""
+``strumik2024`` run, and for the in-plane BRDF and TIS of a run of any other family.
+
+Every band follows the run's one fold switch, the scene's ``[model] fold`` (default false):
+without it the bands are of the physical BRDF, whose TIS is the conservative one for a
+stray-light budget; with it Eq. (10)'s folding (a measurement artefact, Sec. 5 of the article)
+is in the BRDF and the TIS alike. ``"fold"`` in the bands says which."""
 
 from __future__ import annotations
 
@@ -56,20 +61,22 @@ def compute_bands(
     Args:
         params: parameter draws.
         theta_i_deg: incidence angles of the BRDF bands [deg].
-        fold: the scene's in-plane model includes Eq. (10) (the BRDF bands follow it; the TIS
-            always includes the folding, as the paper's Eq. (9) and Table 3 do).
+        fold: the scene's ``[model] fold``: Eq. (10) in the BRDF and TIS bands (default
+            false, the physical BRDF; the article's Table 3 includes it).
         constants: out-of-plane and folding constants.
         with_tis: compute the TIS band (not when the scene has no out-of-plane model).
 
     Returns:
-        ``{"tis": …, "brdf_inplane": …, "pi_brdf0": …}`` (no ``"tis"`` without ``with_tis``);
-        the BRDF band holds arrays of shape (len(theta_i_deg), 181) over θs = −90°…90° [sr⁻¹].
+        ``{"fold": fold, "tis": …, "brdf_inplane": …, "pi_brdf0": …}`` (no ``"tis"`` without
+        ``with_tis``); the BRDF band holds arrays of shape (len(theta_i_deg), 181) over
+        θs = −90°…90° [sr⁻¹].
     """
     theta_i = np.asarray(theta_i_deg, float)
     grid_i, grid_s = np.meshgrid(theta_i, BRDF_THETA_S_DEG, indexing="ij")
     batch = Params(*(np.asarray(v)[:, None, None] for v in params))
     brdf = np.asarray(brdf_inplane(grid_i[None], grid_s[None], batch, fold, constants))
     bands = {
+        "fold": bool(fold),
         "brdf_inplane": {
             "theta_i_deg": theta_i.tolist(),
             "theta_s_deg": BRDF_THETA_S_DEG.tolist(),
@@ -78,7 +85,7 @@ def compute_bands(
         "pi_brdf0": quantile_band(np.pi * np.asarray(params.brdf0)),
     }
     if with_tis:
-        bands["tis"] = tis_band(params, TIS_THETA_I_DEG, True, constants)
+        bands["tis"] = tis_band(params, TIS_THETA_I_DEG, fold, constants)
     return bands
 
 
@@ -144,19 +151,20 @@ def family_tis_band(
 def family_bands(
     family: ModelFamily, physical: dict[str, np.ndarray], theta_i_deg, with_tis: bool = True
 ) -> dict[str, dict]:
-    """The bands of a run of ``family``: ``{"brdf_inplane": …, "tis": …}`` as in
-    :func:`compute_bands` (the TIS at :data:`FAMILY_TIS_THETA_I_DEG` over
-    :data:`FAMILY_TIS_DRAWS` draws; no π·BRDF0, a parameter of Eq. 7 only)."""
+    """The bands of a run of ``family``: ``{"fold": False, "brdf_inplane": …, "tis": …}`` as
+    in :func:`compute_bands` (the TIS at :data:`FAMILY_TIS_THETA_I_DEG` over
+    :data:`FAMILY_TIS_DRAWS` draws; no π·BRDF0, a parameter of Eq. 7 only; no Eq. 10 either)."""
     theta_i = np.asarray(theta_i_deg, float)
     grid_i, grid_s = np.meshgrid(theta_i, BRDF_THETA_S_DEG, indexing="ij")
     batch = {k: jnp.asarray(v, float)[:, None, None] for k, v in physical.items()}
     brdf = np.exp(np.asarray(_signed_program(family)(grid_i[None], grid_s[None], batch)))
     bands = {
+        "fold": False,
         "brdf_inplane": {
             "theta_i_deg": theta_i.tolist(),
             "theta_s_deg": BRDF_THETA_S_DEG.tolist(),
             **quantile_band(brdf),
-        }
+        },
     }
     if with_tis:
         bands["tis"] = family_tis_band(family, physical, FAMILY_TIS_THETA_I_DEG, FAMILY_TIS_DRAWS)

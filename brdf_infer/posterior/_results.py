@@ -234,8 +234,15 @@ def _run_posterior_group(run: Path):
         raise BadInputError(f"cannot read: {error}", file=path) from None
 
 
+def run_fold(posterior) -> bool:
+    """The fold switch of the run whose ``posterior`` group this is: its scene's
+    ``[model] fold`` (Eq. 10), which its likelihood used and its products follow."""
+    return bool(int(posterior.attrs.get("fold", 0)))
+
+
 def load_run_draws(run: Path):
-    """(Params of every draw, fold, constants) of a ``strumik2024`` posterior run directory.
+    """(Params of every draw, the run's fold switch, constants) of a ``strumik2024`` posterior
+    run directory; the fold switch is the scene's ``[model] fold`` (:func:`run_fold`).
 
     Raises:
         BadInputError: no readable posterior.nc in ``run``, or a run of another family
@@ -252,12 +259,15 @@ def load_run_draws(run: Path):
         raise BadInputError(f"posterior lacks {', '.join(missing)}", file=path)
     params = Params(*(np.asarray(posterior[name]).reshape(-1) for name in PARAM_NAMES))
     constants = HemisphereConstants(**json.loads(posterior.attrs["constants"]))
-    return params, True, constants
+    return params, run_fold(posterior), constants
 
 
-def load_run_family(run: Path, fold: bool = True) -> tuple[ModelFamily, dict[str, np.ndarray]]:
+def load_run_family(
+    run: Path, fold: bool | None = None
+) -> tuple[ModelFamily, dict[str, np.ndarray]]:
     """(the run's model family, every draw of its physical parameters) for a posterior run
-    of any family (``fold``: ``strumik2024`` with Eq. 10, as its TIS is defined).
+    of any family (``fold``: ``strumik2024`` with or without Eq. 10; None: the run's own
+    switch, :func:`run_fold`).
 
     Raises:
         BadInputError: no readable posterior.nc in ``run``, or one without its parameters.
@@ -267,10 +277,11 @@ def load_run_family(run: Path, fold: bool = True) -> tuple[ModelFamily, dict[str
 
 
 def family_draws(
-    posterior, fold: bool = True, path: Path | None = None
+    posterior, fold: bool | None = None, path: Path | None = None
 ) -> tuple[ModelFamily, dict[str, np.ndarray]]:
     """(model family, every draw of its physical parameters) of a run's ``posterior`` group
-    (its attribute ``model``; runs without it are ``strumik2024``).
+    (its attribute ``model``; runs without it are ``strumik2024``); ``fold`` as in
+    :func:`load_run_family`.
 
     Raises:
         BadInputError: an unknown family, or a group without its parameters (naming ``path``).
@@ -278,6 +289,7 @@ def family_draws(
     from brdf_infer.params import HemisphereConstants
 
     name = posterior.attrs.get("model", REFERENCE_FAMILY)
+    fold = run_fold(posterior) if fold is None else fold
     try:
         constants = HemisphereConstants(**json.loads(posterior.attrs["constants"]))
         member = family(name, fold, constants)

@@ -319,6 +319,7 @@ def complete_run(
         "error_model": scene.errors.describe(),
         "options": {"reparametrised": model.whiten},
         "n_points": len(measurements),
+        "fold": bands["fold"],  # Eq. (10) in the bands and TIS (the scene's [model] fold)
         "median": medians,
         "units": units,
         "noise": {

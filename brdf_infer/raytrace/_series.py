@@ -184,7 +184,7 @@ def trace_configuration(
     rays: int,
     key: jax.Array,
     estimator: str = "nee",
-    fold: bool = True,
+    fold: bool = False,
 ) -> Estimate:
     """Ray-trace one configuration with ``rays`` rays in chunks of ``CHUNK_RAYS`` (Eq. 10's
     folding when ``fold``)."""
@@ -230,7 +230,7 @@ def compile_tallies(
     estimator,
     limiting,
     batched: bool,
-    fold=True,
+    fold=False,
     group: int = 0,
 ):
     """Compile every chunk size once, outside the timing; returns the seconds it took.

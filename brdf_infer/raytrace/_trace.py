@@ -154,7 +154,7 @@ def _trace(
     n: int,
     estimator: str,
     limiting: int,
-    fold: bool = True,
+    fold: bool = False,
 ):
     """Per-ray tallies (n, 6) in the order of ``TALLIES`` and detector coordinates [mm];
     the BRDF is Eq. (8), with Eq. (10)'s folding when ``fold`` (the scene's switch)."""
@@ -240,7 +240,7 @@ def _trace(
 
 @partial(jax.jit, static_argnames=("n", "estimator", "limiting", "fold"))
 def tally_moments(
-    key, theta_i_deg, theta_s_deg, params, setup, constants, n, estimator, limiting, fold=True
+    key, theta_i_deg, theta_s_deg, params, setup, constants, n, estimator, limiting, fold=False
 ):
     """Sums Σz and Σzzᵀ of the per-ray tallies z (shape (6,) and (6, 6)) of n rays."""
     tallies, _, _ = _trace(

@@ -13,7 +13,7 @@ from brdf_infer._arviz import az
 from brdf_infer._atomic import atomic_write_bytes
 from brdf_infer.compare import COMPARE_FILE
 from brdf_infer.errors import BadInputError
-from brdf_infer.model import REFERENCE_FAMILY
+from brdf_infer.model import REFERENCE_FAMILY, fold_statement
 from brdf_infer.posterior import (
     BANDS_FILE,
     POSTERIOR_FILE,
@@ -21,6 +21,7 @@ from brdf_infer.posterior import (
     THRESHOLDS,
     draws_params,
     family_draws,
+    run_fold,
 )
 from brdf_infer.report import _figures, _html, _noise
 from brdf_infer.report._compare import compare_figure, compare_table_html
@@ -123,32 +124,28 @@ def write_report(run: Path, progress=print) -> tuple[Path, Verdict]:
             "tis_band",
             "TIS(θi): posterior median, 68 % and 95 % bands"
             + (", with the scene's reference points" if scene.outputs.tis_reference else "")
-            + ".",
+            + f"; {fold_statement(_tis_fold(bands))}.",
             lambda: _figures.tis_band(bands, scene.load_tis_reference()),
         )
     if scene.outputs.maps and (scene.model.out_of_plane or not reference_model):
         add(
             "hemisphere",
             "Hemisphere maps (cf. Fig. 9): posterior median BRDF on one logarithmic colour scale "
-            "(top) and the relative width of its 95 % band (bottom).",
+            "(top) and the relative width of its 95 % band (bottom); "
+            f"{fold_statement(reference_model and run_fold(idata.posterior))}.",
             lambda: _figures.hemisphere_maps(member, physical),
         )
     exports = load_exports(run)
-    tables = next(
-        (
-            {f["kind"]: Path(f["path"]) for f in e["files"] if f["kind"] != "draw"}
-            for e in reversed(exports)
-            if e["format"] == "zemax-bsdf"
-        ),
-        None,
-    )
-    if tables and reference_model:
+    shown = next((e for e in reversed(exports) if e["format"] == "zemax-bsdf"), None)
+    if shown is not None and reference_model:
+        tables = {f["kind"]: Path(f["path"]) for f in shown["files"] if f["kind"] != "draw"}
+        fold = shown.get("fold", True)  # exports before the "fold" key folded by default
         add(
             "export",
             "Exported .BSDF tables read back as a ray tracer reads them, cut through the plane "
             "of incidence (black: median solid, 95 % bounds dotted), against the model's "
-            "posterior median and 95 % band evaluated directly (blue).",
-            lambda: plot_export(tables, draws_params(idata.posterior), scene.model.constants),
+            f"posterior median and 95 % band evaluated directly (blue); {fold_statement(fold)}.",
+            lambda: plot_export(tables, draws_params(idata.posterior), fold, scene.model.constants),
         )
     traces = _load_traces(run)
     if traces:
@@ -186,6 +183,7 @@ def write_report(run: Path, progress=print) -> tuple[Path, Verdict]:
         )
         + "</p>",
         _result_box(summary, bands, scene.band_theta_i_deg(rows), member.name),
+        _fold_note(bands) if "tis" in bands else "",
         *(_html.figure(png, caption) for name, caption, png in figures if name == "brdf_bands"),
         _studies_line(run),
         "<h2>The run</h2>",
@@ -204,6 +202,10 @@ def write_report(run: Path, progress=print) -> tuple[Path, Verdict]:
                 ["sampler", f"{attrs['sampler']} {attrs['settings']}"],
                 ["seed", attrs["seed"]],
                 ["options", json.dumps(summary.get("options", {}))],
+                [
+                    "Eq. (10) folding (the scene's [model] fold)",
+                    fold_statement(reference_model and run_fold(idata.posterior)),
+                ],
                 ["versions", attrs["versions"]],
                 [
                     "wall time",
@@ -344,9 +346,11 @@ def _export_section(exports: list[dict], figures) -> list[str]:
     for entry in exports:
         names = ", ".join(Path(f["path"]).name for f in entry["files"][:6])
         more = len(entry["files"]) - 6
+        folding = f"; {fold_statement(entry['fold'])}" if "fold" in entry else ""
         parts.append(
             f"<p>{_html.escape(entry['format'])} in <code>{_html.escape(entry['folder'])}</code>: "
-            f"{_html.escape(names)}{f' and {more} more' if more > 0 else ''}</p>"
+            f"{_html.escape(names)}{f' and {more} more' if more > 0 else ''}"
+            f"{_html.escape(folding)}</p>"
         )
         if entry["format"] == "abg" and entry.get("rows"):
             parts.append(abg_table(entry["rows"]))
@@ -556,6 +560,24 @@ def _indices_of(grid: list[float], angles: tuple[float, ...]) -> list[int]:
     return [list(grid).index(angle) for angle in angles if angle in grid]
 
 
+def _tis_fold(bands: dict) -> bool:
+    """Eq. (10) in the run's TIS band: its ``"fold"`` (the scene's switch); a run written
+    before that key had its TIS folded always."""
+    return bands.get("fold", True)
+
+
+def _fold_note(bands: dict) -> str:
+    """One line under the result: whether its TIS includes Eq. (10), and how to change it."""
+    fold = _tis_fold(bands)
+    change = (
+        "leave out [model] fold (or set it false) in the scene for the physical BRDF"
+        if fold
+        else "the article's Table 3 includes it: set [model] fold = true in the scene, or "
+        "pass --fold to tis and export"
+    )
+    return f"<p class='fold'>{_html.escape(fold_statement(fold))}; {_html.escape(change)}.</p>"
+
+
 def _tis_table(bands: dict) -> str:
     band = bands["tis"]
     chosen = _indices_of(band["theta_i_deg"], (0.0, 5.0, 30.0, 50.0, 70.0, 80.0))
@@ -566,8 +588,10 @@ def _tis_table(bands: dict) -> str:
         ]
         for i in chosen
     ]
-    return "<h3>TIS [%]</h3>" + _html.table(
-        ["θi [deg]", "median", "16 %", "84 %", "2.5 %", "97.5 %"], rows
+    return (
+        "<h3>TIS [%]</h3>"
+        + f"<p>{_html.escape(fold_statement(_tis_fold(bands)))}.</p>"
+        + _html.table(["θi [deg]", "median", "16 %", "84 %", "2.5 %", "97.5 %"], rows)
     )
 
 
@@ -631,6 +655,8 @@ def write_example(run: Path, example: Path) -> Path:
                     f"{100 * band['lo95'][i]:.2f}–{100 * band['hi95'][i]:.2f} |"
                     for i in _indices_of(band["theta_i_deg"], (0.0, 30.0, 50.0, 70.0, 80.0))
                 ),
+                "",
+                f"TIS: {fold_statement(_tis_fold(bands))}.",
             ]
             if band
             else []

@@ -45,11 +45,11 @@ def _in_plane_cut(contents, k: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def plot_export(
-    tables: dict[str, Path], draws: Params, constants: HemisphereConstants
+    tables: dict[str, Path], draws: Params, fold: bool, constants: HemisphereConstants
 ) -> plt.Figure:
     """In-plane cuts of the exported tables (lines) against the model's posterior median and
-    95 % band evaluated directly (shaded), on polar axes: angle θs from the normal, radius
-    log10 BRDF."""
+    95 % band evaluated directly (shaded; with Eq. 10 when the export has it, ``fold``), on
+    polar axes: angle θs from the normal, radius log10 BRDF."""
     contents = {kind: read_bsdf(path) for kind, path in tables.items()}
     first = next(iter(contents.values()))
     shown = [
@@ -68,7 +68,7 @@ def plot_export(
         theta_s = np.linspace(-89.5, 89.5, 359)
         phi = np.where(theta_s >= 0.0, 180.0, 0.0)
         batch = Params(*(np.asarray(v)[:, None] for v in draws))
-        model = np.asarray(brdf_hemisphere(theta_i, np.abs(theta_s), phi, batch, True, constants))
+        model = np.asarray(brdf_hemisphere(theta_i, np.abs(theta_s), phi, batch, fold, constants))
         low, median, high = np.log10(np.quantile(model, [0.025, 0.5, 0.975], axis=0))
         floor = np.floor(np.min(low)) - 0.5 if floor is None else floor
         angle = np.radians(theta_s)
