@@ -199,7 +199,7 @@ def test_aperture_kernel_loses_what_the_sample_and_the_cusp_lose(lya):
     """dPs/Pi over Eq. (6) on every row within the hand-computed bounds of
     :func:`_aperture_ratio_bounds` (series I at 80°: 0.58 ≤ 0.62 ≤ 0.70, the 25.4-mm sample
     catches ≈ 70 % of the 44-mm footprint). A kernel that ignored the sample's edge (ratio
-    0.97 at 80°) or the aperture (1.0) fails them."""
+    0.92 for series I at 80° with a sample 10× larger) or the aperture (1.0) fails them."""
     scene, measurements = lya
     point = build_observation_model(scene, measurements)
     aperture = build_observation_model(check_instrument(scene, "aperture"), measurements)
