@@ -218,17 +218,21 @@ def fit_family(
 
 def _elpd(fit: FamilyResult):
     """ArviZ's PSIS-LOO of ``fit`` with the refitted rows' exact terms put in, and the
-    largest Pareto k before the refits."""
+    largest Pareto k before the refits. ``p_loo`` follows the new elpd: ArviZ defines it as
+    lppd − elpd_loo, with lppd = Σᵢ ln mean_s of the pointwise terms over the full posterior
+    (here the leave-one-out conditionals p(yᵢ | y₋ᵢ, θ_s)), which the refits leave unchanged."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         loo = az.loo(fit.idata, pointwise=True)
     raw_k_max = float(np.max(np.asarray(loo.pareto_k)))
     if fit.exact_elpd:
+        lppd = float(loo["p_loo"] + loo["elpd_loo"])
         pointwise = np.asarray(loo.loo_i).copy()
         for row, value in fit.exact_elpd.items():
             pointwise[row] = value
         loo.loo_i.values[:] = pointwise
         loo["elpd_loo"] = float(pointwise.sum())
+        loo["p_loo"] = lppd - loo["elpd_loo"]
         loo["se"] = float(np.sqrt(pointwise.size * np.var(pointwise)))
         pareto_k = np.asarray(loo.pareto_k).copy()
         pareto_k[list(fit.exact_elpd)] = 0.0  # exact now

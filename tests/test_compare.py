@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import warnings
 
 import jax
 import jax.numpy as jnp
@@ -11,7 +12,7 @@ import numpy as np
 import pytest
 
 from brdf_infer._cli_compare import comparison_table
-from brdf_infer.compare import CompareSettings, compare_families
+from brdf_infer.compare import PARETO_K_LIMIT, CompareSettings, compare_families
 from brdf_infer.error_model import NoiseScales
 from brdf_infer.model import family
 from brdf_infer.params import UV_PAPER
@@ -186,9 +187,11 @@ def test_a_row_with_the_left_out_sigma_carries_no_information(lya):
     y = model.data.rows.log_reflectance
     keep = np.arange(y.shape[0]) != row
     differences = []
+    calibration = scene.errors.calibration_sd  # the per-series effect row 7 shares with others
+    assert calibration > 0
     for a, b, g, sd in ((2e-3, 5e-3, 1.8, 0.05), (1e-2, 1e-1, 2.5, 0.2), (5e-4, 1e-3, 1.2, 0.01)):
         params = {"A": jnp.asarray(a), "B": jnp.asarray(b), "g": jnp.asarray(g)}
-        scales = NoiseScales(*(jnp.asarray(v) for v in (sd, 0.05, 0.0, 0.3, 0.3)))
+        scales = NoiseScales(*(jnp.asarray(v) for v in (sd, 0.05, calibration, 0.3, 0.3)))
         full = model.likelihood_parts(params, scales, left_out)
         dropped = model.likelihood_parts(params, scales)
         whole = dist.LowRankMultivariateNormal(full.mean, full.factor, full.diagonal).log_prob(y)
@@ -197,6 +200,85 @@ def test_a_row_with_the_left_out_sigma_carries_no_information(lya):
         ).log_prob(y[keep])
         differences.append(float(whole - rest))
     assert np.ptp(differences) < 1e-6, differences
+
+
+def _psis_only(fit):
+    """The same posterior ranked without its refits (the PSIS terms kept everywhere)."""
+    return dataclasses.replace(fit, refitted_rows=[], exact_elpd={})
+
+
+def _with_refit_effect(fit, table):
+    """The rows of a ranking ``table`` by name, and the exact minus the PSIS terms of the
+    refitted rows of ``fit``."""
+    from brdf_infer._arviz import az
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        psis = np.asarray(az.loo(fit.idata, pointwise=True).loo_i)
+    shift = sum(value - psis[row] for row, value in fit.exact_elpd.items())
+    rows = {row["name"]: row for row in table}
+    return rows, shift
+
+
+def test_refitted_terms_replace_psis_in_elpd_and_p_loo():
+    """Bookkeeping of the exact refit, on a hand-made posterior (no sampling): the ranked
+    elpd_loo is the PSIS sum with the refitted rows' exact terms put in, and p_loo = lppd −
+    elpd_loo (ArviZ's definition, lppd = Σᵢ ln mean_s exp(log_lik)) moves by the opposite
+    amount; Pareto k of a refitted row counts as 0 afterwards."""
+    from brdf_infer._arviz import az
+    from brdf_infer.compare import FamilyResult, rank_families
+
+    rng = np.random.default_rng(0)
+    y = rng.normal(size=12)
+    y[3] = 6.0  # an outlier: its PSIS weights have a heavy tail
+    centres = rng.normal(0.0, 0.3, size=(2, 200, 1))
+    log_lik = -0.5 * (y - centres) ** 2 - 0.5 * np.log(2 * np.pi)
+    idata = az.from_dict(posterior={"mu": centres[..., 0]}, log_likelihood={"obs": log_lik})
+    fit = FamilyResult(
+        "model", {}, {}, idata, 1.0, 400.0, 0, refitted_rows=[3], exact_elpd={3: -25.0}, seconds=0
+    )
+    table, notes = rank_families({"model": fit, "psis only": _psis_only(fit)})
+    rows, shift = _with_refit_effect(fit, table)
+    flat = log_lik.reshape(-1, y.size)
+    lppd = np.sum(np.log(np.mean(np.exp(flat), axis=0)))
+    assert rows["model"]["elpd_loo"] == pytest.approx(rows["psis only"]["elpd_loo"] + shift)
+    assert rows["model"]["p_loo"] == pytest.approx(lppd - rows["model"]["elpd_loo"], rel=1e-10)
+    assert rows["psis only"]["p_loo"] == pytest.approx(lppd - rows["psis only"]["elpd_loo"])
+    assert (
+        rows["model"]["pareto_k_max"] > PARETO_K_LIMIT >= rows["model"]["pareto_k_max_after_refit"]
+    )
+    assert any("LOO by refit" in note for note in notes)
+
+
+@pytest.mark.slow  # ≈ 10 s of sampling and one refit, but its own compile (30-60 s on 2 cores):
+# the single-series structure is compiled by no other test of the default suite
+def test_a_row_with_pareto_k_above_0_7_is_refitted_on_a_single_series_scene(tmp_path):
+    """A user scene of one series, θi 10-70° (synthetic.GEOMETRIES "single-series", data
+    seed 3): with 2 × 300 draws row 0 (θi = 10°, θs = 0°) has Pareto k ≈ 0.8, so its LOO
+    term is computed by refitting without it; elpd_loo and p_loo of the ranking carry the
+    exact term."""
+    from brdf_infer._arviz import az
+    from brdf_infer.compare import fit_family, rank_families
+    from brdf_infer.scene import load_scene
+    from brdf_infer.synthetic import write_geometry_scene
+
+    scene = load_scene(write_geometry_scene(tmp_path, "single-series", UV_PAPER, seed=3))
+    fit = fit_family(scene, scene.load_measurements(), "strumik2024", SMALL)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # ArviZ warns about the very row this test is about
+        k = np.asarray(az.loo(fit.idata, pointwise=True).pareto_k)
+    high = [int(row) for row in np.flatnonzero(k > PARETO_K_LIMIT)]
+    assert high, k  # the scene has such a row
+    assert fit.refitted_rows == high and set(fit.exact_elpd) == set(high)
+    assert all(np.isfinite(value) for value in fit.exact_elpd.values())
+    table, notes = rank_families({"strumik2024": fit, "psis only": _psis_only(fit)})
+    rows, shift = _with_refit_effect(fit, table)
+    assert shift != 0.0
+    refitted, psis = rows["strumik2024"], rows["psis only"]
+    assert refitted["elpd_loo"] == pytest.approx(psis["elpd_loo"] + shift, rel=1e-12)
+    assert refitted["p_loo"] == pytest.approx(psis["p_loo"] - shift, rel=1e-12)
+    assert refitted["pareto_k_max"] > PARETO_K_LIMIT >= refitted["pareto_k_max_after_refit"]
+    assert any(f"rows {high}" in note and "LOO by refit" in note for note in notes), notes
 
 
 def test_fit_lsq_of_another_family_gives_its_parameters_in_json(capsys):

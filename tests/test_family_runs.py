@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 import pytest
-from scipy import integrate
+from scipy import integrate, stats
 
 from brdf_infer._arviz import az
 from brdf_infer.model import family
@@ -179,14 +179,59 @@ def test_unknown_model_option_is_refused_before_any_work(command, tmp_path, caps
     assert not target.exists()
 
 
-def test_sbc_of_another_family_ranks_its_own_parameters():
+FAMILY_SBC = {"replicates": 6, "draws": 20, "warmup": 100}
+
+
+def extreme_rank_limit(replicates: int, draws: int, quantities: int, alpha: float = 0.01) -> int:
+    """The fewest ranks at 0 or ``draws`` (of ``replicates``) that fail a quantity: under
+    calibrated ranks, uniform on 0 … draws, their number is Binomial(replicates, 2/(draws + 1))
+    and reaches the limit with probability ≤ alpha/quantities."""
+    p = 2 / (draws + 1)
+    return next(
+        k
+        for k in range(replicates + 1)
+        if stats.binom.sf(k - 1, replicates, p) <= alpha / quantities
+    )
+
+
+def extreme_quantities(result) -> list[str]:
+    """Quantities with too many ranks at an end (:func:`extreme_rank_limit`): the posterior
+    sits on one side of the truth, as when it is too narrow or shifted."""
+    draws = result.settings.draws
+    limit = extreme_rank_limit(result.settings.replicates, draws, len(result.ranks))
+    return [
+        name
+        for name, ranks in result.ranks.items()
+        if np.sum((ranks == 0) | (ranks == draws)) >= limit
+    ]
+
+
+def _family_sbc(sigma_scale: float = 1.0):
     from brdf_infer.sbc import SbcSettings, run_sbc
     from brdf_infer.scene import load_scene
 
     scene = load_scene("lya")
-    settings = SbcSettings(replicates=6, draws=20, warmup=100)
-    result = run_sbc(scene, scene.load_measurements(), settings, model="abg")
+    settings = SbcSettings(**FAMILY_SBC, sigma_scale=sigma_scale)
+    return run_sbc(scene, scene.load_measurements(), settings, model="abg")
+
+
+def test_sbc_of_another_family_ranks_its_own_parameters():
+    """Six replicates cannot test uniformity, but they can see a posterior on one side of
+    the truth: four or more of six ranks at 0 or 20 happen with probability 1.0e-3 per
+    quantity under calibrated ranks (family-wise < 1 % over the six quantities)."""
+    result = _family_sbc()
     assert set(result.quantities) >= {"A", "B", "g", "tis70"}
     assert "brdf0" not in result.quantities
     for ranks in result.ranks.values():
         assert ranks.shape == (6,) and np.all((ranks >= 0) & (ranks <= 20))
+    assert extreme_rank_limit(6, 20, len(result.quantities)) == 4
+    assert extreme_quantities(result) == [], result.ranks
+
+
+@pytest.mark.slow  # a second compile of the family's SBC program (≈ 25 s): σ is compiled in
+def test_family_sbc_with_a_planted_sigma_fault_fails_the_same_check():
+    """The inference's σ three times the simulator's: the learned noise scales shrink to
+    absorb it, so their truths rank at the top (measured: repeatability 20 in five of six
+    replicates, sample_sd in four)."""
+    result = _family_sbc(sigma_scale=3.0)
+    assert "repeatability" in extreme_quantities(result), result.ranks

@@ -150,19 +150,42 @@ def test_the_sample_clips_the_footprint_at_grazing_incidence(lya):
         assert (ratio > 1.05) if gain else ratio == pytest.approx(1.0, abs=1e-9)
 
 
-def test_uv_paper_simulation_agrees_with_table_2_as_figure_14_shows(lya):
-    """'General agreement' (Sec. 6) made a number. The Eq. (6) curve of the fitted BRDF
-    scatters about the data by 10.5 % rms (log); the simulation lies below that curve by what
-    Eq. (6) neglects: the sample clips the beam at θi = 80° (−15 %) and the BRDF's cusp at
-    φ = 180° (Eq. 8) is averaged over AD and the footprint (−2 to −7 %). Measured: 16 % rms,
-    simulated/measured from 0.68 (θs = 85°, where Eq. (10)'s folding sets in) to 1.07."""
+SIGMA_E_UV = 0.064  # the article's fit error at 121.6 nm, mean |ln(fitted/measured)| (Sec. 5.3)
+
+
+def test_uv_paper_image_ratio_follows_table_2_as_figure_14_shows(lya):
+    """Fig. 14 plots the measured raw reflectance of series II against the simulated image
+    ratio (Sec. 6: both images averaged over the same rectangle on the light spot, then
+    divided) and reports "general agreement"; the text gives no number. Made a number:
+
+    - Shape: up to one common factor, the simulated image ratios follow Table 2 as closely as
+      the article's fit of the same BRDF follows its data, σE = 6.4 % (mean |ln|). The mean
+      |centred ln(image ratio/measured)| over the 18 configurations estimates that with a
+      standard error of σE·√(π/2 − 1)/√18 = 0.18 σE (normal residuals), so it must stay below
+      σE + 3 se = 0.098 (Monte Carlo adds < 1 % per configuration at 2^17 rays). A BRDF with
+      a1 10 % lower or 20 % higher than the article's gives 0.14 and 0.12; uv-paper 0.079.
+    - Level: only loosely, within a factor 1.5. The article does not describe its simulated
+      reference image beyond "the same rectangle", and the level of an image ratio depends on
+      it (AD passes only part of the reference beam, README "Ray tracing"); our image ratio
+      lies ≈ 25 % above Table 2, an offset the article's figure does not show (README,
+      "Instrument models"). A loose bound is all the text supports.
+    - The Eq. (6) curve of the same BRDF (``point_estimate``) scatters about Table 2 like the
+      fit: rms ln below σE·√(π/2) + 3·that/√(2·18) = 0.080 + 0.040 = 0.12.
+    - dPs/Pi (``simulated``) lies below the point estimate everywhere: the sample clips the
+      beam at θi = 80° and the BRDF's cusp at φ = 180° (Eq. 8) is averaged over AD and the
+      footprint; both only lower it.
+    """
     result = raytrace_series(*lya, UV_PAPER, rays=2**17)
-    ratio = np.array([row["simulated"] / row["measured"] for row in result.rows])
-    point = np.array([row["point_estimate"] / row["measured"] for row in result.rows])
-    assert np.sqrt(np.mean(np.log(point) ** 2)) < 0.12
-    assert np.sqrt(np.mean(np.log(ratio) ** 2)) < 0.2
-    assert np.all((ratio > 2 / 3) & (ratio < 1.5))
-    assert np.all(ratio < point)  # every neglected effect lowers dPs/Pi here
+    image = np.log([row["image_ratio"] / row["measured"] for row in result.rows])
+    point = np.log([row["point_estimate"] / row["measured"] for row in result.rows])
+    n = len(result.rows)
+    assert n == 18
+    shape_bound = SIGMA_E_UV * (1 + 3 * math.sqrt(math.pi / 2 - 1) / math.sqrt(n))
+    assert np.mean(np.abs(image - image.mean())) < shape_bound, image
+    assert abs(image.mean()) < math.log(1.5), image.mean()
+    rms_bound = SIGMA_E_UV * math.sqrt(math.pi / 2) * (1 + 3 / math.sqrt(2 * n))
+    assert np.sqrt(np.mean(point**2)) < rms_bound
+    assert all(row["simulated"] < row["point_estimate"] for row in result.rows)
 
 
 def test_posterior_trace_has_a_band_around_its_median(lya, nuts_run):

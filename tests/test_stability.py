@@ -119,9 +119,30 @@ def test_tis_is_bounded_by_pi_times_the_brdf_range_and_finite(params, theta_i):
             assert all_finite(gradient)
 
 
-def test_tis_of_physical_parameters_lies_in_zero_one():
-    values = np.asarray(tis(np.linspace(0.0, 89.0, 90), UV_PAPER))
-    assert np.all((values > 0) & (values < 1))
+def test_tis_of_a_constant_brdf_is_pi_brdf0_and_folding_removes_the_hand_computed_part():
+    """A constant BRDF scatters TIS = π·BRDF0 (Eq. 9: ∫cos θ dω = π). Eq. (7) is constant at
+    θi = 0 (every term of its exponent carries θi) and for a1 = a2 = a3 = 0 at every θi:
+    π × 0.0114 = 0.0358142 for uv-paper. Folded (Eq. 10), the forward branch loses
+    BRDF0·(1 + erf(a(θ − θsf)))/2 weighted by w(φ), whose φ-integral is the triangle's area
+    Δφ = c1·θi + c2 [rad]: TIS = π·BRDF0 − BRDF0·Δφ·∫ (1 + erf(a(θ − θsf)))/2 cos θ sin θ dθ,
+    the θ-integral by SciPy; a = 0.35 /deg, θsf = 87°, c1 = −0.95, c2 = 90.5° (Sec. 5.2)."""
+    from scipy import integrate
+    from scipy.special import erf
+
+    hand = math.pi * 0.0114
+    flat = UV_PAPER._replace(a1=0.0, a2=0.0, a3=0.0)
+    theta_i = np.array([0.0, 20.0, 45.0, 70.0, 89.0])
+    assert float(tis(0.0, UV_PAPER, False)) == pytest.approx(hand, rel=1e-12)
+    np.testing.assert_allclose(np.asarray(tis(theta_i, flat, False)), hand, rtol=1e-12)
+
+    def lost(theta):
+        fold = (1 + erf(0.35 * (math.degrees(theta) - 87.0))) / 2
+        return fold * math.cos(theta) * math.sin(theta)
+
+    for angle in theta_i:
+        width = math.radians(-0.95 * angle + 90.5)
+        loss = 0.0114 * width * integrate.quad(lost, 0, math.pi / 2, epsabs=0, epsrel=1e-12)[0]
+        assert float(tis(angle, flat, True)) == pytest.approx(hand - loss, rel=1e-10), angle
 
 
 @given(
