@@ -622,7 +622,8 @@ def _comparison(run: Path, idata) -> str:
     )
 
 
-EXAMPLE_FIGURES = ("brdf_bands", "tis_band", "hemisphere", "predictive", "raytrace")
+EXAMPLE_FIGURES = ("brdf_bands", "tis_band", "hemisphere", "predictive", "raytrace", "instrument")
+STUDY_FIGURES = ("compare", "sensitivity")  # written by the studies into the run folder itself
 
 
 def write_example(run: Path, example: Path) -> Path:
@@ -630,16 +631,26 @@ def write_example(run: Path, example: Path) -> Path:
     summary = json.loads((run / SUMMARY_FILE).read_text())
     verdict = Verdict.from_json(summary["verdict"])
     bands = json.loads((run / BANDS_FILE).read_text())
-    names = [name for name in EXAMPLE_FIGURES if (run / FIGURE_DIR / f"{name}.png").is_file()]
-    for name in names:
-        atomic_write_bytes(example / f"{name}.png", (run / FIGURE_DIR / f"{name}.png").read_bytes())
+    sources = [run / FIGURE_DIR / f"{name}.png" for name in EXAMPLE_FIGURES]
+    sources += [run / f"{name}.png" for name in STUDY_FIGURES]
+    names = [source.stem for source in sources if source.is_file()]
+    for source in sources:
+        if source.is_file():
+            atomic_write_bytes(example / source.name, source.read_bytes())
     diagnostics = summary["diagnostics"]
     band = bands.get("tis")
+    studies_file = run / "studies.json"
+    studies = json.loads(studies_file.read_text()).get("run", []) if studies_file.exists() else []
     lines = [
         f"# Example report: scene `{summary['scene']}` ({summary['sampler']})",
         "",
-        "Regenerate with `./dev run --example reports/example` (the full HTML report is written to",
-        "`reports/lya/report.html`, which is not committed).",
+        "Regenerate with `./dev run --full --example reports/example` (every study the scene can",
+        "run; the full HTML report is written to `reports/lya/report.html`, which is not",
+        "committed).",
+        "",
+        "**Studies run beside the posterior:** "
+        + ("; ".join(studies) if studies else "none (the scene's one posterior)")
+        + ".",
         "",
         f"**Verdict:** {verdict.text} (max R-hat {diagnostics['r_hat_max']:.3f}, min "
         f"bulk/tail ESS {diagnostics['ess_bulk_min']:.0f}/{diagnostics['ess_tail_min']:.0f}, "
