@@ -9,7 +9,10 @@ import brdf_infer  # noqa: F401  (float64 for every test)
 from brdf_infer.posterior import run_posterior
 from brdf_infer.scene import load_scene
 
-REDUCED_NUTS = {"chains": 4, "warmup": 500, "draws": 500}
+# 1000 draws: under the default error model the learned noise scales reach down to 0 (series
+# II's values carry their own σ), and 4 × 500 draws gave them a tail ESS of 283-375 for some
+# seeds; the draws do not change the compiled program (the warmup does)
+REDUCED_NUTS = {"chains": 4, "warmup": 500, "draws": 1000}
 
 # Property tests: random exploration locally; CI (the CI variable set, as .ci/run does)
 # replays the same examples every time so a run cannot fail by chance; "explore" searches
