@@ -76,6 +76,8 @@ Schema (keys other than these are errors; defaults in brackets)::
                                              #   source_diameter_mm … signal_region_mm
     [studies]                                # what `run` adds to the one posterior [none]
     error_models = ["spread"]                # [] posteriors under other error models
+    sensitivity = true                       # [false] posteriors under each error-model
+                                             #   assumption changed (brdf_infer.sensitivity)
     instruments = ["aperture", "image"]      # [] posteriors under other instrument models
     raytrace = true                          # [false] ray-trace the posterior ([raytrace])
     compare = ["strumik2024", "abg"]         # [] model families compared by PSIS-LOO
@@ -244,12 +246,15 @@ class Studies:
         raytrace: ray-trace the posterior (and ``[outputs] reference_params``) through the
             ``[raytrace]`` setup (Sec. 6).
         compare: model families compared by PSIS-LOO (at least two).
+        sensitivity: posteriors with each error-model assumption changed
+            (:mod:`brdf_infer.sensitivity`).
     """
 
     error_models: tuple[str, ...] = ()
     instruments: tuple[str, ...] = ()
     raytrace: bool = False
     compare: tuple[str, ...] = ()
+    sensitivity: bool = False
 
     def requested(self) -> list[str]:
         """One phrase per study asked for."""
@@ -257,6 +262,7 @@ class Studies:
         asked += [f"instrument model {name}" for name in self.instruments]
         asked += ["ray traces"] * self.raytrace
         asked += [f"comparison of {', '.join(self.compare)}"] if self.compare else []
+        asked += ["sensitivity to the error-model assumptions"] * self.sensitivity
         return asked
 
 
@@ -503,6 +509,7 @@ def _parse_studies(document: dict, path: Path) -> Studies:
         ),
         raytrace=_boolean(table, "raytrace", path, "studies.", False),
         compare=_compare_families(compare, path, field_name),
+        sensitivity=_boolean(table, "sensitivity", path, "studies.", False),
     )
 
 

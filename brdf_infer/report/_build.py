@@ -27,6 +27,7 @@ from brdf_infer.report._compare import compare_figure, compare_table_html
 from brdf_infer.report._export import abg_table, load_exports, plot_export
 from brdf_infer.report._instruments import MEANINGS, instruments_section
 from brdf_infer.report._raytrace import figure_png, plot_detector_images, plot_raytrace
+from brdf_infer.report._sensitivity import sensitivity_section
 from brdf_infer.scene import load_scene
 
 REPORT_FILE = "report.html"
@@ -282,6 +283,7 @@ def write_report(run: Path, progress=print) -> tuple[Path, list[str]]:
         _tis_table(bands) if "tis" in bands else "",
         *_export_section(exports, figures),
         *_compare_section(run),
+        *sensitivity_section(run),
         *instruments_section(run),
         *(
             ["<h2>Ray-tracing validation (Sec. 6)</h2>", _raytrace_table(traces)]
