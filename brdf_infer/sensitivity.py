@@ -18,6 +18,11 @@ nothing); another error model (``model=spread``) compiles its own.
 Each row's pointwise log predictive density is that of its leave-one-out conditional
 (:func:`brdf_infer.posterior.loo_terms`), as in the run's PSIS-LOO. The TIS follows the
 scene's ``[model] fold`` (its bands' convention).
+
+The baseline posterior is also checked for its sensitivity to the prior and to the likelihood
+by power-scaling (:func:`brdf_infer.posterior.power_scaling`): per free parameter, learned
+noise scale and TIS(70°), how far the posterior would move if either were raised to a power
+near 1.
 """
 
 from __future__ import annotations
@@ -250,16 +255,26 @@ class VariantResult:
 
 @dataclass
 class SensitivityResult:
-    """The study (``as_json``: the JSON of ``brdf-infer sensitivity --json``)."""
+    """The study (``as_json``: the JSON of ``brdf-infer sensitivity --json``).
+
+    Attributes:
+        baseline: the posterior under the scene's error model.
+        variants: the posterior under each variant, in the order asked.
+        power_scaling: the baseline's prior and likelihood sensitivity per quantity
+            (``{name: {"prior", "likelihood", "diagnosis"}}``).
+        seconds: wall time of the study.
+    """
 
     baseline: VariantResult
     variants: list[VariantResult]
+    power_scaling: dict[str, dict[str, float | str]]
     seconds: float
 
     def as_json(self) -> dict[str, Any]:
         return {
             "baseline": self.baseline.as_json(self.baseline),
             "variants": [v.as_json(self.baseline) for v in self.variants],
+            "power_scaling": self.power_scaling,
             "seconds": self.seconds,
         }
 
@@ -303,6 +318,24 @@ def _summarise(
     )
 
 
+def _power_scaling(scene: Scene, model, sites: dict[str, np.ndarray]) -> dict:
+    """Power-scaling sensitivity of the free parameters (paper units), the learned noise
+    scales and TIS(70°) of one posterior."""
+    import jax.numpy as jnp
+
+    from brdf_infer.model import tis
+    from brdf_infer.posterior import NOISE_SITES, draws_params, power_scaling
+
+    shape = np.shape(sites["alpha"])
+    values = tis(
+        jnp.array([TIS_ANGLE_DEG]), draws_params(sites), scene.model.fold, scene.model.constants
+    )
+    quantities = {name: sites[name] for name in scene.free_parameters}
+    quantities |= {name: sites[name] for name in NOISE_SITES if name in sites}
+    quantities["tis_70deg"] = np.asarray(values).reshape(shape)
+    return power_scaling(model, sites, quantities)
+
+
 def sensitivity(
     scene: Scene,
     measurements: Measurements,
@@ -342,6 +375,7 @@ def sensitivity(
     keys = chain_keys(settings.seed, 1, settings.chains)[0]
     angles = tis_angles(scene, measurements)
     results: list[VariantResult | None] = [None] * len(runs)
+    scaling: dict = {}
     for members in groups.values():
         datasets = pad_datasets([models[index].data for index in members])
         program = NutsProgram(
@@ -356,7 +390,9 @@ def sensitivity(
             )
             model = dataclasses.replace(models[index], data=data)
             results[index] = _summarise(scenes[index], runs[index], model, output, angles, clock)
-    return SensitivityResult(results[0], results[1:], time.perf_counter() - started)
+            if index == 0:
+                scaling = _power_scaling(scene, model, output.sites)
+    return SensitivityResult(results[0], results[1:], scaling, time.perf_counter() - started)
 
 
 def write_sensitivity(out: Path, result: SensitivityResult) -> list[Path]:

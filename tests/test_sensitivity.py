@@ -101,7 +101,7 @@ def test_no_calibration_gives_a_narrower_tis_interval_than_one_per_series(calibr
 
 def test_library_json_follows_the_contract(calibration_study, lya):
     payload = calibration_study.as_json()
-    assert set(payload) == {"baseline", "variants", "seconds"}
+    assert set(payload) == {"baseline", "variants", "power_scaling", "seconds"}
     angles = tis_angles(*lya)
     for entry in (payload["baseline"], *payload["variants"]):
         assert set(entry) == VARIANT_KEYS
@@ -120,6 +120,63 @@ def test_library_json_follows_the_contract(calibration_study, lya):
     assert other["dse"] > 0
 
 
+def test_power_scaling_covers_every_free_quantity(calibration_study, lya):
+    scaling = calibration_study.as_json()["power_scaling"]
+    expected = [*lya[0].free_parameters, "sample_sd", "repeatability", "tis_70deg"]
+    assert list(scaling) == expected
+    for values in scaling.values():
+        assert set(values) == {"prior", "likelihood", "diagnosis"}
+        assert values["prior"] >= 0 and values["likelihood"] >= 0
+
+
+def test_power_scaling_components_are_the_models_log_density(lya):
+    """The log prior and the joint log likelihood per draw add up to NumPyro's log joint
+    density of the unwhitened model (its sample sites are the prior's coordinates) at every
+    point: nothing left out, nothing counted twice (the leave-one-out conditionals of the
+    run's log_likelihood group would not add up to it)."""
+    from numpyro import handlers
+    from numpyro.infer import init_to_uniform
+    from numpyro.infer.util import log_density
+
+    from brdf_infer.posterior import build_posterior_model
+    from brdf_infer.posterior._power_scaling import log_likelihood_draws, log_prior_draws
+
+    model = build_posterior_model(*lya, reparametrise=False)
+    for seed in range(3):
+        seeded = handlers.substitute(handlers.seed(model, seed), substitute_fn=init_to_uniform)
+        trace = handlers.trace(seeded).get_trace(model.data)
+        sampled = {
+            name: site["value"]
+            for name, site in trace.items()
+            if site["type"] == "sample" and not site["is_observed"]
+        }
+        sites = {
+            name: np.asarray(site["value"])[None, None]
+            for name, site in trace.items()
+            if site["type"] in ("sample", "deterministic") and name != "obs"
+        }
+        expected = float(log_density(model, (model.data,), {}, sampled)[0])
+        got = log_prior_draws(model, sites) + log_likelihood_draws(model, sites)
+        assert got.shape == (1, 1)
+        assert float(got[0, 0]) == pytest.approx(expected, rel=1e-10)
+
+
+def test_power_scaling_flags_a_prior_that_conflicts_with_the_data(calibration_study, lya):
+    """Planted fault: ln BRDF0's prior N(−5.5, 0.1) (BRDF0 ≈ 0.0041 sr⁻¹) where the data put
+    ln BRDF0 near −4.35 (0.013 sr⁻¹), 11 prior sds away. The prior then pulls the level, and
+    power-scaling must see it; under the scene's own wide prior, N(−4.6, 2), the TIS is not
+    prior-sensitive (below 0.1; measured 0.05 on 2 × 300 draws)."""
+    scene, measurements = lya
+    priors = dict(scene.priors)
+    priors["brdf0"] = dataclasses.replace(priors["brdf0"], loc=-5.5, scale=0.1)
+    conflicting = dataclasses.replace(scene, priors=priors)
+    planted = sensitivity(conflicting, measurements, [], TINY).power_scaling
+    assert calibration_study.power_scaling["tis_70deg"]["prior"] < 0.1
+    for name in ("brdf0", "tis_70deg"):
+        assert planted[name]["prior"] > 0.2, planted[name]
+        assert planted[name]["diagnosis"] == "possible prior-data conflict"
+
+
 def test_the_report_of_a_run_folder_shows_the_study(calibration_study, nuts_run, tmp_path):
     run = tmp_path / "run"
     shutil.copytree(nuts_run.out, run)
@@ -131,7 +188,7 @@ def test_the_report_of_a_run_folder_shows_the_study(calibration_study, nuts_run,
     assert not list(run.glob(".*.tmp"))
     html = write_report(run, progress=lambda message: None)[0].read_text()
     assert "Sensitivity to the error-model assumptions" in html
-    assert "calibration=none" in html
+    assert "calibration=none" in html and "power scaling" in html
 
 
 def test_cli_json_contract_and_files(tmp_path, capsys):
@@ -154,7 +211,7 @@ def test_cli_json_contract_and_files(tmp_path, capsys):
     )
     assert code == 0, err
     payload = json.loads(stdout)
-    assert set(payload) == {"baseline", "variants", "seconds"}
+    assert set(payload) == {"baseline", "variants", "power_scaling", "seconds"}
     assert [v["name"] for v in payload["variants"]] == ["calibration=none", "model=spread"]
     assert [v["changes"] for v in payload["variants"]] == [
         {"calibration": "none"},
