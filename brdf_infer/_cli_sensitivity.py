@@ -28,6 +28,9 @@ def add_sensitivity_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--draws", type=int, default=defaults.draws, help="NUTS draws per chain")
     parser.add_argument("--seed", type=int, default=defaults.seed, help="random seed (all)")
     parser.add_argument(
+        "--no-refit", action="store_true", help="no exact refits where Pareto k > 0.7"
+    )
+    parser.add_argument(
         "--out",
         help="also write sensitivity.json and sensitivity.png here (into a run folder: the "
         "report shows them)",
@@ -58,7 +61,11 @@ def command_sensitivity(
     )
 
     settings = SensitivitySettings(
-        chains=args.chains, warmup=args.warmup, draws=args.draws, seed=args.seed
+        chains=args.chains,
+        warmup=args.warmup,
+        draws=args.draws,
+        seed=args.seed,
+        refit=not args.no_refit,
     )
     settings.check()
     scene, measurements = scene_and_measurements(args.scene)

@@ -16,7 +16,9 @@ padded to one shape (:mod:`brdf_infer.posterior._padding`: zero calibration colu
 nothing); another error model (``model=spread``) compiles its own.
 
 Each row's pointwise log predictive density is that of its leave-one-out conditional
-(:func:`brdf_infer.posterior.loo_terms`), as in the run's PSIS-LOO. The TIS follows the
+(:func:`brdf_infer.posterior.loo_terms`), as in the run's PSIS-LOO; where Pareto k > 0.7 the
+row's term is computed exactly by refitting without it, through the same program
+(:func:`brdf_infer.compare.without_row`), as the model comparison does. The TIS follows the
 scene's ``[model] fold`` (its bands' convention).
 
 The baseline posterior is also checked for its sensitivity to the prior and to the likelihood
@@ -28,6 +30,7 @@ near 1.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import time
 import tomllib
@@ -57,9 +60,10 @@ BASELINE = "default"
 class SensitivitySettings:
     """How every variant is sampled (NUTS, the same settings and seed for all).
 
-    The defaults keep the study at about a minute or two on 2 cores: 4 × 500 draws give the
-    95 % intervals of TIS and π·BRDF0 to a few tenths of a per cent and PSIS-LOO its usual
-    precision.
+    The defaults keep the study at a few minutes on 2 cores: 4 × 500 draws give the 95 %
+    intervals of TIS and π·BRDF0 to a few tenths of a per cent and PSIS-LOO its usual
+    precision. ``refit``: compute the leave-one-out term of a row with Pareto k > 0.7 exactly,
+    by one more posterior without it.
     """
 
     chains: int = 4
@@ -67,6 +71,7 @@ class SensitivitySettings:
     draws: int = 500
     seed: int = 0
     target_accept: float = 0.8
+    refit: bool = True
 
     def check(self) -> None:
         """Raises BadInputError naming the setting that is out of range."""
@@ -220,9 +225,11 @@ class VariantResult:
         variant: what was changed (nothing for the baseline).
         tis: ``theta_i_deg``, ``median``, ``lo95``, ``hi95`` (lists over the angles).
         pi_brdf0: median and 95 % interval of π·BRDF0.
-        elpd_loo, se: PSIS-LOO and its standard error.
+        elpd_loo, se: PSIS-LOO (exact where refitted) and its standard error.
         pointwise: each row's leave-one-out elpd term.
-        diagnostics: ``r_hat_max``, ``ess_bulk_min``, ``divergences``, ``pareto_k_max``.
+        diagnostics: ``r_hat_max``, ``ess_bulk_min``, ``divergences``, ``pareto_k_max``
+            (before the refits) and ``refitted_rows`` (0-based rows with Pareto k > 0.7 whose
+            term is exact).
         idata: the posterior (free parameters, noise scales) and its leave-one-out log
             likelihood.
         seconds: wall time of this posterior (sampling and the summaries).
@@ -279,11 +286,38 @@ class SensitivityResult:
         }
 
 
+def _exact_terms(
+    program, model, pointwise: np.ndarray, rows: list[int], *, settings: SensitivitySettings
+) -> np.ndarray:
+    """``pointwise`` with the terms of ``rows`` replaced by their exact leave-one-out elpd:
+    log of the mean over draws of p(yᵢ | y₋ᵢ, θ) from a posterior without row i."""
+    from scipy.special import logsumexp
+
+    from brdf_infer.compare import without_row
+    from brdf_infer.posterior import chain_keys, loo_terms
+
+    keys = chain_keys(settings.seed, 1, settings.chains)[0]
+    exact = pointwise.copy()
+    for row in rows:
+        refit = program.run(without_row(model, row), keys, settings.draws)
+        terms = loo_terms(model, refit.sites)[0][..., row].reshape(-1)
+        exact[row] = float(logsumexp(terms) - np.log(terms.size))
+    return exact
+
+
 def _summarise(
-    scene: Scene, changed: Variant, model, output, angles: list[float], started: float
+    scene: Scene,
+    changed: Variant,
+    model,
+    output,
+    angles: list[float],
+    started: float,
+    refit=None,
 ) -> VariantResult:
-    """TIS, π·BRDF0, PSIS-LOO and the sampler's health of one variant's draws."""
+    """TIS, π·BRDF0, PSIS-LOO (``refit(pointwise, rows)``: exact terms where Pareto k > 0.7)
+    and the sampler's health of one variant's draws."""
     from brdf_infer._arviz import az
+    from brdf_infer.compare import PARETO_K_LIMIT
     from brdf_infer.posterior import NOISE_SITES, draws_params, interval95, loo_terms, tis_band
 
     sites = output.sites
@@ -297,21 +331,29 @@ def _summarise(
     with warnings.catch_warnings():  # a high Pareto k is reported in the diagnostics
         warnings.simplefilter("ignore")
         loo = az.loo(idata, pointwise=True)
-        summary = az.summary(idata, var_names=names, kind="diagnostics")
+        summary = az.summary(idata, var_names=names, kind="diagnostics", round_to="none")
+    pareto_k = np.asarray(loo.pareto_k)
+    refitted = [int(row) for row in np.flatnonzero(pareto_k > PARETO_K_LIMIT)]
+    pointwise = np.asarray(loo.loo_i)
+    if refit is not None and refitted:
+        pointwise = refit(pointwise, refitted)
+    else:
+        refitted = []
     params = draws_params(sites)
     band = tis_band(params, angles, scene.model.fold, scene.model.constants)
     return VariantResult(
         variant=changed,
         tis={key: band[key] for key in ("theta_i_deg", "median", "lo95", "hi95")},
         pi_brdf0=interval95(np.pi * np.asarray(params.brdf0)),
-        elpd_loo=float(loo.elpd_loo),
-        se=float(loo.se),
-        pointwise=np.asarray(loo.loo_i),
+        elpd_loo=float(np.sum(pointwise)),
+        se=float(np.sqrt(pointwise.size * np.var(pointwise))),
+        pointwise=pointwise,
         diagnostics={
             "r_hat_max": float(np.max(summary["r_hat"])),
             "ess_bulk_min": float(np.min(summary["ess_bulk"])),
             "divergences": int(np.sum(output.stats["diverging"])),
-            "pareto_k_max": float(np.max(np.asarray(loo.pareto_k))),
+            "pareto_k_max": float(np.max(pareto_k)),
+            "refitted_rows": refitted,
         },
         idata=idata,
         seconds=time.perf_counter() - started,
@@ -389,7 +431,16 @@ def sensitivity(
                 data, keys, settings.draws, progress=progress, description=runs[index].name
             )
             model = dataclasses.replace(models[index], data=data)
-            results[index] = _summarise(scenes[index], runs[index], model, output, angles, clock)
+            refit = functools.partial(_exact_terms, program, model, settings=settings)
+            results[index] = _summarise(
+                scenes[index],
+                runs[index],
+                model,
+                output,
+                angles,
+                clock,
+                refit if settings.refit else None,
+            )
             if index == 0:
                 scaling = _power_scaling(scene, model, output.sites)
     return SensitivityResult(results[0], results[1:], scaling, time.perf_counter() - started)

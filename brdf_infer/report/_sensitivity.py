@@ -73,7 +73,10 @@ def sensitivity_rows(payload: dict[str, Any]) -> list[list[str]]:
             notes.append(f"R-hat {health['r_hat_max']:.3f}")
         if health.get("ess_bulk_min", np.inf) < 400:
             notes.append(f"ESS {health['ess_bulk_min']:.0f}")
-        if health.get("pareto_k_max", 0.0) > 0.7:
+        refitted = health.get("refitted_rows", [])
+        if refitted:
+            notes.append(f"rows {', '.join(str(r + 1) for r in refitted)} refitted (k > 0.7)")
+        elif health.get("pareto_k_max", 0.0) > 0.7:
             notes.append(f"Pareto k {health['pareto_k_max']:.2f}")
         rows.append(
             [
