@@ -5,8 +5,8 @@ give the same compiled NUTS program with the data as its argument
 (:class:`brdf_infer.posterior.NutsProgram`), so each group is compiled once and all its scenes
 run through it (``run_many``: one data set per thread on a single CPU; vmapped with the scene
 axis sharded over every device JAX sees otherwise). Scenes of unequal size share a group: their
-data are padded to the group's largest row count and largest number of samples, series and
-rotation settings, the padding rows carrying a mask that removes them from the likelihood
+data are padded to the group's largest row count and largest number of samples, calibration
+groups and rotation settings, the padding rows carrying a mask that removes them from the likelihood
 exactly (:mod:`brdf_infer.posterior._padding`); only scenes with latent angles (a sampled
 variable per row) group by their exact shape. Each scene's run folder is exactly what
 ``brdf-infer posterior`` writes (``report``, ``tis --run`` and ``export --run`` read it),
@@ -201,7 +201,7 @@ def structure_key(model) -> str:
     """What must agree for two scenes to share one compiled program: the family, the model's
     options (error model, priors, folding and constants, free parameters, reparametrisation)
     and the data's tree structure and shapes — the row count and the number of samples,
-    series and rotation settings left out where the data can be padded to one shape
+    calibration groups and rotation settings left out where the data can be padded to one shape
     (:func:`brdf_infer.posterior._padding.paddable`)."""
     scene = model.scene
     options: dict[str, Any] = {

@@ -23,6 +23,7 @@ import numpy as np
 from brdf_infer._cli_compare import add_compare_arguments, command_compare
 from brdf_infer._cli_export import add_export_arguments, command_export
 from brdf_infer._cli_fold import add_fold_arguments, chosen_fold, refuse_fold
+from brdf_infer._cli_sensitivity import add_sensitivity_arguments, command_sensitivity
 from brdf_infer._device import DEVICES, placement
 from brdf_infer._outdir import check_output_dir
 from brdf_infer.errors import BadInputError
@@ -497,6 +498,11 @@ def _command_compare(args: argparse.Namespace) -> None:
     command_compare(args, scene_and_measurements, _table, _progress)
 
 
+def _command_sensitivity(args: argparse.Namespace) -> None:
+    _headless()
+    command_sensitivity(args, _scene_and_measurements, _table, _progress)
+
+
 def _command_brdf(args: argparse.Namespace) -> None:
     from brdf_infer.model import brdf_hemisphere, brdf_inplane
     from brdf_infer.params import resolve_params
@@ -637,7 +643,7 @@ def _requested_studies(args: argparse.Namespace, scene):
     if args.full:
         return full_studies(scene)
     given = (args.error_models, args.instruments, args.compare)
-    if all(value is None for value in given) and not args.raytrace:
+    if all(value is None for value in given) and not (args.raytrace or args.sensitivity):
         return None
     for option, values, known in (
         ("--error-models", args.error_models, ERROR_MODELS),
@@ -662,6 +668,7 @@ def _requested_studies(args: argparse.Namespace, scene):
         instruments=tuple(args.instruments or ()),
         raytrace=args.raytrace,
         compare=tuple(dict.fromkeys(args.compare or ())),
+        sensitivity=args.sensitivity,
     )
 
 
@@ -1055,7 +1062,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--full",
         action="store_true",
         help="every study the scene can run (other error model, instrument models, ray "
-        "traces, model comparison)",
+        "traces, model comparison, sensitivity to the error-model assumptions)",
     )
     studies.add_argument(
         "--error-models", nargs="+", metavar="NAME", help="posteriors under these error models"
@@ -1066,6 +1073,11 @@ def build_parser() -> argparse.ArgumentParser:
     studies.add_argument("--raytrace", action="store_true", help="ray-trace the posterior")
     studies.add_argument(
         "--compare", nargs="+", metavar="FAMILY", help="model families compared by PSIS-LOO"
+    )
+    studies.add_argument(
+        "--sensitivity",
+        action="store_true",
+        help="posteriors with each error-model assumption changed (brdf-infer sensitivity)",
     )
     _model_argument(run)
     _instrument_argument(run)
@@ -1246,6 +1258,14 @@ def build_parser() -> argparse.ArgumentParser:
     _force_argument(compare)
     _instrument_argument(compare)
     compare.set_defaults(handler=_command_compare)
+
+    sensitivity = scene_command(
+        "sensitivity",
+        "the posterior under the scene's error model and with each assumption changed "
+        "(calibration, rotation coupling, images per row, spread): TIS, π·BRDF0, PSIS-LOO",
+    )
+    add_sensitivity_arguments(sensitivity)
+    sensitivity.set_defaults(handler=_command_sensitivity)
 
     report = command("report", "HTML report of a posterior run: the answer, then diagnostics")
     report.add_argument("run_dir", help="directory of a posterior run (posterior.nc, ...)")

@@ -155,7 +155,9 @@ def check_family_names(names: list[str]) -> list[str]:
     return names
 
 
-def _without_row(model, row: int):
+def without_row(model, row: int):
+    """``model``'s data with ``row`` left out: its σ set to :data:`LEFT_OUT_SIGMA`, which
+    removes its information from the likelihood and keeps the data's shape (no compilation)."""
     noise = model.data.noise
     sigma = noise.sigma_row.at[row].set(LEFT_OUT_SIGMA)
     return model.data._replace(noise=noise._replace(sigma_row=sigma))
@@ -194,7 +196,7 @@ def fit_family(
     refitted, exact = [], {}
     if settings.refit:
         for row in np.flatnonzero(np.asarray(loo.pareto_k) > PARETO_K_LIMIT):
-            refit = program.run(_without_row(model, int(row)), keys, settings.draws)
+            refit = program.run(without_row(model, int(row)), keys, settings.draws)
             terms = loo_terms(model, refit.sites)[0][..., row].reshape(-1)
             exact[int(row)] = float(logsumexp(terms) - np.log(terms.size))
             refitted.append(int(row))

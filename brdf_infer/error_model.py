@@ -4,36 +4,60 @@
 once (README, "Error model"). For a row i of physical sample j, series c, measured at a
 sample-rotation setting k,
 
-    ln R_i = ln R_pred(θi + ε_k, θs − ε_k + η_i) + u_j + κ_c + e_i + ν_i,
+    ln R_i = ln R_pred(θi + ε_k, θs + s ε_k + η_i) + u_j + κ_g + e_i + ν_i,
 
 with
 
-* ``e_i ~ N(0, σ_i)``: the noise of the row's value, σ_i = σ(R_i)/(R_i √n) from the row's
-  ``reflectance_err`` (or ``errors.reflectance_rel`` where the file has none), n =
-  ``errors.images_per_row`` the number of images averaged into the value (Sec. 3.1: 12);
+* ``e_i ~ N(0, σ_i)``: the noise of the row's value, σ_i = σ(R_i)/(R_i √n_c) from the row's
+  ``reflectance_err`` (or ``errors.reflectance_rel`` where the file has none), n_c =
+  ``errors.images_per_row`` of the row's series, the number of images averaged into the value
+  (Sec. 3.1: 12 for series I);
 * ``ν_i ~ N(0, σ_rep)``: repeatability, what changes from one measurement setting to the next
   and so cannot show in the spread of the images of one setting; learned (half-normal prior)
   unless the scene fixes it;
 * ``u_j ~ N(0, τ)``: sample-to-sample variation, shared by every row of one physical sample,
   with a learned scale τ (``errors.hierarchical``);
-* ``κ_c ~ N(0, σ_cal)``: a calibration factor shared by every row of one series (one reference
-  measurement per series), σ_cal = ``errors.reflectance_rel`` when
-  ``errors.reflectance_rel_kind = "calibration"``;
-* ``ε_k ~ N(0, σ_rot)``: the sample-rotation error of one (series, sample, θi) setting; the
-  camera stays put, so θi grows by ε and θs shrinks by ε (θi + θs is fixed);
+* ``κ_g ~ N(0, σ_cal)``: the calibration factor of one reference measurement, shared by every
+  row normalised by it (Eq. 2 divides by the reference): one per series
+  (``errors.calibration = "per_series"``), one per (series, sample) (``"per_sample"``) or none
+  (``"none"``); σ_cal = ``errors.calibration_rel``;
+* ``ε_k ~ N(0, σ_rot)``: the sample-rotation error of one (series, sample, θi) setting;
 * ``η_i ~ N(0, σ_cam)``: the camera-position error of each row, which moves θs alone.
 
+The rotation coupling s (``errors.rotation_coupling``) is what a rotation error does to θs.
+In the plane of incidence, measure lab angles from the direction back to the source (the
+beam is fixed): the sample normal lies at θi, the camera at θi + θs (θs from the normal, on
+the far side; θs = θi + δ, Eq. 1), the specular beam at 2θi. Turning the sample by ε turns
+its normal to θi + ε and the specular beam to 2(θi + ε).
+
+* ``"camera_follows"`` (s = +1): the camera is set on the specular beam of the sample as it
+  actually stands and moved by δ from there — Sec. 2: "The camera's position was manually
+  adjusted to receive either the specularly reflected beam for each incidence angle ... or the
+  reflected signal for off-specular case", Sec. 3.2: δ "from the specular reflection
+  position". The camera sits at 2(θi + ε) + δ, so θs → 2(θi + ε) + δ − (θi + ε) = θs + ε: a
+  specular row stays specular, at θi + ε.
+* ``"camera_fixed"`` (s = −1): the camera stays where the nominal geometry puts it, at
+  θi + θs, so θs → θi + θs − (θi + ε) = θs − ε (θi + θs fixed): a specular row leaves the
+  specular ridge by 2ε.
+
 The angle errors enter through the predicted ln R (ln BRDF + ln cos θs + ln Ω), linearised:
-ln R_pred(θi + ε, θs − ε + η) ≈ ln R_pred + g_rot ε + g_cam η with g_rot = ∂θi − ∂θs and
+ln R_pred(θi + ε, θs + s ε + η) ≈ ln R_pred + g_rot ε + g_cam η with g_rot = ∂θi + s ∂θs and
 g_cam = ∂θs of ln R_pred (``angle_method = "linearised"``), or kept as latent angles
 (``"latent"``, errors in variables). All effects are Gaussian in ln R, so the rows follow one
 multivariate normal with covariance D + W Wᵀ: D diagonal (σ_i², σ_rep², g_cam² σ_cam²) and W
-one column per sample, series and rotation setting. The samplers use it marginalised over
-u, κ, ε, η (no funnels; PSIS-LOO from the leave-one-out conditionals).
+one column per sample, calibration group and rotation setting. The samplers use it
+marginalised over u, κ, ε, η (no funnels; PSIS-LOO from the leave-one-out conditionals).
+
+Where each option enters, once: ``images_per_row`` and ``reflectance_rel`` in σ_i,
+``calibration`` in the calibration columns of W (which rows share a factor),
+``calibration_rel`` in their scale σ_cal, ``rotation_coupling`` in s of g_rot. All of them are
+data of the compiled likelihood (:class:`NoiseLayout`), not constants of the model: one
+compiled program samples, and simulates from, every combination of them, and data simulated
+under one layout can be fitted under another (misspecification studies).
 
 ``spread`` is the earlier model, kept for comparison: independent rows with
-σ_i² = σ_rel² + s(θi)², s the inter-sample spread of ln R. It counts the measurement noise
-twice (s is computed from values that already carry it).
+σ_i² = σ_rel² + s(θi)², s the inter-sample spread of ln R, σ_rel = ``reflectance_rel``. It
+counts the measurement noise twice (s is computed from values that already carry it).
 """
 
 from __future__ import annotations
@@ -49,21 +73,41 @@ from brdf_infer.errors import BadInputError
 from brdf_infer.measurements import Measurements
 
 ERROR_MODELS = ("generative", "spread")
-REFLECTANCE_REL_KINDS = ("per_row", "calibration")
+CALIBRATIONS = ("per_series", "per_sample", "none")
+ROTATION_COUPLINGS = ("camera_follows", "camera_fixed")
+# s = ∂θs/∂ε, the change of θs per unit sample-rotation error (module docstring)
+THETA_S_PER_ROTATION = {"camera_follows": 1.0, "camera_fixed": -1.0}
 ANGLE_METHODS = ("linearised", "latent")
 LEARNED = "learned"
+# the options that are data of the compiled likelihood (NoiseLayout), not model structure
+DATA_OPTIONS = (
+    "reflectance_rel",
+    "calibration",
+    "calibration_rel",
+    "rotation_coupling",
+    "images_per_row",
+)
 
 
 @dataclass(frozen=True)
 class ErrorSettings:
     """The scene's ``[errors]`` table (see the module docstring for the model).
 
+    The defaults are argued from the article in the README ("Error model"): the 6.5 % of
+    Sec. 5.3 as a calibration per series, the camera following the specular beam (Sec. 2),
+    one image per row where the number averaged is not stated.
+
     Attributes:
         model: ``generative`` or ``spread`` (the earlier model, for comparison).
-        reflectance_rel: relative 1σ of the measured value [-]; per row where the file has no
-            σ column (``per_row``), or of one factor shared by a series (``calibration``).
-        reflectance_rel_kind: ``per_row`` or ``calibration``.
-        images_per_row: images averaged into each row's value; the σ column (and a per-row
+        reflectance_rel: relative 1σ of one image of a row without ``reflectance_err`` [-]
+            (and the σ_rel of the ``spread`` model).
+        calibration: which rows share one calibration factor: ``per_series``, ``per_sample``
+            (one per series and physical sample) or ``none``.
+        calibration_rel: relative 1σ of a calibration factor [-].
+        rotation_coupling: ``camera_follows`` (θs + ε under a rotation error ε) or
+            ``camera_fixed`` (θs − ε).
+        images_per_row: images averaged into each row's value, one number for every series
+            or a mapping series name → number (series not named: 1); the σ column (and
             ``reflectance_rel``) is the σ of one image, so the value's σ is that over √n.
         angle_deg: 1σ of the angles [deg] (default of the next two).
         rotation_deg: 1σ of the sample rotation of one (series, sample, θi) setting [deg].
@@ -78,8 +122,10 @@ class ErrorSettings:
 
     model: str = "generative"
     reflectance_rel: float = 0.065
-    reflectance_rel_kind: str = "per_row"
-    images_per_row: int = 1
+    calibration: str = "per_series"
+    calibration_rel: float = 0.065
+    rotation_coupling: str = "camera_follows"
+    images_per_row: int | dict[str, int] = 1
     angle_deg: float = 1.0
     rotation_deg: float = 1.0
     camera_deg: float = 1.0
@@ -96,43 +142,66 @@ class ErrorSettings:
 
     @property
     def calibration_sd(self) -> float:
-        """σ_cal of the per-series factor (0 unless the kind is ``calibration``)."""
-        return self.reflectance_rel if self.reflectance_rel_kind == "calibration" else 0.0
+        """σ_cal of the calibration factors (0 without a calibration or under ``spread``)."""
+        if self.model != "generative" or self.calibration == "none":
+            return 0.0
+        return self.calibration_rel
 
     @property
     def angles_on(self) -> bool:
         return self.model == "generative" and self.propagate_angles
 
+    def images_of(self, series: str) -> int:
+        """Images averaged into a row of ``series``."""
+        if isinstance(self.images_per_row, dict):
+            return self.images_per_row.get(series, 1)
+        return self.images_per_row
+
     def describe(self) -> dict:
         """The settings as plain JSON values (stored with every posterior run)."""
-        return {name: getattr(self, name) for name in self.__dataclass_fields__}
+        return {
+            name: dict(value) if isinstance(value, dict) else value
+            for name, value in ((n, getattr(self, n)) for n in self.__dataclass_fields__)
+        }
+
+    def structure(self) -> dict:
+        """:meth:`describe` without :data:`DATA_OPTIONS`: what the compiled model depends on.
+        Settings with the same structure share one compiled program; their data differ."""
+        return {k: v for k, v in self.describe().items() if k not in DATA_OPTIONS}
 
 
 class NoiseLayout(NamedTuple):
     """Per-row noise structure (a pytree of arrays; data of the compiled likelihood).
 
-    A group of one row (a sample measured once, a rotation setting with one row) adds its
-    variance to that row's diagonal instead of a column of W, which keeps W narrow.
+    A group of one row (a sample measured once, a calibration or rotation setting with one
+    row) adds its variance to that row's diagonal instead of a column of W, which keeps W
+    narrow.
 
     Attributes:
         sigma_row: fixed per-row 1σ of ln R: the value's own noise σ_i (``generative``) or
             √(σ_rel² + s²) (``spread``).
         sample_members: one-hot (rows × physical samples with two or more rows).
         sample_alone: 1 where the row is its sample's only row.
-        series_members: one-hot (rows × series with two or more rows).
-        series_alone: 1 where the row is its series' only row.
+        calibration_members: one-hot (rows × calibration groups with two or more rows): the
+            series, the (series, sample) pairs, or none (``errors.calibration``).
+        calibration_alone: 1 where the row is its calibration group's only row.
+        calibration_sd: σ_cal of a calibration factor [ln R] (a scalar; 0: none).
         rotation_members: one-hot (rows × rotation settings (series, sample, θi) with two or
             more rows).
         rotation_alone: 1 where the row is its rotation setting's only row.
+        theta_s_per_rotation: s = ∂θs/∂ε of each row: +1 when the camera follows the specular
+            beam, −1 when it stays put (``errors.rotation_coupling``).
     """
 
     sigma_row: jnp.ndarray
     sample_members: jnp.ndarray
     sample_alone: jnp.ndarray
-    series_members: jnp.ndarray
-    series_alone: jnp.ndarray
+    calibration_members: jnp.ndarray
+    calibration_alone: jnp.ndarray
+    calibration_sd: jnp.ndarray
     rotation_members: jnp.ndarray
     rotation_alone: jnp.ndarray
+    theta_s_per_rotation: jnp.ndarray
 
 
 class NoiseScales(NamedTuple):
@@ -156,25 +225,24 @@ def group_members(keys: list) -> tuple[np.ndarray, np.ndarray]:
 
 
 def value_sigma(settings: ErrorSettings, measurements: Measurements) -> np.ndarray:
-    """σ_i of ln R from each value's own noise: σ(R)/(R √n) (see the module docstring).
+    """σ_i of ln R from each value's own noise: σ(R)/(R √n) with n the images of the row's
+    series (see the module docstring).
 
     Raises:
         BadInputError: a row would have no noise at all (no σ, no ``reflectance_rel``, and
             nothing learned per row), which makes the likelihood degenerate.
     """
-    n = settings.images_per_row
+    images = np.array([settings.images_of(str(s)) for s in measurements.series], dtype=float)
     if measurements.reflectance_err is not None:
         relative = measurements.reflectance_err / measurements.reflectance
-    elif settings.reflectance_rel_kind == "per_row":
-        relative = np.full(len(measurements), settings.reflectance_rel)
     else:
-        relative = np.zeros(len(measurements))
-    sigma = relative / np.sqrt(n)
+        relative = np.full(len(measurements), settings.reflectance_rel)
+    sigma = relative / np.sqrt(images)
     if not settings.learns_repeatability and settings.repeatability == 0 and np.any(sigma <= 0):
         row = int(np.argmax(sigma <= 0)) + 1
         raise BadInputError(
             "the error model gives this row no noise: give it a reflectance_err > 0, set "
-            "errors.reflectance_rel > 0 (per_row), or let errors.repeatability be learned",
+            "errors.reflectance_rel > 0, or let errors.repeatability be learned",
             file=measurements.path,
             row=row,
             field="reflectance_err",
@@ -221,6 +289,21 @@ def spread_sigma(reflectance_rel: float, measurements: Measurements) -> np.ndarr
     return sigma
 
 
+def calibration_groups(settings: ErrorSettings, measurements: Measurements) -> list | None:
+    """The calibration group of each row: its series, or its (series, sample); None without a
+    calibration."""
+    if settings.calibration == "per_series":
+        return list(measurements.series)
+    if settings.calibration == "per_sample":
+        return list(zip(measurements.series, measurements.sample, strict=True))
+    return None
+
+
+def theta_s_per_rotation(settings: ErrorSettings, rows: int) -> np.ndarray:
+    """s = ∂θs/∂ε of ``rows`` rows under the scene's rotation coupling (module docstring)."""
+    return np.full(rows, THETA_S_PER_ROTATION[settings.rotation_coupling])
+
+
 def noise_layout(settings: ErrorSettings, measurements: Measurements) -> NoiseLayout:
     """The per-row noise structure of ``measurements`` under ``settings``."""
     if settings.model == "spread":
@@ -231,15 +314,28 @@ def noise_layout(settings: ErrorSettings, measurements: Measurements) -> NoiseLa
         zip(measurements.series, measurements.sample, measurements.theta_i_deg, strict=True)
     )
     samples = group_members(list(measurements.sample))
-    series = group_members(list(measurements.series))
+    groups = calibration_groups(settings, measurements)
+    if groups is None:
+        calibration = (np.zeros((len(measurements), 0)), np.zeros(len(measurements)))
+    else:
+        calibration = group_members(groups)
     rotations = group_members(rotation_keys)
     return NoiseLayout(
-        jnp.asarray(sigma),
-        *(jnp.asarray(array) for array in (*samples, *series, *rotations)),
+        sigma_row=jnp.asarray(sigma),
+        sample_members=jnp.asarray(samples[0]),
+        sample_alone=jnp.asarray(samples[1]),
+        calibration_members=jnp.asarray(calibration[0]),
+        calibration_alone=jnp.asarray(calibration[1]),
+        calibration_sd=jnp.asarray(settings.calibration_sd),
+        rotation_members=jnp.asarray(rotations[0]),
+        rotation_alone=jnp.asarray(rotations[1]),
+        theta_s_per_rotation=jnp.asarray(theta_s_per_rotation(settings, len(measurements))),
     )
 
 
-def angle_slopes(log_reflectance_at, theta_i_deg, theta_s_deg) -> tuple[jnp.ndarray, jnp.ndarray]:
+def angle_slopes(
+    log_reflectance_at, theta_i_deg, theta_s_deg, theta_s_per_rotation
+) -> tuple[jnp.ndarray, jnp.ndarray]:
     """(g_rot, g_cam) per row [1/deg]: the first-order response of ln R to the angle errors.
 
     Two forward-mode directional derivatives of the elementwise ln R_pred over all rows.
@@ -248,14 +344,17 @@ def angle_slopes(log_reflectance_at, theta_i_deg, theta_s_deg) -> tuple[jnp.ndar
         log_reflectance_at: ln R_pred(θi, θs), elementwise over arrays of angles (the
             aperture's ln Ω may be left out, it does not depend on the angles).
         theta_i_deg, theta_s_deg: the rows' nominal angles [deg].
+        theta_s_per_rotation: s = ∂θs/∂ε per row (or one for all): +1 camera follows the
+            specular beam, −1 camera fixed (:attr:`NoiseLayout.theta_s_per_rotation`).
 
     Returns:
-        g_rot = ∂ln R/∂θi − ∂ln R/∂θs (sample rotation: θi + ε, θs − ε) and
+        g_rot = ∂ln R/∂θi + s ∂ln R/∂θs (sample rotation: θi + ε, θs + s ε) and
         g_cam = ∂ln R/∂θs (camera position: θs + η).
     """
     ones = jnp.ones_like(theta_i_deg)
     angles = (theta_i_deg, theta_s_deg)
-    g_rot = jax.jvp(log_reflectance_at, angles, (ones, -ones))[1]
+    coupling = theta_s_per_rotation * ones
+    g_rot = jax.jvp(log_reflectance_at, angles, (ones, coupling))[1]
     g_cam = jax.jvp(log_reflectance_at, angles, (jnp.zeros_like(ones), ones))[1]
     return g_rot, g_cam
 
@@ -269,8 +368,8 @@ def covariance_factors(
     """(W, D) with Cov(ln R) = D + W Wᵀ (module docstring).
 
     D = σ_i² + σ_rep² + (g_cam σ_cam)² (+ the variance of groups of one row);
-    W = [τ·samples, σ_cal·series, σ_rot·g_rot·settings]. Pass zero slopes for the latent-angle
-    model (the angles are then sampled, not marginalised).
+    W = [τ·samples, σ_cal·calibration groups, σ_rot·g_rot·settings]. Pass zero slopes for the
+    latent-angle model (the angles are then sampled, not marginalised).
     """
     rotation = scales.rotation_deg * g_rot
     diagonal = (
@@ -278,13 +377,13 @@ def covariance_factors(
         + scales.repeatability**2
         + (g_cam * scales.camera_deg) ** 2
         + layout.sample_alone * scales.sample_sd**2
-        + layout.series_alone * scales.calibration**2
+        + layout.calibration_alone * scales.calibration**2
         + layout.rotation_alone * rotation**2
     )
     factor = jnp.concatenate(
         [
             scales.sample_sd * layout.sample_members,
-            scales.calibration * layout.series_members,
+            scales.calibration * layout.calibration_members,
             rotation[:, None] * layout.rotation_members,
         ],
         axis=1,

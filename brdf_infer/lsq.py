@@ -32,7 +32,7 @@ import numpy as np
 import optimistix as optx
 
 from brdf_infer.coordinates import ANGLE_SCALE_DEG, INTERNAL_NAMES, from_internal, to_internal
-from brdf_infer.error_model import angle_slopes
+from brdf_infer.error_model import angle_slopes, theta_s_per_rotation
 from brdf_infer.errors import BadInputError
 from brdf_infer.measurements import Measurements
 from brdf_infer.observations import (
@@ -391,6 +391,7 @@ class _Reweighting:
                 ),
                 data.theta_i_deg,
                 data.theta_s_deg,
+                theta_s_per_rotation(errors, len(self.value_variance)),
             )
             self.angle_variance = np.asarray(
                 (g_rot * errors.rotation_deg) ** 2 + (g_cam * errors.camera_deg) ** 2

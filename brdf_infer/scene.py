@@ -12,10 +12,15 @@ Schema (keys other than these are errors; defaults in brackets)::
     aperture_distance_mm = 103.8             # required, > 0
     [errors]                                 # brdf_infer.error_model explains the model
     model = "generative"                     # ["generative"] or "spread" (the earlier model)
-    reflectance_rel = 0.065                  # [0.065] relative 1σ of the measured value
-    reflectance_rel_kind = "per_row"         # ["per_row"]: σ of rows without reflectance_err;
-                                             #   "calibration": one factor per series
-    images_per_row = 12                      # [1] images averaged into each row's value
+    calibration = "per_series"               # ["per_series"], "per_sample" or "none": rows
+                                             #   sharing one reference's calibration factor
+    calibration_rel = 0.065                  # [0.065] relative 1σ of a calibration factor
+    rotation_coupling = "camera_follows"     # ["camera_follows"] θs + ε under a sample
+                                             #   rotation ε, or "camera_fixed" (θs − ε)
+    images_per_row = 12                      # [1] images averaged into each row's value; or
+                                             #   per series: { I = 12 } (series not named: 1)
+    reflectance_rel = 0.065                  # [0.065] relative 1σ of one image of a row
+                                             #   without reflectance_err (and spread's σ_rel)
     angle_deg = 1.0                          # [1.0] 1σ of the angles [deg]
     rotation_deg = 1.0                       # [angle_deg] sample rotation per (series,
                                              #   sample, θi) setting [deg]
@@ -73,6 +78,8 @@ Schema (keys other than these are errors; defaults in brackets)::
                                              #   source_diameter_mm … signal_region_mm
     [studies]                                # what `run` adds to the one posterior [none]
     error_models = ["spread"]                # [] posteriors under other error models
+    sensitivity = true                       # [false] posteriors under each error-model
+                                             #   assumption changed (brdf_infer.sensitivity)
     instruments = ["aperture", "image"]      # [] posteriors under other instrument models
     raytrace = true                          # [false] ray-trace the posterior ([raytrace])
     compare = ["strumik2024", "abg"]         # [] model families compared by PSIS-LOO
@@ -92,9 +99,10 @@ from brdf_infer._resources import data_path
 from brdf_infer.bsdf_measurements import BSDF_SERIES, is_bsdf_path, measurements_from_bsdf
 from brdf_infer.error_model import (
     ANGLE_METHODS,
+    CALIBRATIONS,
     ERROR_MODELS,
     LEARNED,
-    REFLECTANCE_REL_KINDS,
+    ROTATION_COUPLINGS,
     ErrorSettings,
 )
 from brdf_infer.errors import BadInputError
@@ -242,12 +250,15 @@ class Studies:
         raytrace: ray-trace the posterior (and ``[outputs] reference_params``) through the
             ``[raytrace]`` setup (Sec. 6).
         compare: model families compared by PSIS-LOO (at least two).
+        sensitivity: posteriors with each error-model assumption changed
+            (:mod:`brdf_infer.sensitivity`).
     """
 
     error_models: tuple[str, ...] = ()
     instruments: tuple[str, ...] = ()
     raytrace: bool = False
     compare: tuple[str, ...] = ()
+    sensitivity: bool = False
 
     def requested(self) -> list[str]:
         """One phrase per study asked for."""
@@ -255,6 +266,7 @@ class Studies:
         asked += [f"instrument model {name}" for name in self.instruments]
         asked += ["ray traces"] * self.raytrace
         asked += [f"comparison of {', '.join(self.compare)}"] if self.compare else []
+        asked += ["sensitivity to the error-model assumptions"] * self.sensitivity
         return asked
 
 
@@ -501,6 +513,7 @@ def _parse_studies(document: dict, path: Path) -> Studies:
         ),
         raytrace=_boolean(table, "raytrace", path, "studies.", False),
         compare=_compare_families(compare, path, field_name),
+        sensitivity=_boolean(table, "sensitivity", path, "studies.", False),
     )
 
 
@@ -682,10 +695,49 @@ def _choice(
     return value
 
 
-def _parse_errors(document: dict, path: Path) -> ErrorSettings:
-    """The ``[errors]`` table (schema: :class:`brdf_infer.error_model.ErrorSettings`)."""
+_REPLACED_ERROR_KEYS = {
+    "reflectance_rel_kind": 'replaced by errors.calibration = "per_series" | "per_sample" | '
+    '"none" and errors.calibration_rel (the old "calibration" kind is calibration = '
+    '"per_series" with calibration_rel = the old reflectance_rel; "per_row" is calibration = '
+    '"none"; README, "Error model")',
+}
+
+
+def _images_per_row(table: dict, path: Path, series: tuple[str, ...]) -> int | dict[str, int]:
+    """``errors.images_per_row``: a positive integer, or a table series name → integer."""
+
+    def count(value, field: str) -> int:
+        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+            raise BadInputError(
+                f"expected a positive integer, got {value!r}", file=path, field=field
+            )
+        return value
+
+    value = table.get("images_per_row", ErrorSettings().images_per_row)
+    if not isinstance(value, dict):
+        return count(value, "errors.images_per_row")
+    for name in value:
+        if name not in series:
+            raise BadInputError(
+                f"no series {name!r} in the scene (series: {', '.join(series)})",
+                file=path,
+                field=f"errors.images_per_row.{name}",
+            )
+    return {name: count(n, f"errors.images_per_row.{name}") for name, n in value.items()}
+
+
+def parse_errors(table: dict, path: Path, series: tuple[str, ...]) -> ErrorSettings:
+    """The ``[errors]`` table (schema: :class:`brdf_infer.error_model.ErrorSettings`) of a
+    scene with these ``series``.
+
+    Raises:
+        BadInputError: an unknown or replaced key, or a value out of range (naming the field).
+    """
     defaults = ErrorSettings()
-    table = _table(document, "errors", path, set(ErrorSettings.__dataclass_fields__))
+    for key, replacement in _REPLACED_ERROR_KEYS.items():
+        if key in table:
+            raise BadInputError(replacement, file=path, field="errors." + key)
+    table = _table({"errors": table}, "errors", path, set(ErrorSettings.__dataclass_fields__))
 
     def number(key: str, default: float, *, positive: bool = False) -> float:
         value = _prefixed_number(table, key, path, default, "errors.", positive=False)
@@ -694,11 +746,6 @@ def _parse_errors(document: dict, path: Path) -> ErrorSettings:
             raise BadInputError(f"must be {bound}, got {value:g}", file=path, field="errors." + key)
         return value
 
-    images = table.get("images_per_row", defaults.images_per_row)
-    if isinstance(images, bool) or not isinstance(images, int) or images < 1:
-        raise BadInputError(
-            f"expected a positive integer, got {images!r}", file=path, field="errors.images_per_row"
-        )
     repeatability = table.get("repeatability", defaults.repeatability)
     if isinstance(repeatability, str) and repeatability != LEARNED:
         raise BadInputError(
@@ -712,14 +759,12 @@ def _parse_errors(document: dict, path: Path) -> ErrorSettings:
     return ErrorSettings(
         model=_choice(table, "model", path, ERROR_MODELS, defaults.model),
         reflectance_rel=number("reflectance_rel", defaults.reflectance_rel),
-        reflectance_rel_kind=_choice(
-            table,
-            "reflectance_rel_kind",
-            path,
-            REFLECTANCE_REL_KINDS,
-            defaults.reflectance_rel_kind,
+        calibration=_choice(table, "calibration", path, CALIBRATIONS, defaults.calibration),
+        calibration_rel=number("calibration_rel", defaults.calibration_rel),
+        rotation_coupling=_choice(
+            table, "rotation_coupling", path, ROTATION_COUPLINGS, defaults.rotation_coupling
         ),
-        images_per_row=images,
+        images_per_row=_images_per_row(table, path, series),
         angle_deg=angle,
         rotation_deg=number("rotation_deg", angle),
         camera_deg=number("camera_deg", angle),
@@ -778,7 +823,10 @@ def parse_scene(document: dict, path: Path) -> Scene:
             )
         except BadInputError as error:
             raise BadInputError(error.problem, file=path, field=prefix + str(error.field)) from None
-    errors = _parse_errors(document, path)
+    errors_table = document.get("errors", {})
+    if not isinstance(errors_table, dict):
+        raise BadInputError("expected a table [errors]", file=path, field="errors")
+    errors = parse_errors(errors_table, path, tuple(series))
     model = _table(
         document, "model", path, {"fold", "out_of_plane", "family", *HemisphereConstants._fields}
     )

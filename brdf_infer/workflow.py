@@ -1,10 +1,12 @@
 """The main job as one library call: paper fit, least squares, the scene's NUTS posterior,
 its products and the report, into one run folder. The studies a scene asks for in
 ``[studies]`` (other error models, other instrument models, ray traces of the posterior, a
-model comparison) run after it; none runs unless asked (``RunSettings.studies`` overrides the
-scene's table, :func:`full_studies` is everything the scene can do). For a model family other
-than ``strumik2024`` the paper fit (Eq. 7's regression), the instrument study and the ray
-traces (whose surface scatters by Eq. 7) are left out.
+model comparison, the sensitivity to the error-model assumptions) run after it; none runs
+unless asked (``RunSettings.studies`` overrides the scene's table, :func:`full_studies` is
+everything the scene can do). For a model family other
+than ``strumik2024`` the paper fit (Eq. 7's regression), the instrument study, the ray
+traces (whose surface scatters by Eq. 7) and the sensitivity study (π·BRDF0 is Eq. 7's) are
+left out.
 
 ``brdf-infer run`` parses its options and calls :func:`run`; a notebook calls it the same way:
 
@@ -75,8 +77,9 @@ class RunSettings:
 
 def full_studies(scene: Scene) -> Studies:
     """Every study the scene can run: the other error model, every instrument model its
-    geometry supports, ray traces where it has a ``[raytrace]`` setup, and the comparison of
-    the reference model with ABg and Lambertian (or the scene's own list)."""
+    geometry supports, ray traces where it has a ``[raytrace]`` setup, the comparison of
+    the reference model with ABg and Lambertian (or the scene's own list), and the sensitivity
+    to the error-model assumptions where the scene has a TIS."""
     from brdf_infer.error_model import ERROR_MODELS
     from brdf_infer.instrument_comparison import supported_instruments
 
@@ -85,6 +88,7 @@ def full_studies(scene: Scene) -> Studies:
         instruments=tuple(m for m in supported_instruments(scene) if m != scene.instrument.model),
         raytrace=scene.raytrace is not None,
         compare=scene.studies.compare or ("strumik2024", "abg", "lambertian", "lambertian+abg"),
+        sensitivity=scene.model.out_of_plane,
     )
 
 
@@ -306,10 +310,12 @@ def run(
     instruments = [m for m in studies.instruments if m != scene.instrument.model]
     instruments = instruments if reference else []
     traces = studies.raytrace and scene.raytrace is not None and reference
-    _check_studies(scene, instruments)
+    sensitive = studies.sensitivity and reference
+    _check_studies(scene, instruments, sensitive)
     implausible = measurement_checks(scene, measurements)
     require_plausible(implausible, settings.force)
     steps = 4 + len(error_models) + bool(instruments) + traces + bool(studies.compare)
+    steps += sensitive
     step = iter(range(1, steps + 1))
     paper = None
     if reference:
@@ -392,6 +398,14 @@ def run(
         result = compare_families(scene, measurements, list(studies.compare))
         write_comparison(out, result)
         comparison = result.as_json()
+    if sensitive:
+        from brdf_infer.sensitivity import SensitivitySettings, sensitivity, write_sensitivity
+
+        progress(f"[{next(step)}/{steps}] sensitivity to the error-model assumptions")
+        write_sensitivity(
+            out,
+            sensitivity(scene, measurements, settings=SensitivitySettings(seed=settings.seed)),
+        )
     atomic_write_json(
         out / STUDIES_FILE,
         {"run": studies.requested(), "not_run": not_run(scene, studies) if reference else []},
@@ -413,9 +427,13 @@ def run(
     )
 
 
-def _check_studies(scene: Scene, instruments: list[str]) -> None:
-    """Refuse, before any work, an instrument study the scene's geometry cannot support."""
+def _check_studies(scene: Scene, instruments: list[str], sensitive: bool) -> None:
+    """Refuse, before any work, an instrument study the scene's geometry cannot support, or
+    a sensitivity study without a TIS."""
     from brdf_infer.scene import check_instrument
+    from brdf_infer.sensitivity import check_scene
 
     for instrument in instruments:
         check_instrument(scene, instrument, field="studies.instruments")
+    if sensitive:
+        check_scene(scene)

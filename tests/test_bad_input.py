@@ -157,13 +157,33 @@ SCENE_CASES = {
         SCENE.replace("[errors]", '[errors]\nmodel = "gaussian"'),
         "field 'errors.model': expected one of generative, spread",
     ),
-    "unknown kind of the relative error": (
-        SCENE.replace("[errors]", '[errors]\nreflectance_rel_kind = "shared"'),
-        "field 'errors.reflectance_rel_kind': expected one of per_row, calibration",
+    "the replaced kind of the relative error": (
+        SCENE.replace("[errors]", '[errors]\nreflectance_rel_kind = "calibration"'),
+        "field 'errors.reflectance_rel_kind': replaced by errors.calibration",
+    ),
+    "unknown calibration": (
+        SCENE.replace("[errors]", '[errors]\ncalibration = "shared"'),
+        "field 'errors.calibration': expected one of per_series, per_sample, none",
+    ),
+    "negative calibration size": (
+        SCENE.replace("[errors]", "[errors]\ncalibration_rel = -0.1"),
+        "field 'errors.calibration_rel': must be >= 0",
+    ),
+    "unknown rotation coupling": (
+        SCENE.replace("[errors]", '[errors]\nrotation_coupling = "camera_moves"'),
+        "field 'errors.rotation_coupling': expected one of camera_follows, camera_fixed",
     ),
     "images per row not a positive integer": (
         SCENE.replace("[errors]", "[errors]\nimages_per_row = 0"),
         "field 'errors.images_per_row': expected a positive integer",
+    ),
+    "images per row of a series not a positive integer": (
+        SCENE.replace("[errors]", "[errors]\nimages_per_row = { I = 2.5 }"),
+        "field 'errors.images_per_row.I': expected a positive integer",
+    ),
+    "images per row of an unknown series": (
+        SCENE.replace("[errors]", "[errors]\nimages_per_row = { I = 12, III = 3 }"),
+        "field 'errors.images_per_row.III': no series 'III' in the scene",
     ),
     "negative repeatability": (
         SCENE.replace("[errors]", "[errors]\nrepeatability = -0.1"),

@@ -1,6 +1,7 @@
 """The generative error model: each noise source once, angle errors through ln R, LOO."""
 
 import dataclasses
+from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -9,6 +10,7 @@ import pytest
 from scipy import stats
 
 from brdf_infer.error_model import (
+    ErrorSettings,
     NoiseScales,
     angle_slopes,
     covariance_factors,
@@ -16,6 +18,7 @@ from brdf_infer.error_model import (
     value_sigma,
 )
 from brdf_infer.errors import BadInputError
+from brdf_infer.measurements import Measurements
 from brdf_infer.model import log_aperture_factor, log_brdf_inplane
 from brdf_infer.observations import log_reflectance_at
 from brdf_infer.params import PAPER_CONSTANTS, UV_PAPER
@@ -32,27 +35,32 @@ def ln_r(theta_i, theta_s, params=UV_PAPER, d=7.2, r=103.8):
     )
 
 
-def test_value_sigma_is_the_image_spread_over_root_n(lya):
+def test_value_sigma_is_the_image_spread_over_root_n_of_its_series(lya):
     scene, measurements = lya
-    assert scene.errors.images_per_row == 12
-    expected = measurements.reflectance_err / measurements.reflectance / np.sqrt(12)
+    assert scene.errors.images_per_row == {"I": 12}  # series II: the article is silent, 1
+    n = np.where(measurements.series == "I", 12.0, 1.0)
+    expected = measurements.reflectance_err / measurements.reflectance / np.sqrt(n)
     assert_allclose(value_sigma(scene.errors, measurements), expected)
+    every = dataclasses.replace(scene.errors, images_per_row=12)
+    assert_allclose(
+        value_sigma(every, measurements),
+        measurements.reflectance_err / measurements.reflectance / np.sqrt(12),
+    )
 
 
-def test_rows_without_sigma_use_reflectance_rel_per_row(lya):
+def test_rows_without_sigma_use_reflectance_rel_per_image(lya):
     scene, measurements = lya
     bare = dataclasses.replace(measurements, reflectance_err=None)
-    per_row = dataclasses.replace(scene.errors, reflectance_rel_kind="per_row")
-    assert_allclose(value_sigma(per_row, bare), np.full(len(bare), 0.065 / np.sqrt(12)))
-    # a calibration-only 6.5 % leaves such rows no noise of their own: only when nothing is
-    # learned per row either is that refused
-    assert np.all(value_sigma(scene.errors, bare) == 0)
-    fixed = dataclasses.replace(scene.errors, repeatability=0.0)
+    n = np.where(bare.series == "I", 12.0, 1.0)
+    assert_allclose(value_sigma(scene.errors, bare), 0.065 / np.sqrt(n))
+    # no σ of their own is allowed where the repeatability is learned, refused where not
+    silent = dataclasses.replace(scene.errors, reflectance_rel=0.0)
+    assert np.all(value_sigma(silent, bare) == 0)
     with pytest.raises(BadInputError, match="no noise"):
-        value_sigma(fixed, bare)
+        value_sigma(dataclasses.replace(silent, repeatability=0.0), bare)
 
 
-def dense_covariance(measurements, sigma_row, scales, g_rot, g_cam):
+def dense_covariance(measurements, sigma_row, scales, g_rot, g_cam, calibration="per_series"):
     """Cov(ln R) built row pair by row pair from the effects each pair shares."""
     n = len(measurements)
     covariance = np.zeros((n, n))
@@ -65,7 +73,12 @@ def dense_covariance(measurements, sigma_row, scales, g_rot, g_cam):
                 and same_series
                 and (measurements.theta_i_deg[i] == measurements.theta_i_deg[j])
             )
-            value = same_sample * scales.sample_sd**2 + same_series * scales.calibration**2
+            same_reference = {
+                "per_series": same_series,
+                "per_sample": same_series and same_sample,
+                "none": False,
+            }[calibration]
+            value = same_sample * scales.sample_sd**2 + same_reference * scales.calibration**2
             value += same_setting * scales.rotation_deg**2 * g_rot[i] * g_rot[j]
             if i == j:
                 value += sigma_row[i] ** 2 + scales.repeatability**2
@@ -74,36 +87,204 @@ def dense_covariance(measurements, sigma_row, scales, g_rot, g_cam):
     return covariance
 
 
-def test_low_rank_covariance_equals_the_effects_row_by_row(lya):
+@pytest.mark.parametrize(
+    ("calibration", "columns"), [("per_series", 2), ("per_sample", 7), ("none", 0)]
+)
+def test_low_rank_covariance_equals_the_effects_row_by_row(lya, calibration, columns):
     scene, measurements = lya
-    layout = noise_layout(scene.errors, measurements)
+    errors = dataclasses.replace(scene.errors, calibration=calibration)
+    layout = noise_layout(errors, measurements)
     scales = NoiseScales(*(jnp.asarray(v) for v in (0.05, 0.07, 0.065, 1.0, 1.3)))
     rng = np.random.default_rng(1)
     g_rot, g_cam = rng.normal(0, 0.1, len(measurements)), rng.normal(0, 0.1, len(measurements))
     factor, diagonal = covariance_factors(layout, scales, jnp.asarray(g_rot), jnp.asarray(g_cam))
     low_rank = np.diag(np.asarray(diagonal)) + np.asarray(factor) @ np.asarray(factor).T
-    expected = dense_covariance(measurements, np.asarray(layout.sigma_row), scales, g_rot, g_cam)
+    expected = dense_covariance(
+        measurements, np.asarray(layout.sigma_row), scales, g_rot, g_cam, calibration
+    )
     assert_allclose(low_rank, expected, rtol=1e-12, atol=1e-15)
-    # groups of one row are folded into the diagonal: 7 samples, 2 series, 3 settings of II
-    assert factor.shape == (42, 7 + 2 + 3)
+    # groups of one row are folded into the diagonal: 7 samples, the calibration groups of
+    # two or more rows (2 series, or 6 + 1 (series, sample)), 3 settings of II
+    assert factor.shape == (42, 7 + columns + 3)
+
+
+def toy_rows() -> Measurements:
+    """Three rows: two samples of series I at (45°, 45°), one of series II at (80°, 70°)."""
+    return Measurements(
+        path=Path("toy.csv"),
+        series=np.array(["I", "I", "II"]),
+        sample=np.array(["a", "b", "a"]),
+        theta_i_deg=np.array([45.0, 45.0, 80.0]),
+        theta_s_deg=np.array([45.0, 45.0, 70.0]),
+        reflectance=np.array([1e-4, 2e-4, 1e-3]),
+        reflectance_err=np.array([2e-5, 2e-5, 5e-5]),
+    )
+
+
+TOY_SCALES = NoiseScales(*(jnp.asarray(v) for v in (0.0, 0.0, 0.1, 0.5, 0.0)))
+TOY_SLOPES = (jnp.array([0.2, 0.3, 0.4]), jnp.zeros(3))
+
+
+def toy_covariance(**options) -> np.ndarray:
+    """D + W Wᵀ of the toy rows with only value noise, calibration (σ 0.1, passed as the
+    layout's) and sample rotation (0.5°) on, the slopes fixed."""
+    errors = dataclasses.replace(
+        ErrorSettings(calibration_rel=0.1, images_per_row={"I": 4}), **options
+    )
+    layout = noise_layout(errors, toy_rows())
+    scales = TOY_SCALES._replace(calibration=layout.calibration_sd)
+    factor, diagonal = covariance_factors(layout, scales, *TOY_SLOPES)
+    return np.diag(np.asarray(diagonal)) + np.asarray(factor) @ np.asarray(factor).T
+
+
+def test_calibration_options_change_the_covariance_as_computed_by_hand():
+    """Rows 1, 2: series I (σ_R/R = 0.2, 0.1 per image, 4 images: σ 0.1, 0.05); row 3:
+    series II (σ_R/R = 0.05, 1 image). Rotation: rows 1, 2 are different samples, so each
+    row is its own setting: (0.5 g)² on the diagonal. Calibration σ 0.1 (0.01 in variance):
+    per series rows 1 and 2 share it; per sample every row has its own; none: nothing."""
+    value = np.diag([0.1**2, 0.05**2, 0.05**2])
+    rotation = np.diag([(0.5 * 0.2) ** 2, (0.5 * 0.3) ** 2, (0.5 * 0.4) ** 2])
+    shared = np.array([[0.01, 0.01, 0.0], [0.01, 0.01, 0.0], [0.0, 0.0, 0.01]])
+    expected = {
+        "per_series": value + rotation + shared,
+        "per_sample": value + rotation + 0.01 * np.eye(3),
+        "none": value + rotation,
+    }
+    for calibration, matrix in expected.items():
+        assert_allclose(toy_covariance(calibration=calibration), matrix, atol=1e-15)
+    # the size enters as σ_cal², nowhere else
+    assert_allclose(
+        toy_covariance(calibration="per_series", calibration_rel=0.2),
+        value + rotation + 4 * shared,
+        atol=1e-15,
+    )
+
+
+def test_images_per_row_divide_only_their_series_sigma():
+    """Series I with 4 images: σ 0.2/2, 0.1/2; series II one image: 0.05. Then 1 everywhere
+    (σ 0.2, 0.1, 0.05) and 16 everywhere (0.05, 0.025, 0.0125)."""
+    base = toy_covariance(calibration="none") - np.diag([0.1**2, 0.05**2, 0.05**2])
+    for images, sigma in (
+        (1, [0.2, 0.1, 0.05]),
+        (16, [0.05, 0.025, 0.0125]),
+        ({"II": 4}, [0.2, 0.1, 0.025]),
+    ):
+        got = toy_covariance(calibration="none", images_per_row=images)
+        assert_allclose(got, base + np.diag(np.square(sigma)), atol=1e-15)
+
+
+def test_rotation_coupling_is_the_sign_of_theta_s_in_the_rotation_slope():
+    """ln R = 2 θi + 5 θs (per degree): a rotation ε moves it by (2 + 5) ε when the camera
+    follows the specular beam (θs + ε) and by (2 − 5) ε when it stays put (θs − ε); a camera
+    error only by 5 η. Rows 1, 2 share a rotation setting here (one sample)."""
+    rows = dataclasses.replace(toy_rows(), sample=np.array(["a", "a", "a"]))
+    for coupling, slope in (("camera_follows", 7.0), ("camera_fixed", -3.0)):
+        layout = noise_layout(ErrorSettings(rotation_coupling=coupling), rows)
+        g_rot, g_cam = angle_slopes(
+            lambda ti, ts: 2.0 * ti + 5.0 * ts,
+            jnp.asarray(rows.theta_i_deg),
+            jnp.asarray(rows.theta_s_deg),
+            layout.theta_s_per_rotation,
+        )
+        assert_allclose(g_rot, np.full(3, slope))
+        assert_allclose(g_cam, np.full(3, 5.0))
+        scales = NoiseScales(*(jnp.asarray(v) for v in (0.0, 0.0, 0.0, 0.5, 0.0)))
+        factor, diagonal = covariance_factors(
+            layout._replace(sigma_row=jnp.zeros(3)), scales, g_rot, g_cam
+        )
+        covariance = np.diag(np.asarray(diagonal)) + np.asarray(factor) @ np.asarray(factor).T
+        shared = (0.5 * slope) ** 2
+        expected = np.array([[shared, shared, 0.0], [shared, shared, 0.0], [0.0, 0.0, shared]])
+        assert_allclose(covariance, expected, atol=1e-15)
+
+
+def test_old_options_reproduce_the_old_likelihood_bit_for_bit(lya):
+    """The error model before these options: 12 images on every row, a 6.5 % calibration per
+    series (W's middle block the series one-hot), the camera fixed (g_rot = ∂θi − ∂θs). With
+    those option values the layout and the slopes are the old ones exactly (==), so the
+    likelihood, which is built from them alone, is too."""
+    scene, measurements = lya
+    old = dataclasses.replace(
+        scene.errors,
+        images_per_row=12,
+        calibration="per_series",
+        calibration_rel=0.065,
+        rotation_coupling="camera_fixed",
+    )
+    layout = noise_layout(old, measurements)
+    series_one_hot = (measurements.series[:, None] == np.array(["I", "II"])[None, :]).astype(float)
+    assert np.array_equal(np.asarray(layout.calibration_members), series_one_hot)
+    assert not np.any(np.asarray(layout.calibration_alone))
+    assert float(layout.calibration_sd) == 0.065
+    assert np.array_equal(
+        np.asarray(layout.sigma_row),
+        measurements.reflectance_err / measurements.reflectance / np.sqrt(12),
+    )
+    theta_i = jnp.asarray(measurements.theta_i_deg)
+    theta_s = jnp.asarray(measurements.theta_s_deg)
+
+    def ln_r_at(ti, ts):
+        return log_reflectance_at(ti, ts, UV_PAPER, False, PAPER_CONSTANTS)
+
+    g_rot = angle_slopes(ln_r_at, theta_i, theta_s, layout.theta_s_per_rotation)[0]
+    ones = jnp.ones_like(theta_i)
+    assert np.array_equal(g_rot, jax.jvp(ln_r_at, (theta_i, theta_s), (ones, -ones))[1])
+
+
+def test_potential_gradients_are_finite_under_every_option(lya):
+    """One compiled potential and gradient (the options are data): finite at spread-out
+    points for every calibration, coupling and images-per-row value."""
+    from brdf_infer.posterior._model import build_model_data
+    from brdf_infer.posterior._padding import pad_datasets
+    from brdf_infer.posterior._potential import FlatPotential
+
+    scene, measurements = lya
+    variants = [
+        {"calibration": c, "rotation_coupling": r, "images_per_row": n}
+        for c in ("per_series", "per_sample", "none")
+        for r in ("camera_follows", "camera_fixed")
+        for n in (1, {"I": 12})
+    ]
+    datasets = pad_datasets(
+        [
+            build_model_data(
+                dataclasses.replace(scene, errors=dataclasses.replace(scene.errors, **v)),
+                measurements,
+            )
+            for v in variants
+        ]
+    )
+    model = build_posterior_model(scene, measurements)
+    flat = FlatPotential(model)
+    value_and_grad = jax.jit(jax.value_and_grad(flat.potential))
+    points = jax.random.uniform(jax.random.PRNGKey(0), (3, flat.dimension), minval=-2, maxval=2)
+    values = set()
+    for data in datasets:
+        for z in points:
+            value, gradient = value_and_grad(z, data)
+            assert np.isfinite(value) and np.all(np.isfinite(gradient))
+            values.add(float(value))
+    assert len(values) == len(datasets) * len(points)  # every option changes the density
 
 
 def test_angle_slopes_go_through_ln_r_and_match_finite_differences(lya):
     measurements = lya[1]
     theta_i = jnp.asarray(measurements.theta_i_deg)
     theta_s = jnp.asarray(measurements.theta_s_deg)
-    g_rot, g_cam = angle_slopes(
-        lambda ti, ts: log_reflectance_at(ti, ts, UV_PAPER, False, PAPER_CONSTANTS),
-        theta_i,
-        theta_s,
-    )
-    h = 1e-5
-    for k in range(len(measurements)):
-        ti, ts = float(theta_i[k]), float(theta_s[k])
-        rotation = (ln_r(ti + h, ts - h) - ln_r(ti - h, ts + h)) / (2 * h)
-        camera = (ln_r(ti, ts + h) - ln_r(ti, ts - h)) / (2 * h)
-        assert g_rot[k] == pytest.approx(rotation, rel=1e-6, abs=1e-9)
-        assert g_cam[k] == pytest.approx(camera, rel=1e-6, abs=1e-9)
+    for coupling in (1.0, -1.0):
+        g_rot, g_cam = angle_slopes(
+            lambda ti, ts: log_reflectance_at(ti, ts, UV_PAPER, False, PAPER_CONSTANTS),
+            theta_i,
+            theta_s,
+            coupling,
+        )
+        h = 1e-5
+        for k in range(len(measurements)):
+            ti, ts = float(theta_i[k]), float(theta_s[k])
+            rotation = (ln_r(ti + h, ts + coupling * h) - ln_r(ti - h, ts - coupling * h)) / (2 * h)
+            camera = (ln_r(ti, ts + h) - ln_r(ti, ts - h)) / (2 * h)
+            assert g_rot[k] == pytest.approx(rotation, rel=1e-6, abs=1e-9)
+            assert g_cam[k] == pytest.approx(camera, rel=1e-6, abs=1e-9)
 
 
 def test_one_degree_at_80_85_gives_the_measured_quantity_sigma():
@@ -115,6 +296,7 @@ def test_one_degree_at_80_85_gives_the_measured_quantity_sigma():
         lambda ti, ts: log_reflectance_at(ti, ts, UV_PAPER, False, PAPER_CONSTANTS),
         jnp.array([80.0]),
         jnp.array([85.0]),
+        -1.0,
     )
     d_i, d_s = float(g_rot[0] + g_cam[0]), float(g_cam[0])
     p, ti, ts = UV_PAPER, 80.0, 85.0

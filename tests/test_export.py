@@ -251,7 +251,7 @@ def test_more_draws_than_the_run_has_is_a_clear_error(nuts_run, tmp_path, capsys
     out = tmp_path / "out"
     argv = ["export", "--run", str(nuts_run.out), "--draws", "100000", "--out", str(out)]
     code, _, err = run_cli(*argv, capsys=capsys)
-    assert code == 2 and "--draws" in err and "2000 draws" in err and not out.exists()
+    assert code == 2 and "--draws" in err and "4000 draws" in err and not out.exists()
 
 
 def test_a_grid_too_coarse_for_its_tis_is_warned_about(tmp_path, capsys):

@@ -44,6 +44,36 @@ def _grouped_factor(rng, rows: int, groups: int, extra: int) -> np.ndarray:
     return np.concatenate([0.3 * members, 0.2 * rng.normal(size=(rows, extra))], axis=1)
 
 
+@pytest.mark.parametrize("extra", [0, 2])
+@pytest.mark.parametrize("groups", [0, 3])
+def test_density_and_loo_with_only_disjoint_or_no_shared_columns(groups, extra):
+    """W may have no columns beyond the per-sample ones (a scene without calibration, with no
+    rotation setting of two rows), or none at all: the Schur complement is then 0 × 0."""
+    rng = np.random.default_rng(4)
+    rows = 6
+    if groups:
+        factor = _grouped_factor(rng, rows, groups, extra)
+    else:
+        factor = 0.2 * rng.normal(size=(rows, extra))
+    diagonal = rng.uniform(0.05, 0.2, rows)
+    mean, value = rng.normal(size=rows), rng.normal(size=rows)
+    covariance = np.diag(diagonal) + factor @ factor.T
+    got = low_rank_normal_log_density(
+        jnp.asarray(value),
+        jnp.asarray(mean),
+        jnp.asarray(factor),
+        jnp.asarray(diagonal),
+        disjoint=groups,
+    )
+    expected = stats.multivariate_normal(mean, covariance).logpdf(value)
+    assert float(got) == pytest.approx(expected, rel=1e-12)
+    sd = leave_one_out_conditionals(
+        jnp.asarray(value), jnp.asarray(mean), jnp.asarray(factor), jnp.asarray(diagonal), groups
+    )[1]
+    precision = np.linalg.inv(covariance)
+    np.testing.assert_allclose(np.asarray(sd), 1 / np.sqrt(np.diag(precision)), rtol=1e-11)
+
+
 def test_cholesky_and_triangular_solves_match_numpy():
     rng = np.random.default_rng(1)
     matrix = _spd(rng, 7)

@@ -141,7 +141,7 @@ def test_noisy_synthetic_scenes_covered_by_two_sigma(lya, truth):
     simple = dataclasses.replace(
         scene.errors,
         images_per_row=1,
-        reflectance_rel_kind="per_row",
+        calibration="none",
         repeatability=0.0,
         propagate_angles=False,
         hierarchical=False,

@@ -112,9 +112,9 @@ def test_posterior_file_holds_every_group_and_the_paper_unit_parameters(nuts_run
     ):
         assert group in idata.groups(), group
     for name in PARAM_NAMES:
-        assert idata.posterior[name].shape == (4, 500)
+        assert idata.posterior[name].shape == (4, 1000)
         assert np.all(np.isfinite(idata.posterior[name]))
-    assert idata.log_likelihood["obs"].shape == (4, 500, 42)
+    assert idata.log_likelihood["obs"].shape == (4, 1000, 42)
     attrs = idata.posterior.attrs
     assert attrs["scene"] == "lya" and attrs["sampler"] == "nuts"
     assert "jax" in json.loads(attrs["versions"]) and "[series.I]" in attrs["scene_toml"]

@@ -132,7 +132,6 @@ def model_arrays(scene, measurements) -> dict[str, np.ndarray]:
         "fixed_repeatability": (
             0.0 if not generative or errors.learns_repeatability else float(errors.repeatability)
         ),
-        "calibration": errors.calibration_sd if generative else 0.0,
         "rotation_deg": errors.rotation_deg if errors.angles_on else 0.0,
         "camera_deg": errors.camera_deg if errors.angles_on else 0.0,
     }
@@ -202,26 +201,27 @@ def pymc_model_from_arrays(arrays: dict[str, np.ndarray]):
             d_s = (
                 b1 * t * positive + (b2 * t + b3 * t**2) * alpha * x_alpha_1
             ) / ANGLE_SCALE_DEG + a["slope_s"]
-            g_rot, g_cam = d_i - d_s, d_s
+            g_rot, g_cam = d_i + a["theta_s_per_rotation"] * d_s, d_s
         else:
             g_rot = g_cam = pt.zeros_like(mean)
-        calibration = float(a["calibration"])
+        calibration = float(a["calibration_sd"])
         rotation = float(a["rotation_deg"]) * g_rot
         diagonal = (
             a["sigma_row"] ** 2
             + repeatability**2
             + (g_cam * float(a["camera_deg"])) ** 2
             + a["sample_alone"] * sample_sd**2
-            + a["series_alone"] * calibration**2
+            + a["calibration_alone"] * calibration**2
             + a["rotation_alone"] * rotation**2
         )
-        samples, series, rotations = (
-            a[key] @ a[key].T for key in ("sample_members", "series_members", "rotation_members")
+        samples, calibrations, rotations = (
+            a[key] @ a[key].T
+            for key in ("sample_members", "calibration_members", "rotation_members")
         )
         covariance = (
             pt.diag(diagonal)
             + sample_sd**2 * samples
-            + calibration**2 * series
+            + calibration**2 * calibrations
             + pt.outer(rotation, rotation) * rotations
         )
         pm.MvNormal("obs", mu=mean, cov=covariance, observed=y)

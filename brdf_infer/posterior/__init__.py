@@ -15,6 +15,7 @@ from brdf_infer.posterior._family_model import FamilyPosteriorModel, build_famil
 from brdf_infer.posterior._loo import pointwise_loo_terms
 from brdf_infer.posterior._model import NOISE_SITES, PosteriorModel, build_posterior_model
 from brdf_infer.posterior._nuts import NutsProgram, chain_keys
+from brdf_infer.posterior._power_scaling import power_scaling
 from brdf_infer.posterior._results import (
     BANDS_FILE,
     POSTERIOR_FILE,
@@ -70,6 +71,7 @@ __all__ = [
     "loo_terms",
     "model_name",
     "pointwise_loo_terms",
+    "power_scaling",
     "run_emcee",
     "run_fold",
     "run_nuts",

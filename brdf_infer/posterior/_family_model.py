@@ -75,7 +75,7 @@ class FamilyPosteriorModel:
     def __call__(self, data: ModelData | None = None, mode: str = "fit") -> None:
         """The NumPyro model; ``mode`` as in :class:`brdf_infer.posterior.PosteriorModel`."""
         data = self.data if data is None else data
-        scales = sample_noise_scales(self.errors)
+        scales = sample_noise_scales(self.errors, data.noise)
         physical = self.sample_physical()
         parts = self.likelihood_parts(physical, scales, data)
         observe(parts, data, mode, self.sigma_scale, spread=self.errors.model == "spread")
@@ -103,6 +103,7 @@ class FamilyPosteriorModel:
                 lambda ti, ts: self.log_reflectance_at(ti, ts, physical, rows),
                 rows.theta_i_deg,
                 rows.theta_s_deg,
+                data.noise.theta_s_per_rotation,
             )
         else:
             g_rot = g_cam = jnp.zeros_like(mean)
@@ -113,7 +114,7 @@ class FamilyPosteriorModel:
         """:meth:`likelihood_parts` of every draw (leading axis) of a posterior's sites."""
         physical = {name: jnp.asarray(sites[name]) for name in self.family.parameters}
         count = next(iter(physical.values())).shape[0]
-        scales = drawn_noise_scales(self.errors, sites, count)
+        scales = drawn_noise_scales(self.errors, self.data.noise, sites, count)
         # the data as an argument, not a constant: one compilation serves every data set
         parts = jax.jit(jax.vmap(lambda p, s, d: self.likelihood_parts(p, s, d), (0, 0, None)))
         return parts(physical, scales, self.data)

@@ -1,7 +1,7 @@
 """Small dense linear algebra for the normal with covariance D + W Wᵀ, in plain XLA ops.
 
 The posterior's covariance has a few dozen rows and a low-rank factor W of a dozen columns
-(samples, series, rotation settings); the whitening regression has at most four
+(samples, calibration groups, rotation settings); the whitening regression has at most four
 coefficients. At these sizes the LAPACK custom calls behind ``jnp.linalg.cholesky`` and
 ``solve_triangular`` cost more in call overhead than in arithmetic, cannot be fused by XLA,
 and — vmapped over draws and run from several threads at once on a CPU — they wait on the
@@ -27,9 +27,12 @@ def cholesky(matrix: jnp.ndarray) -> jnp.ndarray:
     """Lower Cholesky factor L of a symmetric positive-definite (n, n) matrix, L Lᵀ = matrix.
 
     Right-looking: column j is the current column over the square root of its pivot, then
-    its outer product leaves the Schur complement. Only the lower triangle is read.
+    its outer product leaves the Schur complement. Only the lower triangle is read. A 0 × 0
+    matrix (a factor W without shared columns) is its own factor.
     """
     size = matrix.shape[-1]
+    if size == 0:
+        return matrix
     below = jnp.arange(size)
     rest = matrix
     columns = []
@@ -42,6 +45,8 @@ def cholesky(matrix: jnp.ndarray) -> jnp.ndarray:
 
 def solve_lower(lower: jnp.ndarray, rhs: jnp.ndarray) -> jnp.ndarray:
     """X with L X = rhs for a lower-triangular L (n, n); rhs (n,) or (n, m)."""
+    if lower.shape[0] == 0:
+        return rhs
     rest = rhs
     solution = []
     for j in range(lower.shape[0]):
@@ -54,6 +59,8 @@ def solve_lower(lower: jnp.ndarray, rhs: jnp.ndarray) -> jnp.ndarray:
 def solve_upper_transposed(lower: jnp.ndarray, rhs: jnp.ndarray) -> jnp.ndarray:
     """X with Lᵀ X = rhs for a lower-triangular L (n, n); rhs (n,) or (n, m)."""
     size = lower.shape[0]
+    if size == 0:
+        return rhs
     rest = rhs
     solution = [None] * size
     for j in reversed(range(size)):

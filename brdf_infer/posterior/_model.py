@@ -206,7 +206,7 @@ class PosteriorModel:
                 model of SBC).
         """
         data = self.data if data is None else data
-        scales = sample_noise_scales(self.errors)
+        scales = sample_noise_scales(self.errors, data.noise)
         params = self._parameters(data, scales, whiten=self.whiten and mode != "simulate")
         rows = data.rows
         if self.errors.angles_on and self.errors.angle_method == "latent":
@@ -301,7 +301,8 @@ class PosteriorModel:
         return coefficients
 
     def _latent_angles(self, data: ModelData, scales: NoiseScales):
-        """Perturbed angles (θi + ε, θs − ε + η) with ε per rotation setting, η per row."""
+        """Perturbed angles (θi + ε, θs + s ε + η) with ε per rotation setting, η per row and
+        s the rotation coupling (:mod:`brdf_infer.error_model`)."""
         members = data.noise.rotation_members
         with numpyro.plate("rotation_settings", members.shape[1]):
             rotation = numpyro.sample("rotation_error_std", dist.Normal(0.0, 1.0))
@@ -310,7 +311,8 @@ class PosteriorModel:
         epsilon = members @ (scales.rotation_deg * rotation)
         eta = scales.camera_deg * camera
         rows = data.rows
-        return rows.theta_i_deg + epsilon, rows.theta_s_deg - epsilon + eta
+        coupling = data.noise.theta_s_per_rotation
+        return rows.theta_i_deg + epsilon, rows.theta_s_deg + coupling * epsilon + eta
 
     def likelihood_parts(
         self,
@@ -339,6 +341,7 @@ class PosteriorModel:
                 lambda ti, ts: log_reflectance_at(ti, ts, params, *self._components, rows),
                 rows.theta_i_deg,
                 rows.theta_s_deg,
+                noise.theta_s_per_rotation,
             )
         else:
             g_rot = g_cam = jnp.zeros_like(mean)
@@ -348,7 +351,7 @@ class PosteriorModel:
     def draw_parts(self, sites: dict) -> LikelihoodParts:
         """:meth:`likelihood_parts` of every draw (leading axis) of a posterior's sites."""
         params = Params(*(jnp.asarray(sites[name]) for name in Params._fields))
-        scales = drawn_noise_scales(self.errors, sites, params.brdf0.shape[0])
+        scales = drawn_noise_scales(self.errors, self.data.noise, sites, params.brdf0.shape[0])
         # the data as an argument, not a constant: one compilation serves every data set
         parts = jax.jit(jax.vmap(lambda p, s, d: self.likelihood_parts(p, s, d), (0, 0, None)))
         return parts(params, scales, self.data)
@@ -430,8 +433,9 @@ class LowRankNormal(dist.Distribution):
         )
 
 
-def sample_noise_scales(errors: ErrorSettings) -> NoiseScales:
-    """The noise scales of the error model: NumPyro sites where they are learned."""
+def sample_noise_scales(errors: ErrorSettings, noise: NoiseLayout) -> NoiseScales:
+    """The noise scales of the error model: NumPyro sites where they are learned; the
+    calibration's from the data (``noise``)."""
     generative = errors.model == "generative"
     if generative and errors.hierarchical:
         sample_sd = numpyro.sample("sample_sd", dist.HalfNormal(errors.sample_sd_prior))
@@ -447,14 +451,17 @@ def sample_noise_scales(errors: ErrorSettings) -> NoiseScales:
     return NoiseScales(
         sample_sd=sample_sd,
         repeatability=repeatability,
-        calibration=jnp.asarray(errors.calibration_sd if generative else 0.0),
+        calibration=jnp.asarray(noise.calibration_sd),
         rotation_deg=jnp.asarray(errors.rotation_deg if angles else 0.0),
         camera_deg=jnp.asarray(errors.camera_deg if angles else 0.0),
     )
 
 
-def drawn_noise_scales(errors: ErrorSettings, sites: dict, count: int) -> NoiseScales:
-    """The noise scales of ``count`` posterior draws (learned ones from ``sites``)."""
+def drawn_noise_scales(
+    errors: ErrorSettings, noise: NoiseLayout, sites: dict, count: int
+) -> NoiseScales:
+    """The noise scales of ``count`` posterior draws (learned ones from ``sites``, the
+    calibration's from the data, ``noise``)."""
     generative = errors.model == "generative"
     angles = errors.angles_on
     return NoiseScales(
@@ -464,7 +471,7 @@ def drawn_noise_scales(errors: ErrorSettings, sites: dict, count: int) -> NoiseS
             if "repeatability" in sites
             else jnp.full(count, float(errors.repeatability) if generative else 0.0)
         ),
-        calibration=jnp.full(count, errors.calibration_sd if generative else 0.0),
+        calibration=jnp.full(count, noise.calibration_sd),
         rotation_deg=jnp.full(count, errors.rotation_deg if angles else 0.0),
         camera_deg=jnp.full(count, errors.camera_deg if angles else 0.0),
     )

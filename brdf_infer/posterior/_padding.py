@@ -2,17 +2,17 @@
 
 A batch of scenes (``brdf-infer batch``) compiles one NUTS program per model structure and
 data shape. Scenes that differ only in their number of rows or in the number of their
-physical samples, series or rotation settings are padded to the largest of each in their
+physical samples, calibration groups or rotation settings are padded to the largest of each in their
 group:
 
 * a padding row carries ``mask`` 0, which removes it from the likelihood and from the
   whitening regression exactly (:mod:`brdf_infer.posterior._model`); its values are only
   kept finite and harmless: the first row's geometry (valid angles, the first row's
   instrument kernel and out-of-plane azimuth), σ 1, ln R 0, ln Ω 0, and no membership in
-  any sample, series or rotation setting;
-* a padding member column (a sample, series or rotation setting that no row belongs to) is
-  all zero: a zero column of W adds exactly nothing to the low-rank normal's log density
-  (its capacitance gains an identity row and column) and nothing to the whitening
+  any sample, calibration group or rotation setting;
+* a padding member column (a sample, calibration group or rotation setting that no row
+  belongs to) is all zero: a zero column of W adds exactly nothing to the low-rank normal's
+  log density (its capacitance gains an identity row and column) and nothing to the whitening
   regression.
 
 Every model site stays of the same shape (the parameters are scalars) unless the model
@@ -43,15 +43,18 @@ _ROW_FILL: dict[str, Any] = {
     "phi_s_deg": "first",  # NaN (in the plane) or a finite azimuth: both valid
     "kernel": "first",  # every leaf (rows, nodes) or (rows,): the first row's nodes
 }
-# per field of NoiseLayout: fill of padding rows, and whether it has a member axis (axis 1)
-_NOISE_FILL: dict[str, tuple[float, bool]] = {
+# per field of NoiseLayout: fill of padding rows (None: not per row, a scalar kept as it is),
+# and whether it has a member axis (axis 1)
+_NOISE_FILL: dict[str, tuple[float | None, bool]] = {
     "sigma_row": (1.0, False),
     "sample_members": (0.0, True),
     "sample_alone": (0.0, False),
-    "series_members": (0.0, True),
-    "series_alone": (0.0, False),
+    "calibration_members": (0.0, True),
+    "calibration_alone": (0.0, False),
+    "calibration_sd": (None, False),
     "rotation_members": (0.0, True),
     "rotation_alone": (0.0, False),
+    "theta_s_per_rotation": (1.0, False),
 }
 MEMBER_FIELDS = tuple(name for name, (_, members) in _NOISE_FILL.items() if members)
 
@@ -92,7 +95,8 @@ def row_count(data: ModelData) -> int:
 
 
 def member_counts(data: ModelData) -> tuple[int, ...]:
-    """(samples, series, rotation settings) with two or more rows: W's column blocks."""
+    """(samples, calibration groups, rotation settings) with two or more rows: W's column
+    blocks."""
     return tuple(int(np.shape(getattr(data.noise, name))[1]) for name in MEMBER_FIELDS)
 
 
@@ -106,7 +110,7 @@ def padded_signature(data: ModelData) -> dict[str, Any]:
         names = [getattr(key, "name", str(key)) for key in path]
         if names and names[-1] in MEMBER_FIELDS and names[0] == "noise":
             shape[1] = None
-        shapes.append(([None, *shape[1:]], str(np.asarray(leaf).dtype)))
+        shapes.append(([None, *shape[1:]] if shape else [], str(np.asarray(leaf).dtype)))
     return {"tree": str(tree), "shapes": shapes}
 
 
@@ -131,8 +135,9 @@ def _pad_members(leaf, columns: int) -> jnp.ndarray:
 
 
 def pad_data(data: ModelData, rows: int, members: tuple[int, ...]) -> ModelData:
-    """``data`` padded to ``rows`` rows and ``members`` = (samples, series, rotation settings)
-    member columns (module docstring); unchanged where it already has that shape.
+    """``data`` padded to ``rows`` rows and ``members`` = (samples, calibration groups,
+    rotation settings) member columns (module docstring); unchanged where it already has that
+    shape.
 
     Raises:
         PaddingError: no mask in the data model, a field without a padding rule, or a target
@@ -161,7 +166,11 @@ def pad_data(data: ModelData, rows: int, members: tuple[int, ...]) -> ModelData:
     width = dict(zip(MEMBER_FIELDS, members, strict=True))
     for name in NoiseLayout._fields:
         fill, has_members = _NOISE_FILL[name]
-        value = _pad_rows(getattr(data.noise, name), rows, fill)
+        value = getattr(data.noise, name)
+        if fill is None:
+            noise[name] = value
+            continue
+        value = _pad_rows(value, rows, fill)
         noise[name] = _pad_members(value, width[name]) if has_members else value
     return ModelData(
         rows=Observations(**observations),
@@ -172,8 +181,8 @@ def pad_data(data: ModelData, rows: int, members: tuple[int, ...]) -> ModelData:
 
 def pad_datasets(datasets: list[ModelData]) -> list[ModelData]:
     """Every data set padded to the largest row count and the largest number of samples,
-    series and rotation settings among them (module docstring); data sets that already have
-    that shape are returned as they are.
+    calibration groups and rotation settings among them (module docstring); data sets that
+    already have that shape are returned as they are.
 
     Raises:
         PaddingError: as :func:`pad_data`, or data sets whose shapes differ in more than rows
@@ -184,8 +193,9 @@ def pad_datasets(datasets: list[ModelData]) -> list[ModelData]:
     signatures = [padded_signature(data) for data in datasets]
     if any(signature != signatures[0] for signature in signatures[1:]):
         raise PaddingError(
-            "the data sets differ in more than their rows, samples, series and rotation "
-            "settings (tree structure, kernel nodes or dtypes): they cannot share one shape"
+            "the data sets differ in more than their rows, samples, calibration groups and "
+            "rotation settings (tree structure, kernel nodes or dtypes): they cannot share one "
+            "shape"
         )
     rows = max(row_count(data) for data in datasets)
     members = tuple(int(m) for m in np.max([member_counts(d) for d in datasets], axis=0))

@@ -8,6 +8,7 @@ from brdf_infer.report._figures import posterior_predictive as plot_posterior_pr
 from brdf_infer.report._figures import tis_band as plot_tis_band
 from brdf_infer.report._raytrace import figure_png, plot_detector_images, plot_raytrace
 from brdf_infer.report._sbc import ecdf_differences, png, sbc_figures, sbc_page
+from brdf_infer.report._sensitivity import sensitivity_figure
 
 __all__ = [
     "FIGURE_DIR",
@@ -25,6 +26,7 @@ __all__ = [
     "png",
     "sbc_figures",
     "sbc_page",
+    "sensitivity_figure",
     "write_example",
     "write_report",
 ]

@@ -28,6 +28,7 @@ from brdf_infer.report._compare import compare_figure, compare_table_html
 from brdf_infer.report._export import abg_table, load_exports, plot_export
 from brdf_infer.report._instruments import MEANINGS, instruments_section
 from brdf_infer.report._raytrace import figure_png, plot_detector_images, plot_raytrace
+from brdf_infer.report._sensitivity import sensitivity_section
 from brdf_infer.scene import load_scene
 from brdf_infer.verdict import PARETO_K_LIMIT, Verdict
 
@@ -279,6 +280,7 @@ def write_report(run: Path, progress=print) -> tuple[Path, Verdict]:
         _tis_table(bands) if "tis" in bands else "",
         *_export_section(exports, figures),
         *_compare_section(run),
+        *sensitivity_section(run),
         *instruments_section(run),
         *(
             ["<h2>Ray-tracing validation (Sec. 6)</h2>", _raytrace_table(traces)]
@@ -476,16 +478,23 @@ def _error_model_table(summary: dict) -> str:
         if errors["repeatability"] == "learned"
         else f"{errors['repeatability']:g}, fixed"
     )
+    calibration = errors.get("calibration", "none")
     calibration = (
-        f"{errors['reflectance_rel']:g} per series, fixed"
-        if errors["reflectance_rel_kind"] == "calibration"
+        f"{errors['calibration_rel']:g} {calibration.replace('_', ' ')}, fixed"
+        if calibration != "none"
         else "off"
     )
     angles = errors["propagate_angles"]
+    images = errors["images_per_row"]
+    if isinstance(images, dict):
+        images = ", ".join(f"{n} ({name})" for name, n in images.items()) + ", else 1"
+    coupling = {"camera_follows": "θs + ε", "camera_fixed": "θs − ε"}.get(
+        errors.get("rotation_coupling", ""), ""
+    )
     rows = [
         [
             "value noise e_i",
-            f"σ of each row ÷ √{errors['images_per_row']} (row's reflectance_err, else "
+            f"σ of each row ÷ √n, n = {images} images (row's reflectance_err, else "
             f"reflectance_rel {errors['reflectance_rel']:g})",
         ],
         ["repeatability ν_i (per row)", repeatability],
@@ -493,10 +502,11 @@ def _error_model_table(summary: dict) -> str:
             "sample-to-sample u_j (per sample)",
             learned("sample_sd") if errors["hierarchical"] else "off",
         ],
-        ["calibration κ_c (per series)", calibration],
+        ["calibration κ (per reference measurement)", calibration],
         [
             "sample rotation ε (per series, sample, θi)",
-            f"{errors['rotation_deg']:g}° through ln R ({errors['angle_method']})"
+            f"{errors['rotation_deg']:g}° through ln R ({errors['angle_method']}): θi + ε, "
+            f"{coupling} ({errors.get('rotation_coupling', '')})"
             if angles
             else "off",
         ],

@@ -1,0 +1,459 @@
+"""Sensitivity of the answer to the error model's assumptions: ``brdf-infer sensitivity``.
+
+The error model (:mod:`brdf_infer.error_model`) rests on assumptions the data cannot settle
+alone: which rows share a calibration, its size, what a sample-rotation error does to θs, how
+many images were averaged into a row. This study samples the scene's posterior under its own
+error model (the baseline) and under each *variant*, a set of ``[errors]`` keys changed
+(``calibration=none``, ``rotation_coupling=camera_fixed``, ...), and reports for each the TIS
+at the scene's angles and π·BRDF0 with 95 % intervals — what the assumption does to the
+answer — and PSIS-LOO with its difference to the baseline, Δelpd ± se — what the data say
+about it (more is better; a difference is clear when it is several times its se).
+
+Every variant is sampled by the same NUTS settings from the same seed. The options that are
+data of the compiled likelihood (:data:`brdf_infer.error_model.DATA_OPTIONS`) leave the model
+structure as it is, so the variants of one structure share one compiled program, their data
+padded to one shape (:mod:`brdf_infer.posterior._padding`: zero calibration columns add
+nothing); another error model (``model=spread``) compiles its own.
+
+Each row's pointwise log predictive density is that of its leave-one-out conditional
+(:func:`brdf_infer.posterior.loo_terms`), as in the run's PSIS-LOO; where Pareto k > 0.7 the
+row's term is computed exactly by refitting without it, through the same program
+(:func:`brdf_infer.compare.without_row`), as the model comparison does. The TIS follows the
+scene's ``[model] fold`` (its bands' convention).
+
+The baseline posterior is also checked for its sensitivity to the prior and to the likelihood
+by power-scaling (:func:`brdf_infer.posterior.power_scaling`): per free parameter, learned
+noise scale and TIS(70°), how far the posterior would move if either were raised to a power
+near 1.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import json
+import time
+import tomllib
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from brdf_infer.error_model import CALIBRATIONS, ROTATION_COUPLINGS
+from brdf_infer.errors import BadInputError
+from brdf_infer.measurements import Measurements
+from brdf_infer.model import REFERENCE_FAMILY
+from brdf_infer.scene import Scene, parse_errors
+
+if TYPE_CHECKING:  # ArviZ is imported where it is used: the command line's parser stays light
+    from arviz import InferenceData
+
+SENSITIVITY_FILE = "sensitivity.json"
+SENSITIVITY_FIGURE = "sensitivity.png"
+TIS_ANGLE_DEG = 70.0  # the article's TIS angle (Sec. 7), always among the reported angles
+BASELINE = "default"
+
+
+@dataclass(frozen=True)
+class SensitivitySettings:
+    """How every variant is sampled (NUTS, the same settings and seed for all).
+
+    The defaults keep the study at a few minutes on 2 cores: 4 × 500 draws give the 95 %
+    intervals of TIS and π·BRDF0 to a few tenths of a per cent and PSIS-LOO its usual
+    precision. ``refit``: compute the leave-one-out term of a row with Pareto k > 0.7 exactly,
+    by one more posterior without it.
+    """
+
+    chains: int = 4
+    warmup: int = 500
+    draws: int = 500
+    seed: int = 0
+    target_accept: float = 0.8
+    refit: bool = True
+
+    def check(self) -> None:
+        """Raises BadInputError naming the setting that is out of range."""
+        for name in ("chains", "draws"):
+            if getattr(self, name) < 1:
+                raise BadInputError(
+                    f"must be at least 1, got {getattr(self, name)}", field=f"--{name}"
+                )
+        if self.warmup < 0:
+            raise BadInputError(f"must be >= 0, got {self.warmup}", field="--warmup")
+        if not 0 < self.target_accept < 1:
+            raise BadInputError(
+                f"must lie in (0, 1), got {self.target_accept}", field="--target-accept"
+            )
+
+
+@dataclass(frozen=True)
+class Variant:
+    """A set of ``[errors]`` keys changed from the scene's (``name``: ``key=value, ...``)."""
+
+    name: str
+    changes: dict[str, Any] = field(default_factory=dict)
+
+
+def _toml_value(value: Any) -> str:
+    if isinstance(value, dict):
+        return "{ " + ", ".join(f"{k} = {_toml_value(v)}" for k, v in value.items()) + " }"
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    return f"{value:g}" if isinstance(value, float) else str(value)
+
+
+def variant(changes: dict[str, Any]) -> Variant:
+    """The variant that changes these keys (named after them)."""
+    return Variant(", ".join(f"{k}={_toml_value(v)}" for k, v in changes.items()), dict(changes))
+
+
+def _split_changes(spec: str) -> list[str]:
+    """``KEY=VALUE`` parts of a variant spec, split at commas outside ``{ }``."""
+    parts, depth, current = [], 0, ""
+    for character in spec:
+        depth += {"{": 1, "}": -1}.get(character, 0)
+        if character == "," and depth == 0:
+            parts.append(current)
+            current = ""
+        else:
+            current += character
+    return [*parts, current]
+
+
+def _value(text: str) -> Any:
+    """A TOML value (number, boolean, inline table) or, failing that, the bare string."""
+    try:
+        return tomllib.loads(f"value = {text}")["value"]
+    except tomllib.TOMLDecodeError:
+        return text.strip().strip('"')
+
+
+def parse_variant(spec: str, scene: Scene) -> Variant:
+    """A variant from ``KEY=VALUE[,KEY=VALUE...]`` (keys of ``[errors]``), checked against the
+    scene as its own ``[errors]`` table would be.
+
+    Raises:
+        BadInputError: a part without ``=``, an unknown key, or a value out of range
+            (field ``--variants``).
+    """
+    changes = {}
+    for part in _split_changes(spec):
+        key, equals, text = part.partition("=")
+        if not equals or not key.strip():
+            raise BadInputError(
+                f"{spec!r}: expected KEY=VALUE (keys of [errors], e.g. calibration=none)",
+                field="--variants",
+            )
+        changes[key.strip()] = _value(text.strip())
+    named = variant(changes)
+    variant_scene(scene, named, field_name="--variants")
+    return named
+
+
+def variant_scene(scene: Scene, changed: Variant, field_name: str = "variants") -> Scene:
+    """``scene`` with the variant's ``[errors]`` keys changed, validated as a scene's table.
+
+    Raises:
+        BadInputError: an unknown key or a value out of range (naming the variant).
+    """
+    table = {**scene.errors.describe(), **changed.changes}
+    try:
+        errors = parse_errors(table, scene.path, tuple(scene.series))
+    except BadInputError as error:
+        raise BadInputError(
+            f"variant {changed.name!r}: {error.field}: {error.problem}", field=field_name
+        ) from None
+    return dataclasses.replace(scene, errors=errors)
+
+
+def default_variants(scene: Scene) -> list[Variant]:
+    """The variants that change the answer's assumptions one at a time: the other calibration
+    choices (where the calibration has a size), the other rotation coupling (where angle
+    errors are on), one image per row and, where the scene's images differ by series, every
+    series with the largest of them, and the other error model."""
+    errors = scene.errors
+    if errors.model == "spread":
+        return [variant({"model": "generative"})]
+    changes: list[dict[str, Any]] = []
+    if errors.calibration_rel > 0:
+        changes += [{"calibration": kind} for kind in CALIBRATIONS if kind != errors.calibration]
+    if errors.angles_on:
+        changes += [
+            {"rotation_coupling": other}
+            for other in ROTATION_COUPLINGS
+            if other != errors.rotation_coupling
+        ]
+    counts = {errors.images_of(name) for name in scene.series}
+    if counts != {1}:
+        changes.append({"images_per_row": 1})
+    if len(counts) > 1:
+        changes.append({"images_per_row": max(counts)})
+    changes.append({"model": "spread"})
+    return [variant(c) for c in changes]
+
+
+def check_scene(scene: Scene) -> None:
+    """Refuse a scene the study cannot answer for: another family than ``strumik2024``
+    (π·BRDF0 is its parameter) or no out-of-plane model (no TIS)."""
+    if scene.model.family != REFERENCE_FAMILY:
+        raise BadInputError(
+            f"the sensitivity study samples {REFERENCE_FAMILY} (π·BRDF0 and the TIS of Eq. 9), "
+            f"not {scene.model.family}",
+            file=scene.path,
+            field="model.family",
+        )
+    if not scene.model.out_of_plane:
+        raise BadInputError(
+            "the sensitivity study reports the TIS, which needs the out-of-plane model",
+            file=scene.path,
+            field="model.out_of_plane",
+        )
+
+
+def tis_angles(scene: Scene, measurements: Measurements) -> list[float]:
+    """The scene's band angles and 70° (the article's TIS angle), ascending [deg]."""
+    return sorted({*scene.band_theta_i_deg(measurements), TIS_ANGLE_DEG})
+
+
+@dataclass
+class VariantResult:
+    """One posterior of the study.
+
+    Attributes:
+        variant: what was changed (nothing for the baseline).
+        tis: ``theta_i_deg``, ``median``, ``lo95``, ``hi95`` (lists over the angles).
+        pi_brdf0: median and 95 % interval of π·BRDF0.
+        elpd_loo, se: PSIS-LOO (exact where refitted) and its standard error.
+        pointwise: each row's leave-one-out elpd term.
+        diagnostics: ``r_hat_max``, ``ess_bulk_min``, ``divergences``, ``pareto_k_max``
+            (before the refits) and ``refitted_rows`` (0-based rows with Pareto k > 0.7 whose
+            term is exact).
+        idata: the posterior (free parameters, noise scales) and its leave-one-out log
+            likelihood.
+        seconds: wall time of this posterior (sampling and the summaries).
+    """
+
+    variant: Variant
+    tis: dict[str, list[float]]
+    pi_brdf0: dict[str, float]
+    elpd_loo: float
+    se: float
+    pointwise: np.ndarray
+    diagnostics: dict[str, float]
+    idata: InferenceData
+    seconds: float
+
+    def as_json(self, baseline: VariantResult) -> dict[str, Any]:
+        """The contract's entry: Δelpd and its se against ``baseline`` (pointwise)."""
+        difference = self.pointwise - baseline.pointwise
+        return {
+            "name": self.variant.name,
+            "changes": self.variant.changes,
+            "tis": self.tis,
+            "pi_brdf0": self.pi_brdf0,
+            "elpd_loo": self.elpd_loo,
+            "d_elpd": float(np.sum(difference)),
+            "dse": float(np.sqrt(difference.size * np.var(difference))),
+            "diagnostics": self.diagnostics,
+        }
+
+
+@dataclass
+class SensitivityResult:
+    """The study (``as_json``: the JSON of ``brdf-infer sensitivity --json``).
+
+    Attributes:
+        baseline: the posterior under the scene's error model.
+        variants: the posterior under each variant, in the order asked.
+        power_scaling: the baseline's prior and likelihood sensitivity per quantity
+            (``{name: {"prior", "likelihood", "diagnosis"}}``).
+        seconds: wall time of the study.
+    """
+
+    baseline: VariantResult
+    variants: list[VariantResult]
+    power_scaling: dict[str, dict[str, float | str]]
+    seconds: float
+
+    def as_json(self) -> dict[str, Any]:
+        return {
+            "baseline": self.baseline.as_json(self.baseline),
+            "variants": [v.as_json(self.baseline) for v in self.variants],
+            "power_scaling": self.power_scaling,
+            "seconds": self.seconds,
+        }
+
+
+def _exact_terms(
+    program, model, pointwise: np.ndarray, rows: list[int], *, settings: SensitivitySettings
+) -> np.ndarray:
+    """``pointwise`` with the terms of ``rows`` replaced by their exact leave-one-out elpd:
+    log of the mean over draws of p(yᵢ | y₋ᵢ, θ) from a posterior without row i."""
+    from scipy.special import logsumexp
+
+    from brdf_infer.compare import without_row
+    from brdf_infer.posterior import chain_keys, loo_terms
+
+    keys = chain_keys(settings.seed, 1, settings.chains)[0]
+    exact = pointwise.copy()
+    for row in rows:
+        refit = program.run(without_row(model, row), keys, settings.draws)
+        terms = loo_terms(model, refit.sites)[0][..., row].reshape(-1)
+        exact[row] = float(logsumexp(terms) - np.log(terms.size))
+    return exact
+
+
+def _summarise(
+    scene: Scene,
+    changed: Variant,
+    model,
+    output,
+    angles: list[float],
+    started: float,
+    refit=None,
+) -> VariantResult:
+    """TIS, π·BRDF0, PSIS-LOO (``refit(pointwise, rows)``: exact terms where Pareto k > 0.7)
+    and the sampler's health of one variant's draws."""
+    from brdf_infer._arviz import az
+    from brdf_infer.compare import PARETO_K_LIMIT
+    from brdf_infer.posterior import NOISE_SITES, draws_params, interval95, loo_terms, tis_band
+
+    sites = output.sites
+    log_lik = loo_terms(model, sites)[0]
+    names = [*model.scene.free_parameters, *(n for n in NOISE_SITES if n in sites)]
+    idata = az.from_dict(
+        posterior={name: sites[name] for name in names},
+        log_likelihood={"obs": log_lik},
+        sample_stats={"diverging": output.stats["diverging"]},
+    )
+    with warnings.catch_warnings():  # a high Pareto k is reported in the diagnostics
+        warnings.simplefilter("ignore")
+        loo = az.loo(idata, pointwise=True)
+        summary = az.summary(idata, var_names=names, kind="diagnostics", round_to="none")
+    pareto_k = np.asarray(loo.pareto_k)
+    refitted = [int(row) for row in np.flatnonzero(pareto_k > PARETO_K_LIMIT)]
+    pointwise = np.asarray(loo.loo_i)
+    if refit is not None and refitted:
+        pointwise = refit(pointwise, refitted)
+    else:
+        refitted = []
+    params = draws_params(sites)
+    band = tis_band(params, angles, scene.model.fold, scene.model.constants)
+    return VariantResult(
+        variant=changed,
+        tis={key: band[key] for key in ("theta_i_deg", "median", "lo95", "hi95")},
+        pi_brdf0=interval95(np.pi * np.asarray(params.brdf0)),
+        elpd_loo=float(np.sum(pointwise)),
+        se=float(np.sqrt(pointwise.size * np.var(pointwise))),
+        pointwise=pointwise,
+        diagnostics={
+            "r_hat_max": float(np.max(summary["r_hat"])),
+            "ess_bulk_min": float(np.min(summary["ess_bulk"])),
+            "divergences": int(np.sum(output.stats["diverging"])),
+            "pareto_k_max": float(np.max(pareto_k)),
+            "refitted_rows": refitted,
+        },
+        idata=idata,
+        seconds=time.perf_counter() - started,
+    )
+
+
+def _power_scaling(scene: Scene, model, sites: dict[str, np.ndarray]) -> dict:
+    """Power-scaling sensitivity of the free parameters (paper units), the learned noise
+    scales and TIS(70°) of one posterior."""
+    import jax.numpy as jnp
+
+    from brdf_infer.model import tis
+    from brdf_infer.posterior import NOISE_SITES, draws_params, power_scaling
+
+    shape = np.shape(sites["alpha"])
+    values = tis(
+        jnp.array([TIS_ANGLE_DEG]), draws_params(sites), scene.model.fold, scene.model.constants
+    )
+    quantities = {name: sites[name] for name in scene.free_parameters}
+    quantities |= {name: sites[name] for name in NOISE_SITES if name in sites}
+    quantities["tis_70deg"] = np.asarray(values).reshape(shape)
+    return power_scaling(model, sites, quantities)
+
+
+def sensitivity(
+    scene: Scene,
+    measurements: Measurements,
+    variants: list[Variant] | None = None,
+    settings: SensitivitySettings = SensitivitySettings(),
+    *,
+    progress: bool = False,
+) -> SensitivityResult:
+    """The scene's posterior under its own error model and under each variant (module
+    docstring).
+
+    Args:
+        scene: the scene (``strumik2024`` with the out-of-plane model).
+        measurements: its rows.
+        variants: what to change (default :func:`default_variants`); each is checked against
+            the scene before any sampling.
+        settings: NUTS settings, the same for every posterior.
+        progress: a progress bar per posterior on stderr.
+
+    Raises:
+        BadInputError: a scene the study cannot answer for, a variant that is not a valid
+            ``[errors]`` table, or settings out of range.
+    """
+    from brdf_infer.posterior import NutsProgram, build_posterior_model, chain_keys
+    from brdf_infer.posterior._padding import pad_datasets
+
+    check_scene(scene)
+    settings.check()
+    started = time.perf_counter()
+    runs = [Variant(BASELINE), *(default_variants(scene) if variants is None else variants)]
+    scenes = [variant_scene(scene, run) for run in runs]
+    models = [build_posterior_model(s, measurements) for s in scenes]
+    groups: dict[str, list[int]] = {}
+    for index, each in enumerate(scenes):
+        key = json.dumps(each.errors.structure(), sort_keys=True, default=str)
+        groups.setdefault(key, []).append(index)
+    keys = chain_keys(settings.seed, 1, settings.chains)[0]
+    angles = tis_angles(scene, measurements)
+    results: list[VariantResult | None] = [None] * len(runs)
+    scaling: dict = {}
+    for members in groups.values():
+        datasets = pad_datasets([models[index].data for index in members])
+        program = NutsProgram(
+            dataclasses.replace(models[members[0]], data=datasets[0]),
+            warmup=settings.warmup,
+            target_accept=settings.target_accept,
+        )
+        for index, data in zip(members, datasets, strict=True):
+            clock = time.perf_counter()
+            output = program.run(
+                data, keys, settings.draws, progress=progress, description=runs[index].name
+            )
+            model = dataclasses.replace(models[index], data=data)
+            refit = functools.partial(_exact_terms, program, model, settings=settings)
+            results[index] = _summarise(
+                scenes[index],
+                runs[index],
+                model,
+                output,
+                angles,
+                clock,
+                refit if settings.refit else None,
+            )
+            if index == 0:
+                scaling = _power_scaling(scene, model, output.sites)
+    return SensitivityResult(results[0], results[1:], scaling, time.perf_counter() - started)
+
+
+def write_sensitivity(out: Path, result: SensitivityResult) -> list[Path]:
+    """sensitivity.json and its figure (TIS(70°) and Δelpd per variant) into ``out``,
+    atomically."""
+    from brdf_infer._atomic import atomic_write_bytes, atomic_write_json
+    from brdf_infer.report import sensitivity_figure
+
+    payload = result.as_json()
+    return [
+        atomic_write_json(out / SENSITIVITY_FILE, payload),
+        atomic_write_bytes(out / SENSITIVITY_FIGURE, sensitivity_figure(payload)),
+    ]
