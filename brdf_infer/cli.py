@@ -837,10 +837,18 @@ def _instrument_argument(parser: argparse.ArgumentParser) -> None:
 
 def _command_sbc(args: argparse.Namespace) -> None:
     _headless()
-    from brdf_infer.sbc import COVERAGE_LEVELS, SbcSettings, run_sbc, write_sbc
+    from brdf_infer.sbc import (
+        COVERAGE_LEVELS,
+        SbcSettings,
+        check_planted_fault,
+        run_sbc,
+        write_sbc,
+    )
 
     _checked_model(args.model)
+    check_planted_fault(args.planted_fault, field="--planted-fault")
     scene, measurements = _scene_and_measurements(args.scene, args.instrument)
+    check_planted_fault(args.planted_fault, scene, args.model, field="--planted-fault")
     settings = SbcSettings(
         replicates=args.replicates,
         draws=args.draws,
@@ -850,6 +858,7 @@ def _command_sbc(args: argparse.Namespace) -> None:
         sigma_scale=args.sigma_scale,
         target_accept=args.target_accept,
         warmup_tree_depth=args.warmup_tree_depth,
+        planted_fault=args.planted_fault,
     )
     for name in ("replicates", "draws", "thin", "warmup"):
         if getattr(settings, name) < 1:
@@ -1232,6 +1241,11 @@ def build_parser() -> argparse.ArgumentParser:
         type=float,
         default=1.0,
         help="planted fault: scale the likelihood sigma by this in the inference only",
+    )
+    sbc.add_argument(
+        "--planted-fault",
+        help="planted fault in the inference only, which SBC must flag: jacobian (the "
+        "whitening's log-Jacobian dropped) or prior (every free prior moved by one sd)",
     )
     sbc.add_argument("--target-accept", type=float, default=0.8, help="NUTS target acceptance")
     sbc.add_argument(

@@ -23,6 +23,8 @@ def test_quick_benchmark_report(tmp_path, capsys):
         assert method in text, method
     assert "max rel. error" in text and "final χ²" in text
     assert "## Model families" in text and "harvey-shack" in text and "elpd_loo" in text
+    for case in ("σ × 1.35", "log-Jacobian dropped", "priors moved 1 sd"):
+        assert f"| planted: {case} |" in text, case
     assert (tmp_path / "benchmarks_tis.png").stat().st_size > 10_000
 
 

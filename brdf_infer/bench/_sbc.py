@@ -1,5 +1,6 @@
-"""Benchmark of simulation-based calibration: the bundled scene as built, and with a planted
-fault (the likelihood's σ 35 % too wide in the inference) that the check must flag."""
+"""Benchmark of simulation-based calibration: the bundled scene as built, and with faults
+planted in the inference that the check must flag (the likelihood's σ 35 % too wide, the
+whitening's log-Jacobian dropped, every free prior moved by one prior sd)."""
 
 from __future__ import annotations
 
@@ -56,17 +57,30 @@ FAMILY_MODEL = "abg"  # another family through the same check
 INSTRUMENT = "image"  # a likelihood through the measurement kernel
 
 
+def planted_cases(model: str | None) -> list[tuple[str, dict]]:
+    """The (case, settings) of one family's rows: as built and each planted fault that applies
+    (the machinery faults are for ``strumik2024``, the scene's own family)."""
+    cases = [("as built", {}), ("planted: σ × 1.35", {"sigma_scale": PLANTED_SIGMA_SCALE})]
+    if model is None:
+        cases += [
+            ("planted: log-Jacobian dropped", {"planted_fault": "jacobian"}),
+            ("planted: priors moved 1 sd", {"planted_fault": "prior"}),
+        ]
+    return cases
+
+
 def sbc_rows(scene: Scene, quick: bool, progress=print) -> list[SbcRow]:
-    """SBC of ``scene`` as built and with the planted too-wide σ, for ``strumik2024`` and for
-    :data:`FAMILY_MODEL` (the first two rows are the scene's own family), and of the
-    :data:`INSTRUMENT` kernel's likelihood as built (100 replicates)."""
+    """SBC of ``scene`` as built and with each planted fault (:func:`planted_cases`), for
+    ``strumik2024`` and for :data:`FAMILY_MODEL` (the first two rows are the scene's own family
+    as built and with σ × 1.35), and of the :data:`INSTRUMENT` kernel's likelihood as built
+    (100 replicates)."""
     size = {"replicates": 6, "draws": 30, "thin": 1, "warmup": 150} if quick else {}
     measurements = scene.load_measurements()
     rows = []
     for model in (None, FAMILY_MODEL):
         prefix = "" if model is None else f"{model}: "
-        for case, scale in (("as built", 1.0), ("planted: σ × 1.35", PLANTED_SIGMA_SCALE)):
-            settings = SbcSettings(sigma_scale=scale, **size)
+        for case, planted in planted_cases(model):
+            settings = SbcSettings(**planted, **size)
             progress(f"  SBC, {prefix}{case}, {settings.replicates} replicates")
             result = run_sbc(scene, measurements, settings, model=model)
             rows.append(SbcRow(prefix + case, result))

@@ -13,7 +13,12 @@ from brdf_infer.posterior._bands import (
 )
 from brdf_infer.posterior._family_model import FamilyPosteriorModel, build_family_model
 from brdf_infer.posterior._loo import pointwise_loo_terms
-from brdf_infer.posterior._model import NOISE_SITES, PosteriorModel, build_posterior_model
+from brdf_infer.posterior._model import (
+    LINEAR,
+    NOISE_SITES,
+    PosteriorModel,
+    build_posterior_model,
+)
 from brdf_infer.posterior._nuts import NutsProgram, chain_keys
 from brdf_infer.posterior._power_scaling import power_scaling
 from brdf_infer.posterior._results import (
@@ -42,6 +47,7 @@ from brdf_infer.posterior._samplers import Draws, run_emcee, run_nuts
 __all__ = [
     "BANDS_FILE",
     "CHECKPOINT_FILE",
+    "LINEAR",
     "NOISE_SITES",
     "POSTERIOR_FILE",
     "QUANTILES",

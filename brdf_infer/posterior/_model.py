@@ -181,6 +181,9 @@ class PosteriorModel:
         row_series: index of each row's series (in order of appearance).
         sigma_scale: multiplies the likelihood's σ when fitting (1; other values only for a
             planted fault in simulation-based calibration, whose simulations keep 1).
+        drop_log_jacobian: leave the whitening's log-Jacobian −Σ ln Lᵢᵢ out of the density
+            (False; True only for a planted fault in simulation-based calibration, which must
+            then fail: the target is no longer the scene's posterior).
     """
 
     scene: Scene
@@ -190,6 +193,7 @@ class PosteriorModel:
     row_samples: tuple[str, ...]
     row_series: tuple[int, ...]
     sigma_scale: float = 1.0
+    drop_log_jacobian: bool = False
 
     @property
     def errors(self):
@@ -294,6 +298,8 @@ class PosteriorModel:
             prior_distribution(priors[LINEAR[k]]).log_prob(values[position])
             for position, k in enumerate(free)
         )
+        if self.drop_log_jacobian:  # a planted fault (SBC), never in a fit
+            log_jacobian = 0.0
         numpyro.factor("coefficient_prior", log_prior + log_jacobian)
         coefficients = list(fixed_values)
         for position, k in enumerate(free):
