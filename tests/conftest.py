@@ -23,6 +23,7 @@ settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci" if os.environ.ge
 # Fixtures computed once per module or session whose work is worth sharing (a NUTS or emcee
 # run, a batch, ray traces, a least-squares fit, compiled potentials), most shared first.
 SHARED_FIXTURES = (
+    "calibration_study",  # before nuts_run: its report test needs both
     "nuts_run",
     "emcee_run",
     "batch_run",

@@ -150,6 +150,7 @@ def test_sbc_command_passes_lya_fixed_as_built_without_ranking_its_fixed_paramet
     assert "It cannot see a wrong model" in page and "Planted fault" not in page
 
 
+@pytest.mark.slow  # 60 replicates (≈ 40 s); the suite checks the dropped term exactly below
 def test_sbc_command_flags_the_dropped_whitening_jacobian(tmp_path, capsys):
     """The whitening's log-Jacobian dropped in the inference: the verdict fails at 60
     replicates (13 of 13 measured sets of 60 failed at these settings); the page says which

@@ -17,6 +17,7 @@ from brdf_infer.sbc import (
     ecdf_band,
     uniform_rank_band,
 )
+from brdf_infer.verdict import ALL_PASS, Verdict
 
 LABELS = {
     "brdf0": "brdf0 [sr⁻¹]",
@@ -136,9 +137,8 @@ def _planted(settings) -> list[str]:
 def sbc_page(result: SbcResult, figures: dict[str, bytes]) -> str:
     """A self-contained HTML page: verdict, tests and coverage table, figures."""
     settings = result.settings
-    verdict = (
-        _html.verdict_box([]) if result.passed else _html.verdict_box(result.failures)
-    ).replace("every diagnostic passes its threshold", "the posterior is calibrated")
+    lines = () if result.passed else tuple(result.failures)
+    verdict = _html.verdict_box(Verdict(lines)).replace(ALL_PASS, "the posterior is calibrated")
     rows = []
     for name in result.quantities:
         rows.append(
