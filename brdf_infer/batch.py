@@ -48,6 +48,7 @@ import jax
 import numpy as np
 
 from brdf_infer._atomic import atomic_write_json
+from brdf_infer._nuts_settings import check_nuts_settings
 from brdf_infer.errors import BadInputError
 from brdf_infer.plausibility import measurement_checks, require_plausible
 from brdf_infer.posterior import NutsProgram, build_model, chain_keys, model_name
@@ -84,17 +85,7 @@ class BatchSettings:
 
     def check(self) -> None:
         """Raises BadInputError naming the option that is out of range."""
-        for name in ("chains", "draws"):
-            if getattr(self, name) < 1:
-                raise BadInputError(
-                    f"must be at least 1, got {getattr(self, name)}", field=f"--{name}"
-                )
-        if self.warmup < 0:
-            raise BadInputError(f"must be >= 0, got {self.warmup}", field="--warmup")
-        if not 0 < self.target_accept < 1:
-            raise BadInputError(
-                f"must lie in (0, 1), got {self.target_accept}", field="--target-accept"
-            )
+        check_nuts_settings(self)
         if self.mode not in ("auto", "threads", "vmap"):
             raise BadInputError(f"unknown mode {self.mode!r} (auto, threads, vmap)", field="--mode")
 

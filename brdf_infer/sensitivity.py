@@ -41,6 +41,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from brdf_infer._nuts_settings import check_nuts_settings
 from brdf_infer.error_model import CALIBRATIONS, ROTATION_COUPLINGS
 from brdf_infer.errors import BadInputError
 from brdf_infer.measurements import Measurements
@@ -75,17 +76,7 @@ class SensitivitySettings:
 
     def check(self) -> None:
         """Raises BadInputError naming the setting that is out of range."""
-        for name in ("chains", "draws"):
-            if getattr(self, name) < 1:
-                raise BadInputError(
-                    f"must be at least 1, got {getattr(self, name)}", field=f"--{name}"
-                )
-        if self.warmup < 0:
-            raise BadInputError(f"must be >= 0, got {self.warmup}", field="--warmup")
-        if not 0 < self.target_accept < 1:
-            raise BadInputError(
-                f"must lie in (0, 1), got {self.target_accept}", field="--target-accept"
-            )
+        check_nuts_settings(self)
 
 
 @dataclass(frozen=True)
