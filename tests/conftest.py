@@ -36,15 +36,33 @@ SHARED_FIXTURES = (
 )
 
 
+@pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(items):
     """Under pytest-xdist (``--dist loadgroup``), the tests sharing an expensive fixture go to
     one worker, so that it is computed once (a module fixture is otherwise built again by every
-    worker that runs one of its tests)."""
+    worker that runs one of its tests). First among the hooks: pytest-xdist's worker reads the
+    ``xdist_group`` marks in its own hook, which otherwise runs before this one and sees none
+    (the groups were silently split across workers)."""
     for item in items:
         names = getattr(item, "fixturenames", ())
         shared = next((name for name in SHARED_FIXTURES if name in names), None)
         if shared is not None:
             item.add_marker(pytest.mark.xdist_group(shared))
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_collection_finish(session):
+    """Refuse to run when ``--dist loadgroup`` has not put its group into the ids of the tests
+    it groups (pytest-xdist renames them in its own collection hook): the shared fixtures would
+    be built again on every worker, which costs minutes and says nothing."""
+    if not session.config.getoption("loadgroup", default=False):
+        return
+    grouped = [item for item in session.items if item.get_closest_marker("xdist_group")]
+    if grouped and not any("@" in item.nodeid for item in grouped):
+        raise pytest.UsageError(
+            "pytest-xdist's --dist loadgroup did not group the tests (pytest "
+            f"{pytest.__version__}); install the versions pyproject.toml asks for"
+        )
 
 
 @pytest.fixture(scope="session")
