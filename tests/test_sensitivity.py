@@ -200,12 +200,15 @@ def test_the_report_of_a_run_folder_shows_the_study(calibration_study, nuts_run,
 
 
 def test_cli_json_contract_and_files(tmp_path, capsys):
+    """Two variants that change data of the compiled likelihood only, so every posterior runs
+    the suite's lya program (the spread variant, a program of its own, runs in the slow main-job
+    test below and in ``test_posterior``)."""
     out = tmp_path / "study"
     code, stdout, err = run_cli(
         "sensitivity",
         "--variants",
         "calibration=none",
-        "model=spread",
+        "rotation_coupling=camera_fixed",
         "--chains",
         str(TINY.chains),
         "--warmup",
@@ -220,10 +223,13 @@ def test_cli_json_contract_and_files(tmp_path, capsys):
     assert code == 0, err
     payload = json.loads(stdout)
     assert set(payload) == {"baseline", "variants", "power_scaling", "seconds"}
-    assert [v["name"] for v in payload["variants"]] == ["calibration=none", "model=spread"]
+    assert [v["name"] for v in payload["variants"]] == [
+        "calibration=none",
+        "rotation_coupling=camera_fixed",
+    ]
     assert [v["changes"] for v in payload["variants"]] == [
         {"calibration": "none"},
-        {"model": "spread"},
+        {"rotation_coupling": "camera_fixed"},
     ]
     for entry in (payload["baseline"], *payload["variants"]):
         assert set(entry) == VARIANT_KEYS
