@@ -24,7 +24,8 @@ as the likelihood has them. SBC therefore checks the inference *given the model*
 sampler, the whitened reparametrisation and its Jacobian, and that the inference's priors are
 the simulator's — and cannot see a wrong model (a wrong calibration size, rotation coupling
 or images per row, or the linearisation of the angle slopes): data and inference would share
-the error. Planted faults in the inference only show that the check has power against what it
+the error. The benchmark's misspecification study (:mod:`brdf_infer.bench._misspec`) measures
+what such errors cost the intervals. Planted faults in the inference only show that the check has power against what it
 checks: ``planted_fault`` (:data:`PLANTED_FAULTS`: the whitening's log-Jacobian dropped, or
 every free prior moved by one prior sd) and ``sigma_scale`` (the likelihood's σ scaled; the
 learned noise scales absorb most of it, so it fails through them).
@@ -52,6 +53,7 @@ from brdf_infer.posterior import (
     LINEAR,
     NOISE_SITES,
     FamilyPosteriorModel,
+    ModelData,
     NutsProgram,
     PosteriorModel,
     build_model,
@@ -192,6 +194,51 @@ def simulate(
     )
 
 
+def replicate_data(data: ModelData, log_reflectance: np.ndarray) -> ModelData:
+    """``data`` once per simulated data set, each with its own ln R: ``log_reflectance`` is
+    (data sets, rows), the result's every leaf gains that leading axis."""
+    count = int(np.shape(log_reflectance)[0])
+    datasets = jax.tree_util.tree_map(
+        lambda leaf: jnp.broadcast_to(leaf, (count, *jnp.shape(leaf))), data
+    )
+    return datasets._replace(
+        rows=datasets.rows._replace(log_reflectance=jnp.asarray(log_reflectance))
+    )
+
+
+def ranked_quantities(
+    model: PosteriorModel | FamilyPosteriorModel,
+    simulated: dict,
+    sites: dict[str, np.ndarray],
+    thin: int,
+) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """(truth, posterior) of the quantities SBC ranks, for the family ``model`` samples.
+
+    Args:
+        model: the inference's model (its scene's fold and constants, its family).
+        simulated: the true sites, one value per replicate (leading axis).
+        sites: NUTS draws of one chain per replicate, (replicates, 1, iterations, ...).
+        thin: keep every ``thin``-th draw.
+
+    Returns:
+        The truths (replicates,) and the thinned draws (replicates, draws) of each quantity.
+    """
+    constants = model.scene.model.constants
+    member = family(model_name(model), model.scene.model.fold, constants)
+    thinned = {k: v[:, 0, thin - 1 :: thin] for k, v in sites.items()}
+    return _quantities(simulated, member, constants), _quantities(thinned, member, constants)
+
+
+def ranks_of(truth: dict[str, np.ndarray], posterior: dict[str, np.ndarray]) -> dict:
+    """The rank of each truth among its replicate's draws (0 … draws), per quantity; a
+    quantity the scene fixes (every draw equals the truth) is left out."""
+    return {
+        name: np.sum(posterior[name] < truth[name][:, None], axis=1)
+        for name in truth
+        if not _deterministic(truth[name], posterior[name])
+    }
+
+
 def uniform_rank_band(replicates: int, bins: int, level: float = 0.99) -> tuple[float, float]:
     """Central ``level`` range of one bin's count under uniform ranks: Binomial(N, 1/bins)."""
     low, high = stats.binom.interval(level, replicates, 1.0 / bins)
@@ -234,12 +281,7 @@ def run_sbc(
         dataclasses.replace(model, sigma_scale=settings.sigma_scale), settings.planted_fault
     )
     simulated = simulate(model, settings.replicates, settings.seed)
-    datasets = jax.tree_util.tree_map(
-        lambda leaf: jnp.broadcast_to(leaf, (settings.replicates, *jnp.shape(leaf))), model.data
-    )
-    datasets = datasets._replace(
-        rows=datasets.rows._replace(log_reflectance=jnp.asarray(simulated["obs"]))
-    )
+    datasets = replicate_data(model.data, simulated["obs"])
     program = NutsProgram(
         inference,
         warmup=settings.warmup,
@@ -253,17 +295,8 @@ def run_sbc(
         progress=progress,
         description="SBC",
     )
-    constants = scene.model.constants
-    member = family(model_name(model), scene.model.fold, constants)
-    truth = _quantities(simulated, member, constants)
-    thinned = {k: v[:, 0, settings.thin - 1 :: settings.thin] for k, v in output.sites.items()}
-    posterior = _quantities(thinned, member, constants)
-    ranks = {
-        name: np.sum(posterior[name] < truth[name][:, None], axis=1)
-        for name in truth
-        if not _deterministic(truth[name], posterior[name])
-    }
-    result = assess_ranks(settings, ranks)
+    truth, posterior = ranked_quantities(model, simulated, output.sites, settings.thin)
+    result = assess_ranks(settings, ranks_of(truth, posterior))
     return dataclasses.replace(
         result,
         divergences=np.sum(output.stats["diverging"], axis=(1, 2)),

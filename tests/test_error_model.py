@@ -380,8 +380,8 @@ def test_latent_angles_agree_with_the_linearised_propagation(lya):
     (median ± 1.96 sd) must hold at least 90 % of the latent posterior (normal approximation
     of both), i.e. the linearisation may cost at most 5 points of coverage. That allows a
     shift of the median by 0.65 sd at equal sds, or sds 16 % too small at equal medians.
-    Measured: medians differ by up to 0.36 sd (b2: the latent model keeps the curvature of
-    ln R in the angles), sds by < 10 %."""
+    Measured: medians differ by up to 0.18 sd (α), sds by < 9 % (0.36 sd, b2, before a
+    rotation setting of one row had its latent error)."""
     from numpyro import handlers
     from numpyro.infer import Predictive
 

@@ -21,6 +21,9 @@ from brdf_infer.bench._instrument import (
     ess_rows,
     node_rows,
 )
+from brdf_infer.bench._misspec import HEADERS as MISSPEC_HEADERS
+from brdf_infer.bench._misspec import misspec_rows
+from brdf_infer.bench._misspec import section_text as misspec_text
 from brdf_infer.bench._raytrace import raytrace_rows
 from brdf_infer.bench._robustness import HEADERS as ROBUSTNESS_HEADERS
 from brdf_infer.bench._robustness import robustness_rows
@@ -88,30 +91,33 @@ def _raytrace_plot(rows, path: Path) -> None:
 def write_report(out: Path, quick: bool, progress=print) -> Path:
     """Run the benchmarks and write ``out`` (Markdown) plus PNG plots beside it."""
     started = time.perf_counter()
-    progress("benchmark 1/11: TIS quadratures ...")
+    progress("benchmark 1/12: TIS quadratures ...")
     tis_table = tis_rows(quick)
     count, batch_seconds, batch_compile = batched_throughput(quick)
-    progress("benchmark 2/11: fits ...")
+    progress("benchmark 2/12: fits ...")
     scene = load_scene("lya")
     fits = fit_rows(scene, scene.load_measurements(), quick)
-    progress("benchmark 3/11: samplers ...")
+    progress("benchmark 3/12: samplers ...")
     samplers, reference = sampler_rows(scene, quick, progress)
-    progress("benchmark 4/11: ray tracer ...")
+    progress("benchmark 4/12: ray tracer ...")
     traces, reference_rays = raytrace_rows(scene, quick)
-    progress("benchmark 5/11: sampling robustness ...")
+    progress("benchmark 5/12: sampling robustness ...")
     robustness = robustness_rows(scene, quick, progress)
-    progress("benchmark 6/11: simulation-based calibration ...")
+    progress("benchmark 6/12: simulation-based calibration ...")
     calibrations = sbc_rows(scene, quick, progress)
-    progress("benchmark 7/11: exports ...")
+    progress("benchmark 7/12: misspecification ...")
+    misspecified = misspec_rows(scene, quick, progress)
+    misspec_before, misspec_after = misspec_text(misspecified)
+    progress("benchmark 8/12: exports ...")
     grids, abgs = grid_rows(quick), abg_rows(quick)
-    progress("benchmark 8/11: model families ...")
+    progress("benchmark 9/12: model families ...")
     quadratures = quadrature_rows(quick)
     comparison = comparison_row(scene, scene.load_measurements(), quick)
-    progress("benchmark 9/11: batch inference ...")
+    progress("benchmark 10/12: batch inference ...")
     batches = batch_rows(scene, quick, progress=progress)
-    progress("benchmark 10/11: compilation cache ...")
+    progress("benchmark 11/12: compilation cache ...")
     caches = cache_rows(quick, progress)
-    progress("benchmark 11/11: instrument kernels ...")
+    progress("benchmark 12/12: instrument kernels ...")
     measurements = scene.load_measurements()
     kernel_nodes = node_rows(scene, measurements, quick, progress)
     kernel_ess = ess_rows(scene, measurements, quick, progress)
@@ -308,6 +314,14 @@ def write_report(out: Path, quick: bool, progress=print) -> Path:
             f"![SBC ECDF differences, {row.case}]({path.name})"
             for row, path in zip(calibrations[:2], sbc_plots, strict=True)
         ),
+        "",
+        "## Misspecification: what SBC cannot see",
+        "",
+        misspec_before,
+        "",
+        _markdown_table(MISSPEC_HEADERS, [row.cells for row in misspecified]),
+        "",
+        misspec_after,
         "",
         "## Exports",
         "",

@@ -16,6 +16,7 @@ from brdf_infer.posterior._loo import pointwise_loo_terms
 from brdf_infer.posterior._model import (
     LINEAR,
     NOISE_SITES,
+    ModelData,
     PosteriorModel,
     build_posterior_model,
 )
@@ -55,6 +56,7 @@ __all__ = [
     "THRESHOLDS",
     "Draws",
     "FamilyPosteriorModel",
+    "ModelData",
     "NutsProgram",
     "PosteriorModel",
     "PosteriorRun",

@@ -308,13 +308,20 @@ class PosteriorModel:
 
     def _latent_angles(self, data: ModelData, scales: NoiseScales):
         """Perturbed angles (θi + ε, θs + s ε + η) with ε per rotation setting, η per row and
-        s the rotation coupling (:mod:`brdf_infer.error_model`)."""
-        members = data.noise.rotation_members
+        s the rotation coupling (:mod:`brdf_infer.error_model`).
+
+        A setting of two or more rows has its ε in ``rotation_error_std``; a row alone in its
+        setting (``rotation_alone``) has its own in ``rotation_alone_error_std``, a variable per
+        row that only those rows use (a static shape: the data are an argument).
+        """
+        noise = data.noise
+        members = noise.rotation_members
         with numpyro.plate("rotation_settings", members.shape[1]):
             rotation = numpyro.sample("rotation_error_std", dist.Normal(0.0, 1.0))
         with numpyro.plate("camera_rows", members.shape[0]):
             camera = numpyro.sample("camera_error_std", dist.Normal(0.0, 1.0))
-        epsilon = members @ (scales.rotation_deg * rotation)
+            alone = numpyro.sample("rotation_alone_error_std", dist.Normal(0.0, 1.0))
+        epsilon = scales.rotation_deg * (members @ rotation + noise.rotation_alone * alone)
         eta = scales.camera_deg * camera
         rows = data.rows
         coupling = data.noise.theta_s_per_rotation

@@ -120,6 +120,7 @@ def inference_data(
             "linear_std": ["coefficient"],
             "rotation_error_std": ["rotation_setting"],
             "camera_error_std": ["row"],
+            "rotation_alone_error_std": ["row"],
         },
     )
     scene = model.scene
