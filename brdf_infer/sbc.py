@@ -25,9 +25,9 @@ sampler, the whitened reparametrisation and its Jacobian, and that the inference
 the simulator's — and cannot see a wrong model (a wrong calibration size, rotation coupling
 or images per row, or the linearisation of the angle slopes): data and inference would share
 the error. The benchmark's misspecification study (:mod:`brdf_infer.bench._misspec`) measures
-what such errors cost the intervals. Planted faults in the inference only show that the check has power against what it
-checks: ``planted_fault`` (:data:`PLANTED_FAULTS`: the whitening's log-Jacobian dropped, or
-every free prior moved by one prior sd) and ``sigma_scale`` (the likelihood's σ scaled; the
+what such errors cost the intervals. Planted faults in the inference only show that the check
+has power against what it checks: ``planted_fault`` (:data:`PLANTED_FAULTS`: the whitening's
+log-Jacobian dropped, or every free prior moved by one prior sd) and ``sigma_scale`` (the likelihood's σ scaled; the
 learned noise scales absorb most of it, so it fails through them).
 """
 
