@@ -27,8 +27,8 @@ or images per row, or the linearisation of the angle slopes): data and inference
 the error. The benchmark's misspecification study (:mod:`brdf_infer.bench._misspec`) measures
 what such errors cost the intervals. Planted faults in the inference only show that the check
 has power against what it checks: ``planted_fault`` (:data:`PLANTED_FAULTS`: the whitening's
-log-Jacobian dropped, or every free prior moved by one prior sd) and ``sigma_scale`` (the likelihood's σ scaled; the
-learned noise scales absorb most of it, so it fails through them).
+log-Jacobian dropped, or every free prior moved by one prior sd) and ``sigma_scale`` (the
+likelihood's σ scaled; the learned noise scales absorb most of it, so it fails through them).
 """
 
 from __future__ import annotations
