@@ -1,6 +1,8 @@
 """The first hour with one's own data: other geometries sample cleanly with defaults, and a
 scene names its problems before any work."""
 
+import json
+
 import pytest
 
 from brdf_infer.params import UV_PAPER
@@ -14,8 +16,8 @@ from tests.helpers import REPO, run_cli
     "geometry",
     [
         # each geometry compiles its own sampler and runs the default 4 × 1000 draws: the slow
-        # set and the benchmark (seeds 0-2 of each); the README's single-series scene runs to a
-        # report in the suite (test_readme_scene_example_runs_to_a_report)
+        # set and the benchmark (seeds 0-2 of each); the README's single-series scene is fitted
+        # in the suite and runs to a report in the slow set
         pytest.param("single-series", marks=pytest.mark.slow),
         pytest.param("grazing", marks=pytest.mark.slow),
         pytest.param("specular", marks=pytest.mark.slow),
@@ -45,16 +47,33 @@ def readme_scene_example() -> str:
     return section.split("```toml\n", 1)[1].split("```", 1)[0]
 
 
-def test_readme_scene_example_runs_to_a_report(tmp_path, capsys):
-    """Copied verbatim with a CSV of the documented columns (series I of the bundled data)."""
+def readme_scene_folder(tmp_path):
+    """The README's scene copied verbatim, with a CSV of the documented columns (series I of
+    the bundled data)."""
     (tmp_path / "scene.toml").write_text(readme_scene_example())
     bundled = (REPO / "data" / "lya_measurements.csv").read_text().splitlines()
     rows = [bundled[0]] + [line for line in bundled[1:] if line.startswith("I,")]
     (tmp_path / "my_measurements.csv").write_text("\n".join(rows) + "\n")
+    return tmp_path / "scene.toml"
+
+
+def test_readme_scene_example_loads_and_fits(tmp_path, capsys):
+    """The README's scene is valid as printed and its model fits (least squares); the run to a
+    report, which compiles a sampler of its own, is the slow test below."""
+    scene = readme_scene_folder(tmp_path)
+    code, stdout, err = run_cli("fit", str(scene), "--method", "lsq", "--json", capsys=capsys)
+    assert code == 0, err
+    fit = json.loads(stdout)
+    assert 0 < fit["params"]["brdf0"] < 1, fit["params"]
+
+
+@pytest.mark.slow  # its own sampler (one series): ≈ 50 s of compiling and sampling
+def test_readme_scene_example_runs_to_a_report(tmp_path, capsys):
+    scene = readme_scene_folder(tmp_path)
     out = tmp_path / "out"
     code, stdout, err = run_cli(
         "run",
-        str(tmp_path / "scene.toml"),
+        str(scene),
         "--out",
         str(out),
         "--chains",

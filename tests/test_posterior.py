@@ -254,6 +254,8 @@ def test_emcee_resume_after_kill_reproduces_the_uninterrupted_run(tmp_path):
     assert not checkpoint.exists()
 
 
+# the two emcee tests of 16 walkers share one compiled program: on one worker, one compile
+@pytest.mark.xdist_group("emcee16")
 def test_sigterm_leaves_a_resumable_checkpoint_and_exit_130(tmp_path):
     command = emcee_command(200000, "--out", str(tmp_path))
     process = subprocess.Popen(
@@ -309,6 +311,7 @@ def test_the_earlier_spread_error_model_stays_reachable(lya, capsys, tmp_path):
     assert json.loads(idata.posterior.attrs["error_model"])["model"] == "spread"
 
 
+@pytest.mark.xdist_group("emcee16")
 def test_resume_refuses_a_checkpoint_another_run_wrote(lya, tmp_path, capsys):
     """A checkpoint of lya is not resumed as lya-fixed (other scene text, priors and
     dimension), nor with another burn-in: exit 2, one line naming what differs, nothing
@@ -354,6 +357,7 @@ def test_resume_refuses_a_checkpoint_another_run_wrote(lya, tmp_path, capsys):
     assert code == 2 and "differs in: burn (10 there, 20 now)" in err
 
 
+@pytest.mark.slow  # its own sampler; the suite's SBC of lya-fixed checks the same in every draw
 def test_fixed_scene_keeps_alpha_and_theta_s0(lya):
     run = run_posterior(
         load_scene("lya-fixed"), lya[1], chains=1, warmup=150, draws=150, progress=False
