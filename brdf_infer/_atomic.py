@@ -8,6 +8,8 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
+from brdf_infer._outlock import note_written
+
 
 def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
     """Write ``data`` to ``path`` so that readers see the old file or the whole new one."""
@@ -32,6 +34,7 @@ def publish(temporary: str | Path, path: str | Path) -> None:
     os.umask(umask)
     os.chmod(temporary, 0o666 & ~umask)
     os.replace(temporary, path)
+    note_written(path)
 
 
 def atomic_write_json(path: str | Path, content: Any) -> Path:

@@ -20,7 +20,10 @@ The run folders of a group are written one after another, each under a
 temporary name beside its place and renamed into place when complete, so a folder under its
 scene's name is always a complete run. A batch stops within seconds when cancelled
 (:func:`run_batch` ``cancel``; ``brdf-infer batch`` on SIGINT or SIGTERM:
-:func:`run_batch_until_signalled`), keeping the folders that were complete and no partial one.
+:func:`run_batch_until_signalled`), keeping the folders that were complete and no partial one;
+killed outright, it leaves the same (and half-written folders under temporary names, which the
+next batch into the folder removes). The output folder has one writer at a time
+(:mod:`brdf_infer._outlock`) and stays marked incomplete until a batch into it finishes.
 
 A scene that fails to load or validate is reported with its error and skipped; it never takes
 the batch down. So is a scene whose rows fail a plausibility check (values that look like
@@ -49,6 +52,7 @@ import numpy as np
 
 from brdf_infer._atomic import atomic_write_json
 from brdf_infer._nuts_settings import check_nuts_settings
+from brdf_infer._outlock import note_written, writing
 from brdf_infer.errors import BadInputError
 from brdf_infer.plausibility import measurement_checks, require_plausible
 from brdf_infer.posterior import NutsProgram, build_model, chain_keys, model_name
@@ -61,6 +65,7 @@ from brdf_infer.scene import Scene, load_scene
 
 BATCH_FILE = "batch.json"
 PARTIAL_MARK = ".partial-"  # out/.<scene>.partial-<pid>: a run folder being written
+OLD_MARK = ".old-"  # out/.<scene>.old-<pid>: the folder a complete one is replacing
 GRACE_SECONDS = 3.0  # after a signal, how long the batch may take to stop on its own
 INTERRUPTED = "interrupted before its run was complete"
 
@@ -249,15 +254,17 @@ def _pid_alive(pid: int) -> bool:
 
 def remove_stale_partials(out: Path) -> list[Path]:
     """Remove run folders left half-written in ``out`` by a batch that was killed outright
-    (SIGKILL, power loss): ``.<scene>.partial-<pid>`` of a process that no longer runs."""
+    (SIGKILL, power loss): ``.<scene>.partial-<pid>`` (and ``.<scene>.old-<pid>``, the folder
+    it was replacing) of a process that no longer runs."""
     removed = []
     if not out.is_dir():
         return removed
-    for path in out.glob(f".*{PARTIAL_MARK}*"):
-        pid = path.name.rsplit(PARTIAL_MARK, 1)[-1]
-        if pid.isdigit() and (int(pid) == os.getpid() or not _pid_alive(int(pid))):
-            _remove(path)
-            removed.append(path)
+    for mark in (PARTIAL_MARK, OLD_MARK):
+        for path in out.glob(f".*{mark}*"):
+            pid = path.name.rsplit(mark, 1)[-1]
+            if pid.isdigit() and (int(pid) == os.getpid() or not _pid_alive(int(pid))):
+                _remove(path)
+                removed.append(path)
     return removed
 
 
@@ -320,6 +327,10 @@ class Batch:
 
     def run(self) -> BatchResult:
         """Sample and write every scene; raises :class:`BatchInterrupted` when cancelled."""
+        with writing(self.out, "batch"):  # one writer; an interrupted batch leaves it marked
+            return self._run()
+
+    def _run(self) -> BatchResult:
         try:
             groups = self._load()
             for number, members in enumerate(groups.values(), start=1):
@@ -444,12 +455,7 @@ class Batch:
             with self._lock:
                 self._partials.discard(partial)
         entry.summary = run.summary
-        band = run.bands.get("tis")
-        entry.tis = (
-            None
-            if band is None
-            else {k: band[k] for k in ("theta_i_deg", "median", "lo95", "hi95")}
-        )
+        entry.tis = _tis_entry(run.bands)
         entry.done = True
         self.progress(f"  {entry.scene.name}: {entry.out}")
 
@@ -457,7 +463,7 @@ class Batch:
         """Rename the complete folder ``partial`` to ``target`` (an earlier run's folder there
         is replaced)."""
         if target.exists() or target.is_symlink():
-            old = target.parent / f".{target.name}.old-{os.getpid()}"
+            old = target.parent / f".{target.name}{OLD_MARK}{os.getpid()}"
             with self._lock:
                 self._partials.add(old)
             _remove(old)
@@ -468,6 +474,13 @@ class Batch:
                 self._partials.discard(old)
         else:
             os.replace(partial, target)
+        note_written(target)
+
+
+def _tis_entry(bands: dict) -> dict[str, list] | None:
+    """The TIS band of a run's bands, as a batch entry lists it."""
+    band = bands.get("tis")
+    return None if band is None else {k: band[k] for k in ("theta_i_deg", "median", "lo95", "hi95")}
 
 
 class _Stop(Exception):
@@ -495,7 +508,8 @@ def run_batch(
         cancel: when set, the batch stops between sampling chunks and between run folders.
 
     Raises:
-        BadInputError: settings out of range (a scene's own errors are reported in its entry).
+        BadInputError: settings out of range, or another process writing ``out`` (a scene's
+            own errors are reported in its entry).
         BatchInterrupted: ``cancel`` was set; the complete run folders stay, no partial one,
             and ``batch.json`` lists every scene (the unfinished ones as interrupted).
     """

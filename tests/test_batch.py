@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from brdf_infer._arviz import az
+from brdf_infer._outlock import LOCK_FILE
 from tests.helpers import (
     SUITE_WARMUP,
     fewer_rows,
@@ -304,7 +305,8 @@ def _check_interrupted_folder(out: Path, code: int, stderr: str) -> int:
     """Only complete run folders and batch.json in ``out``, listed as such; returns their
     number."""
     assert "Traceback" not in stderr
-    assert not [p.name for p in out.iterdir() if p.name.startswith(".")]  # no partial folder
+    # no partial folder; the lock file marks the batch's folder incomplete until it is resumed
+    assert [p.name for p in out.iterdir() if p.name.startswith(".")] == [LOCK_FILE]
     folders = sorted(p for p in out.iterdir() if p.is_dir())
     for folder in folders:
         assert {p.name for p in folder.iterdir()} == {"posterior.nc", "summary.json", "bands.json"}

@@ -17,6 +17,7 @@ from numpyro.infer import Predictive
 import brdf_infer
 from brdf_infer._arviz import az
 from brdf_infer._atomic import atomic_write_json, publish
+from brdf_infer._outlock import require_complete
 from brdf_infer.errors import BadInputError
 from brdf_infer.model import REFERENCE_FAMILY, ModelFamily, family
 from brdf_infer.params import PARAM_NAMES
@@ -225,6 +226,7 @@ def write_results(out: Path, idata: az.InferenceData, summary: dict, bands: dict
 
 
 def _run_posterior_group(run: Path):
+    require_complete(run)
     path = run / POSTERIOR_FILE
     if not path.is_file():
         raise BadInputError("no posterior.nc here (run 'brdf-infer posterior' first)", file=run)
