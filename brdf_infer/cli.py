@@ -928,7 +928,7 @@ def _command_batch(args: argparse.Namespace) -> None:
     out = claim_output_dir(args.out or Path("reports") / "batch", "batch", args.claims)
     try:  # SIGINT and SIGTERM stop the batch, keeping the complete run folders
         result = run_batch_until_signalled(
-            args.scenes, out, settings, model=args.model, progress=_progress
+            args.scenes, out, settings, model=args.model, progress=_progress, resume=args.resume
         )
     except BatchInterrupted as interrupted:
         # the complete run folders and batch.json are on disk, nothing half-written is left;
@@ -1166,6 +1166,12 @@ def build_parser() -> argparse.ArgumentParser:
         "sharded over every device (auto: threads on a single CPU, else vmap)",
     )
     batch.add_argument("--out", help="output directory (default: reports/batch)")
+    batch.add_argument(
+        "--resume",
+        action="store_true",
+        help="keep the scenes whose run folders in --out are complete (same scene, data and "
+        "settings) and run the rest",
+    )
     batch.add_argument("--json", action="store_true", help="one JSON object on stdout")
     _model_argument(batch)
     _force_argument(batch)

@@ -108,6 +108,7 @@ def run_fingerprint(model: PosteriorModel, measurements: Measurements) -> dict[s
             measurements.theta_s_deg,
             measurements.reflectance,
             np.zeros(0) if measurements.reflectance_err is None else measurements.reflectance_err,
+            *(() if measurements.phi_s_deg is None else (measurements.phi_s_deg,)),
         )
     )
     scene = model.scene
@@ -335,6 +336,7 @@ def complete_run(
         "pi_brdf0": pi_brdf0,
         "seconds": dict(result.seconds),
         "forced": list(forced),
+        "fingerprint": run_fingerprint(model, measurements),  # what ran: for a resume
     }
     summary["verdict"] = posterior_verdict(summary, bands, theta_i_band, forced).as_json()
     clock.lap("predictive")
