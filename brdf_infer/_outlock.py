@@ -11,8 +11,11 @@ carries an advisory lock (``flock``) for as long as the writer lives.
   every reader (:func:`require_complete`: ``report``, ``tis --run``, ``export --run``, …)
   refuses it in one line. The next command that produces the folder takes the stale file over
   (the kernel released the dead writer's lock), removes the temporary files the dead writer
-  left, and writes the folder again. A command that only adds to a folder (``report``, the
-  export record of ``export --run``) takes over only a stale lock of its own command.
+  left, and writes the folder again.
+- A command that only adds to a complete folder (``report``, the export record of
+  ``export --run``) requires it complete and holds ``.brdf-infer.adding.lock`` instead: one
+  adder at a time, and an adder that dies leaves the folder complete (its files are written
+  atomically; the next adder takes its lock over).
 - A writer that stops before writing anything leaves nothing: the lock file goes, and so do
   the folders it created for it (bad input creates no folder).
 
@@ -39,6 +42,7 @@ from pathlib import Path
 from brdf_infer.errors import BadInputError
 
 LOCK_FILE = ".brdf-infer.lock"
+ADDING_LOCK_FILE = ".brdf-infer.adding.lock"
 # the temporary files of brdf_infer._atomic (tempfile.mkstemp: 8 random characters)
 _TEMPORARY = re.compile(r"^\..+\.[A-Za-z0-9_]{8}\.tmp$")
 _ATTEMPTS = 10  # a reader probing the lock holds it for microseconds: retry before refusing
@@ -83,6 +87,7 @@ class Claim:
 
     folder: Path
     previous: Owner | None = None
+    _adds: bool = False
     _fd: int | None = None
     _owner: Owner | None = None
     _count: int = 0
@@ -91,7 +96,7 @@ class Claim:
 
 
 _HELD: dict[Path, Claim] = {}
-_GUARD = threading.Lock()
+_GUARD = threading.RLock()  # re-entrant: an adder checks the folder while holding it
 
 
 def _key(folder: Path) -> Path:
@@ -232,9 +237,11 @@ def _open_locked(path: Path) -> tuple[int, bool] | None:
     return None
 
 
-def _acquire(folder: Path, command: str, option: str, takes_over: bool) -> Claim:
-    created = _make_folder(folder, option)
-    path = folder / LOCK_FILE
+def _acquire(folder: Path, command: str, option: str, adds: bool) -> Claim:
+    if adds:
+        require_complete(folder)
+    created = [] if adds else _make_folder(folder, option)
+    path = folder / (ADDING_LOCK_FILE if adds else LOCK_FILE)
     try:
         opened = _open_locked(path)
     except OSError as error:
@@ -254,9 +261,6 @@ def _acquire(folder: Path, command: str, option: str, takes_over: bool) -> Claim
         )
     fd, new = opened
     previous = None if new else _read_owner(path) or Owner(None, "?", "?", "?")
-    if previous is not None and not takes_over and previous.command != command:
-        os.close(fd)  # the stale file stays: the folder is still incomplete
-        raise BadInputError(_incomplete(previous), file=folder)
     owner = Owner(os.getpid(), socket.gethostname(), command, _now())
     try:
         _write_owner(fd, owner)
@@ -271,18 +275,21 @@ def _acquire(folder: Path, command: str, option: str, takes_over: bool) -> Claim
         ) from None
     if previous is not None:
         _remove_debris(folder)
-    return Claim(folder, previous, fd, owner, 0, False, created)
+    return Claim(folder, previous, adds, fd, owner, 0, False, created)
 
 
 def _release(claim: Claim, error: BaseException | None) -> None:
-    """Finish a claim: the lock file goes when the write completed or wrote nothing; it stays,
-    marked as stopped, when an error interrupted a write."""
-    path = claim.folder / LOCK_FILE
+    """Finish a claim: the lock file goes when the write completed or wrote nothing (or only
+    added to the folder); it stays, marked as stopped, when an error interrupted a write."""
+    path = claim.folder / (ADDING_LOCK_FILE if claim._adds else LOCK_FILE)
     fd, claim._fd = claim._fd, None
     if fd is None:
         return
     try:
-        if error is not None and not claim._written and claim.previous is not None:
+        if claim._adds:
+            with contextlib.suppress(FileNotFoundError):
+                path.unlink()
+        elif error is not None and not claim._written and claim.previous is not None:
             _write_owner(fd, claim.previous)  # took over an unfinished folder, wrote nothing
         elif error is None or not claim._written:
             with contextlib.suppress(FileNotFoundError):
@@ -299,7 +306,7 @@ def _release(claim: Claim, error: BaseException | None) -> None:
 
 @contextlib.contextmanager
 def writing(
-    folder: str | Path, command: str, *, option: str = "--out", takes_over: bool = True
+    folder: str | Path, command: str, *, option: str = "--out", adds: bool = False
 ) -> Iterator[Claim]:
     """Hold ``folder`` (created with its parents if missing) for writing (module docstring).
 
@@ -307,18 +314,18 @@ def writing(
         folder: the results folder.
         command: the writer, as the refusal names it (``run``, ``batch``, …).
         option: the option that named the folder, for messages.
-        takes_over: a producer of the folder, which takes over the stale lock of any writer
-            that died; otherwise (``report``) only the stale lock of the same command.
+        adds: the command only adds to a complete folder (``report``): the folder must be
+            complete, and an adder that dies leaves it complete.
 
     Raises:
-        BadInputError: another process writes ``folder``; the folder cannot be created or
-            written; or (``takes_over`` false) another command left it incomplete.
+        BadInputError: another process writes ``folder`` (or, ``adds``, adds to it); the
+            folder cannot be created or written; or (``adds``) it is incomplete.
     """
     key = _key(Path(folder))
     with _GUARD:
         claim = _HELD.get(key)
         if claim is None:
-            claim = _acquire(Path(folder), command, option, takes_over)
+            claim = _acquire(Path(folder), command, option, adds)
             _HELD[key] = claim
         claim._count += 1
     failure: BaseException | None = None

@@ -13,7 +13,7 @@ import time
 import pytest
 
 from brdf_infer._atomic import atomic_write_json
-from brdf_infer._outlock import LOCK_FILE, require_complete, writing
+from brdf_infer._outlock import ADDING_LOCK_FILE, LOCK_FILE, require_complete, writing
 from brdf_infer.errors import BadInputError
 from tests.helpers import run_cli
 
@@ -48,7 +48,8 @@ def test_one_writer_per_folder_and_a_dead_writers_folder_is_incomplete(tmp_path,
     reader (tis --run) is told it is being written; once that process is killed, every reader
     refuses the incomplete folder in one line, a command that only adds to it (report) does
     not take it over, and the next producer does: the dead writer's temporary files go, and
-    the folder is complete when the producer finishes."""
+    the folder is complete when the producer finishes. An adder that dies leaves the folder
+    complete."""
     folder = tmp_path / "out"
     holder = subprocess.Popen(
         [sys.executable, "-c", _HOLDER, str(folder)], stdout=subprocess.PIPE, text=True
@@ -77,7 +78,7 @@ def test_one_writer_per_folder_and_a_dead_writers_folder_is_incomplete(tmp_path,
         assert line.startswith(f"brdf-infer: error: {folder}: incomplete: 'brdf-infer run' ")
         assert "stopped before finishing it; run that command again" in line
     assert not (tmp_path / "bsdf").exists()
-    adding = writing(folder, "report", takes_over=False)  # report only adds to a folder
+    adding = writing(folder, "report", adds=True)  # report only adds to a complete folder
     with pytest.raises(BadInputError, match="incomplete"), adding:
         pass
     with writing(folder, "run") as claim:
@@ -87,6 +88,12 @@ def test_one_writer_per_folder_and_a_dead_writers_folder_is_incomplete(tmp_path,
         atomic_write_json(folder / "summary.json", {})
     require_complete(folder)
     assert not (folder / LOCK_FILE).exists()
+    # an adder killed while adding (its lock file left) leaves the folder complete
+    (folder / ADDING_LOCK_FILE).write_text(json.dumps({"pid": holder.pid, "command": "report"}))
+    require_complete(folder)
+    with writing(folder, "report", adds=True) as claim:
+        assert claim.previous.pid == holder.pid
+    assert not (folder / ADDING_LOCK_FILE).exists()
 
 
 def test_bad_input_leaves_no_folder_and_an_error_after_writing_leaves_it_incomplete(tmp_path):

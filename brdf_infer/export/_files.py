@@ -532,7 +532,7 @@ def run_export(
 def record_export(run: Path, result: dict) -> Path:
     """Note an export of ``run`` in ``run/exports.json`` (one entry per format and folder), so
     that ``brdf-infer report`` can show it."""
-    with writing(run, "export", option="--run", takes_over=False):
+    with writing(run, "export", option="--run", adds=True):
         return _record_export(run, result)
 
 

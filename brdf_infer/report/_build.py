@@ -11,7 +11,7 @@ import numpy as np
 
 from brdf_infer._arviz import az
 from brdf_infer._atomic import atomic_write_bytes
-from brdf_infer._outlock import require_complete, writing
+from brdf_infer._outlock import writing
 from brdf_infer.compare import COMPARE_FILE
 from brdf_infer.errors import BadInputError
 from brdf_infer.model import REFERENCE_FAMILY, fold_statement
@@ -67,8 +67,7 @@ def write_report(run: Path, progress=print) -> tuple[Path, Verdict]:
             being written, or left incomplete by a writer that stopped), or another process
             writes its report.
     """
-    require_complete(run)
-    with writing(run, "report", option="RUN_DIR", takes_over=False):
+    with writing(run, "report", option="RUN_DIR", adds=True):
         return _write_report(run, progress)
 
 
