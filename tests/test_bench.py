@@ -25,6 +25,7 @@ def test_quick_benchmark_report(tmp_path, capsys):
     assert "## Model families" in text and "harvey-shack" in text and "elpd_loo" in text
     for case in ("σ × 1.35", "log-Jacobian dropped", "priors moved 1 sd"):
         assert f"| planted: {case} |" in text, case
+    assert "## Bad input" in text and "| parameter JSON | 500 |" in text
     assert (tmp_path / "benchmarks_tis.png").stat().st_size > 10_000
 
 
