@@ -11,7 +11,7 @@ import numpy as np
 
 from brdf_infer._arviz import az
 from brdf_infer._atomic import atomic_write_bytes
-from brdf_infer._outlock import writing
+from brdf_infer._outlock import require_complete, writing
 from brdf_infer.compare import COMPARE_FILE
 from brdf_infer.errors import BadInputError
 from brdf_infer.model import REFERENCE_FAMILY, fold_statement
@@ -67,13 +67,15 @@ def write_report(run: Path, progress=print) -> tuple[Path, Verdict]:
             being written, or left incomplete by a writer that stopped), or another process
             writes its report.
     """
-    with writing(run, "report", option="RUN_DIR", adds=True):
-        return _write_report(run, progress)
-
-
-def _write_report(run: Path, progress) -> tuple[Path, Verdict]:
     started = time.perf_counter()
-    idata, summary, bands = _load(run)
+    require_complete(run)
+    loaded = _load(run)
+    with writing(run, "report", option="RUN_DIR", adds=True):
+        return _write_report(run, loaded, started, progress)
+
+
+def _write_report(run: Path, loaded, started: float, progress) -> tuple[Path, Verdict]:
+    idata, summary, bands = loaded
     attrs = idata.posterior.attrs
     scene = load_scene(attrs["scene_file"])
     member, physical = family_draws(idata.posterior)
