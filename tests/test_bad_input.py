@@ -111,6 +111,15 @@ def test_malformed_measurement_csv(tmp_path, capsys, case):
     assert "m.csv" in line
 
 
+def test_a_nul_character_is_refused_with_its_line(tmp_path):
+    """Found by the generated inputs: a NUL after a name ('1\\x00') was dropped by NumPy, so
+    two different rows became duplicates in the loaded table."""
+    path = tmp_path / "m.csv"
+    path.write_bytes(with_row('II,"1"\x00,30,30,1e-4,1e-5').encode())
+    with pytest.raises(BadInputError, match=r"m.csv, line 4: contains a NUL character"):
+        load_measurements(path)
+
+
 def test_missing_and_unreadable_measurement_paths(tmp_path, capsys):
     scene = write_scene(tmp_path, None)
     message = expect_bad_input(capsys, "fit", str(scene), match="no such file: ")
