@@ -187,7 +187,7 @@ class BatchInterrupted(Exception):
         total = sum(entry.error is None for entry in self.result.entries)
         return (
             f"interrupted ({name}): {self.result.complete} of {total} scene(s) complete in "
-            f"{out} (listed in {BATCH_FILE}); no partial folder left"
+            f"{out} (listed in {BATCH_FILE}); no partial folder left (continue with --resume)"
         )
 
 

@@ -391,7 +391,7 @@ def _check_interrupted_folder(out: Path, code: int, stderr: str) -> int:
     assert last == (
         f"brdf-infer: interrupted ({'SIGINT' if code == 130 else 'SIGTERM'}): "
         f"{len(folders)} of 12 scene(s) complete in {out} (listed in batch.json); "
-        "no partial folder left"
+        "no partial folder left (continue with --resume)"
     )
     return len(folders)
 
