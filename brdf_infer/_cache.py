@@ -4,6 +4,15 @@ Compiling the samplers takes longer than sampling; with the cache a second run o
 model structure on data of the same shape loads the compiled programs from disk instead.
 ``BRDF_INFER_CACHE`` names another folder, or ``off`` disables it; the command line's
 ``--no-cache`` disables it for one run.
+
+Several processes may share the folder (a notebook, a batch, the test suite). JAX writes each
+entry in place, without a lock; a process that meets a half-written entry (another process
+is writing it, or was killed while writing it) cannot decompress it, warns on stderr and
+compiles the program itself: never a hang, never a wrong program (tested: four processes at
+once on one fresh folder, repeated, finish with the same results; every entry cut in half is
+compiled again). An entry a killed process left half-written stays (JAX does not replace an
+entry) and costs that compilation and the warning in later runs, until the folder is cleared.
+The project writes nothing of its own into the folder.
 """
 
 from __future__ import annotations

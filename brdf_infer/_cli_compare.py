@@ -7,7 +7,7 @@ import json
 import sys
 from collections.abc import Callable, Sequence
 
-from brdf_infer._outdir import check_output_dir
+from brdf_infer._outdir import claim_output_dir
 from brdf_infer.errors import BadInputError
 
 DEFAULT_MODELS = ("strumik2024", "abg", "harvey-shack", "lambertian", "lambertian+abg")
@@ -60,7 +60,7 @@ def command_compare(
                 f"must be at least 1, got {getattr(settings, field)}", field=f"--{field}"
             )
     scene, measurements = scene_and_measurements(args.scene)
-    out = check_output_dir(args.out) if args.out else None
+    out = claim_output_dir(args.out, "compare", args.claims) if args.out else None
     progress(
         f"comparing {', '.join(names)} on scene '{scene.name}' by PSIS-LOO "
         f"({settings.chains} chains × {settings.draws} draws each) ..."

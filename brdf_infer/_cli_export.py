@@ -13,6 +13,7 @@ import numpy as np
 
 from brdf_infer._cli_fold import add_fold_arguments, chosen_fold, refuse_fold
 from brdf_infer._outdir import check_output_dir
+from brdf_infer._outlock import writing
 from brdf_infer.errors import BadInputError
 
 MAX_INTEGRAL_ERROR = 0.01  # a table whose own hemisphere integral misses its TIS by more
@@ -122,8 +123,11 @@ def command_export(
     available = source.count
     if source.from_run and draws > available:
         raise BadInputError(f"{draws} > the run's {available} draws", field="--draws")
+    # one writer per folder; an export that died here left files its rerun may replace
+    claim = args.claims.enter_context(writing(out, "export"))
+    unfinished = claim.previous is not None and claim.previous.command == "export"
     existing = [name for name in planned_files(source, args.format, draws) if (out / name).exists()]
-    if existing and not args.force:
+    if existing and not (args.force or unfinished):
         raise BadInputError(
             f"{existing[0]} exists (use --force to overwrite)", file=out / existing[0]
         )

@@ -7,7 +7,7 @@ import json
 import sys
 from collections.abc import Callable, Sequence
 
-from brdf_infer._outdir import check_output_dir
+from brdf_infer._outdir import claim_output_dir
 
 
 def add_sensitivity_arguments(parser: argparse.ArgumentParser) -> None:
@@ -75,7 +75,7 @@ def command_sensitivity(
         if args.variants is None
         else [parse_variant(spec, scene) for spec in args.variants]
     )
-    out = check_output_dir(args.out) if args.out else None
+    out = claim_output_dir(args.out, "sensitivity", args.claims) if args.out else None
     progress(
         f"sensitivity of scene '{scene.name}' to its error model: the default and "
         f"{len(variants)} variant(s) ({', '.join(v.name for v in variants)}), "

@@ -1,10 +1,14 @@
-"""Output folders are checked before any work and created only when results are written."""
+"""Output folders are checked before any work and held by one writer while it writes
+(:mod:`brdf_infer._outlock`); a folder created for a command that then writes nothing (bad
+input) is removed again."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 from pathlib import Path
 
+from brdf_infer._outlock import writing
 from brdf_infer.errors import BadInputError
 
 
@@ -25,4 +29,18 @@ def check_output_dir(path: str | Path, option: str = "--out") -> Path:
         raise BadInputError(
             f"cannot write here ({existing} is not writable)", file=path, field=option
         )
+    return path
+
+
+def claim_output_dir(
+    path: str | Path, command: str, claims: contextlib.ExitStack, option: str = "--out"
+) -> Path:
+    """:func:`check_output_dir`, then hold ``path`` for ``command`` until ``claims`` closes
+    (the folder is created for the lock; one writer per folder, :mod:`brdf_infer._outlock`).
+
+    Raises:
+        BadInputError: as :func:`check_output_dir`, or another process writes ``path``.
+    """
+    path = check_output_dir(path, option)
+    claims.enter_context(writing(path, command, option=option))
     return path

@@ -20,7 +20,17 @@ The run folders of a group are written one after another, each under a
 temporary name beside its place and renamed into place when complete, so a folder under its
 scene's name is always a complete run. A batch stops within seconds when cancelled
 (:func:`run_batch` ``cancel``; ``brdf-infer batch`` on SIGINT or SIGTERM:
-:func:`run_batch_until_signalled`), keeping the folders that were complete and no partial one.
+:func:`run_batch_until_signalled`), keeping the folders that were complete and no partial one;
+killed outright, it leaves the same (and half-written folders under temporary names, which the
+next batch into the folder removes). The output folder has one writer at a time
+(:mod:`brdf_infer._outlock`) and stays marked incomplete until a batch into it finishes.
+
+``resume=True`` (``brdf-infer batch --resume``) keeps every scene whose run folder is in place
+and was written by the same scene text, rows, model options, family and NUTS settings (the
+``fingerprint`` and ``settings`` of its ``summary.json``), and runs the rest; a folder of another
+run is refused, not replaced. The rest of a group run through the program of the whole group
+(padded to the same shape, the same keys), so on one CPU device the resumed scenes get the
+draws an uninterrupted batch gives them, bit for bit (in vmap mode, to rounding).
 
 A scene that fails to load or validate is reported with its error and skipped; it never takes
 the batch down. So is a scene whose rows fail a plausibility check (values that look like
@@ -49,18 +59,21 @@ import numpy as np
 
 from brdf_infer._atomic import atomic_write_json
 from brdf_infer._nuts_settings import check_nuts_settings
+from brdf_infer._outlock import note_written, require_complete, writing
 from brdf_infer.errors import BadInputError
 from brdf_infer.plausibility import measurement_checks, require_plausible
 from brdf_infer.posterior import NutsProgram, build_model, chain_keys, model_name
 from brdf_infer.posterior._nuts import Cancelled, stack_data
 from brdf_infer.posterior._padding import pad_datasets, paddable, padded_signature, row_count
 from brdf_infer.posterior._potential import FlatPotential
-from brdf_infer.posterior._run import complete_run
+from brdf_infer.posterior._results import BANDS_FILE, POSTERIOR_FILE, SUMMARY_FILE
+from brdf_infer.posterior._run import complete_run, run_fingerprint
 from brdf_infer.posterior._samplers import nuts_draws
 from brdf_infer.scene import Scene, load_scene
 
 BATCH_FILE = "batch.json"
 PARTIAL_MARK = ".partial-"  # out/.<scene>.partial-<pid>: a run folder being written
+OLD_MARK = ".old-"  # out/.<scene>.old-<pid>: the folder a complete one is replacing
 GRACE_SECONDS = 3.0  # after a signal, how long the batch may take to stop on its own
 INTERRUPTED = "interrupted before its run was complete"
 
@@ -174,7 +187,7 @@ class BatchInterrupted(Exception):
         total = sum(entry.error is None for entry in self.result.entries)
         return (
             f"interrupted ({name}): {self.result.complete} of {total} scene(s) complete in "
-            f"{out} (listed in {BATCH_FILE}); no partial folder left"
+            f"{out} (listed in {BATCH_FILE}); no partial folder left (continue with --resume)"
         )
 
 
@@ -249,15 +262,17 @@ def _pid_alive(pid: int) -> bool:
 
 def remove_stale_partials(out: Path) -> list[Path]:
     """Remove run folders left half-written in ``out`` by a batch that was killed outright
-    (SIGKILL, power loss): ``.<scene>.partial-<pid>`` of a process that no longer runs."""
+    (SIGKILL, power loss): ``.<scene>.partial-<pid>`` (and ``.<scene>.old-<pid>``, the folder
+    it was replacing) of a process that no longer runs."""
     removed = []
     if not out.is_dir():
         return removed
-    for path in out.glob(f".*{PARTIAL_MARK}*"):
-        pid = path.name.rsplit(PARTIAL_MARK, 1)[-1]
-        if pid.isdigit() and (int(pid) == os.getpid() or not _pid_alive(int(pid))):
-            _remove(path)
-            removed.append(path)
+    for mark in (PARTIAL_MARK, OLD_MARK):
+        for path in out.glob(f".*{mark}*"):
+            pid = path.name.rsplit(mark, 1)[-1]
+            if pid.isdigit() and (int(pid) == os.getpid() or not _pid_alive(int(pid))):
+                _remove(path)
+                removed.append(path)
     return removed
 
 
@@ -274,9 +289,11 @@ class Batch:
         model: str | None = None,
         progress: Callable[[str], None] = _silent,
         cancel: threading.Event | None = None,
+        resume: bool = False,
     ):
         settings.check()
         self.sources, self.out, self.settings = sources, Path(out), settings
+        self.resume = resume
         self.family, self.progress = model, progress
         self.cancel = cancel if cancel is not None else threading.Event()
         self.entries: list[SceneEntry] = []
@@ -320,6 +337,10 @@ class Batch:
 
     def run(self) -> BatchResult:
         """Sample and write every scene; raises :class:`BatchInterrupted` when cancelled."""
+        with writing(self.out, "batch"):  # one writer; an interrupted batch leaves it marked
+            return self._run()
+
+    def _run(self) -> BatchResult:
         try:
             groups = self._load()
             for number, members in enumerate(groups.values(), start=1):
@@ -360,20 +381,71 @@ class Batch:
             entry.out = self.out / folder if entry.error is None else None
         self.groups = len(groups)
         remove_stale_partials(self.out)
+        if self.resume:
+            for entry, member_model, measurements in (m for g in groups.values() for m in g):
+                self._keep_if_complete(entry, member_model, measurements)
+            kept = sum(entry.done for entry in self.entries)
+            self.progress(f"resume: {kept} scene(s) complete in {self.out}, kept")
         return groups
+
+    def _keep_if_complete(self, entry: SceneEntry, model, measurements) -> None:
+        """Mark ``entry`` done when its run folder is in place and this batch wrote it
+        (its summary and bands are then the entry's).
+
+        Raises:
+            BadInputError: the folder holds a complete run of another scene, data or settings.
+        """
+        folder = entry.out
+        files = [folder / name for name in (POSTERIOR_FILE, SUMMARY_FILE, BANDS_FILE)]
+        if not all(path.is_file() for path in files):
+            return  # not there (a scene folder is renamed into place complete): run it
+        require_complete(folder)
+        try:
+            summary = json.loads(files[1].read_text())
+            bands = json.loads(files[2].read_text())
+        except (OSError, ValueError) as error:
+            raise BadInputError(f"cannot read the run to resume: {error}", file=folder) from None
+        settings = self.settings
+        fingerprint = run_fingerprint(model, measurements)
+        recorded = summary.get("fingerprint") or {}
+        differences = [name for name, value in fingerprint.items() if recorded.get(name) != value]
+        ours = {"model": model_name(model), "forced": entry.forced}
+        differences += [name for name, value in ours.items() if summary.get(name) != value]
+        ran = summary.get("settings") or {}
+        differences += [
+            f"--{name.replace('_', '-')}"
+            for name in ("chains", "warmup", "draws", "seed", "target_accept")
+            if ran.get(name) != getattr(settings, name)
+        ]
+        if differences:
+            raise BadInputError(
+                f"holds a complete run of another batch (differs in: {', '.join(differences)}); "
+                "run the batch without --resume to replace it, or into another --out",
+                file=folder,
+                field="--resume",
+            )
+        entry.summary = summary
+        entry.tis = _tis_entry(bands)
+        entry.done = True
 
     def _run_group(self, number: int, count: int, members: list) -> None:
         settings = self.settings
         first = members[0][1]
         datasets = [m.data for _, m, _ in members]
         if paddable(first):  # every member is (one structure key)
-            datasets = pad_datasets(datasets)
+            datasets = pad_datasets(datasets)  # the whole group's shape, also on a resume
         padded = sum(d is not m.data for d, (_, m, _) in zip(datasets, members, strict=True))
         padded = f", {padded} padded to {row_count(datasets[0])} rows" if padded else ""
+        todo = [index for index, (entry, _, _) in enumerate(members) if not entry.done]
+        kept = f", {len(members) - len(todo)} complete already" if len(todo) < len(members) else ""
         self.progress(
-            f"group {number}/{count}: {len(members)} scene(s), {model_name(first)}{padded}, "
+            f"group {number}/{count}: {len(members)} scene(s){kept}, {model_name(first)}{padded}, "
             f"{settings.chains} chains x ({settings.warmup} warmup + {settings.draws} draws)"
         )
+        if not todo:
+            return
+        group_size, members = len(members), [members[index] for index in todo]
+        datasets = [datasets[index] for index in todo]
         program_model = dataclasses.replace(first, data=datasets[0])
         program = NutsProgram(
             program_model, warmup=settings.warmup, target_accept=settings.target_accept
@@ -392,7 +464,7 @@ class Batch:
             "seed": settings.seed,
             "dense_mass": True,
             "target_accept": settings.target_accept,
-            "batch": {"scenes": len(members), "mode": settings.mode},
+            "batch": {"scenes": group_size, "mode": settings.mode},
         }
         shapes: dict[str, dict[str, tuple]] = {}  # the sites of each data shape in the group
         jobs = []
@@ -444,12 +516,7 @@ class Batch:
             with self._lock:
                 self._partials.discard(partial)
         entry.summary = run.summary
-        band = run.bands.get("tis")
-        entry.tis = (
-            None
-            if band is None
-            else {k: band[k] for k in ("theta_i_deg", "median", "lo95", "hi95")}
-        )
+        entry.tis = _tis_entry(run.bands)
         entry.done = True
         self.progress(f"  {entry.scene.name}: {entry.out}")
 
@@ -457,7 +524,7 @@ class Batch:
         """Rename the complete folder ``partial`` to ``target`` (an earlier run's folder there
         is replaced)."""
         if target.exists() or target.is_symlink():
-            old = target.parent / f".{target.name}.old-{os.getpid()}"
+            old = target.parent / f".{target.name}{OLD_MARK}{os.getpid()}"
             with self._lock:
                 self._partials.add(old)
             _remove(old)
@@ -468,6 +535,13 @@ class Batch:
                 self._partials.discard(old)
         else:
             os.replace(partial, target)
+        note_written(target)
+
+
+def _tis_entry(bands: dict) -> dict[str, list] | None:
+    """The TIS band of a run's bands, as a batch entry lists it."""
+    band = bands.get("tis")
+    return None if band is None else {k: band[k] for k in ("theta_i_deg", "median", "lo95", "hi95")}
 
 
 class _Stop(Exception):
@@ -486,6 +560,7 @@ def run_batch(
     model: str | None = None,
     progress: Callable[[str], None] = _silent,
     cancel: threading.Event | None = None,
+    resume: bool = False,
 ) -> BatchResult:
     """Sample the posterior of every scene in ``sources`` (names, TOML paths or globs) into
     ``out/<scene>/`` and write ``out/batch.json`` (module docstring).
@@ -493,13 +568,17 @@ def run_batch(
     Args:
         model: the family of every scene (default: each scene's ``[model] family``).
         cancel: when set, the batch stops between sampling chunks and between run folders.
+        resume: keep the scenes whose run folders this batch already wrote (module docstring).
 
     Raises:
-        BadInputError: settings out of range (a scene's own errors are reported in its entry).
+        BadInputError: settings out of range, another process writing ``out``, or (``resume``)
+            a run folder of another run (a scene's own errors are reported in its entry).
         BatchInterrupted: ``cancel`` was set; the complete run folders stay, no partial one,
             and ``batch.json`` lists every scene (the unfinished ones as interrupted).
     """
-    batch = Batch(sources, out, settings, model=model, progress=progress, cancel=cancel)
+    batch = Batch(
+        sources, out, settings, model=model, progress=progress, cancel=cancel, resume=resume
+    )
     return batch.run()
 
 
@@ -512,6 +591,7 @@ def run_batch_until_signalled(
     progress: Callable[[str], None] = _silent,
     signals: tuple[int, ...] = (signal.SIGINT, signal.SIGTERM),
     grace: float = GRACE_SECONDS,
+    resume: bool = False,
 ) -> BatchResult:
     """:func:`run_batch` that SIGINT or SIGTERM stops (call from the main thread).
 
@@ -526,7 +606,7 @@ def run_batch_until_signalled(
     Raises:
         BatchInterrupted: a signal stopped the batch (``signum``, ``exit_code``, and ``hard``).
     """
-    batch = Batch(sources, out, settings, model=model, progress=progress)
+    batch = Batch(sources, out, settings, model=model, progress=progress, resume=resume)
     if threading.current_thread() is not threading.main_thread():  # no signals here
         return batch.run()
     outcome: dict[str, Any] = {}

@@ -8,6 +8,7 @@ stderr and exits with code 2.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
@@ -25,7 +26,7 @@ from brdf_infer._cli_export import add_export_arguments, command_export
 from brdf_infer._cli_fold import add_fold_arguments, chosen_fold, refuse_fold
 from brdf_infer._cli_sensitivity import add_sensitivity_arguments, command_sensitivity
 from brdf_infer._device import DEVICES, placement
-from brdf_infer._outdir import check_output_dir
+from brdf_infer._outdir import claim_output_dir
 from brdf_infer.errors import BadInputError
 
 EXIT_BAD_INPUT = 2
@@ -408,7 +409,9 @@ def _command_posterior(args: argparse.Namespace) -> None:
     _checked_model(args.model)
     scene, measurements = _scene_and_measurements(args.scene, args.instrument, args.force)
     forced = _forced(scene, measurements)
-    out = check_output_dir(args.out or Path("reports") / scene.name / args.sampler)
+    out = claim_output_dir(
+        args.out or Path("reports") / scene.name / args.sampler, "posterior", args.claims
+    )
     if args.warmup is None:
         args.warmup = 1000 if args.sampler == "nuts" else 4000
     run = run_posterior(
@@ -578,7 +581,7 @@ def _command_run(args: argparse.Namespace) -> None:
         force=args.force,
     )
     _checked_settings(settings)
-    out = check_output_dir(args.out or Path("reports") / scene.name)
+    out = claim_output_dir(args.out or Path("reports") / scene.name, "run", args.claims)
     result = run(
         scene,
         measurements,
@@ -693,6 +696,7 @@ def _command_raytrace(args: argparse.Namespace) -> None:
         if value is not None and value < low:
             raise BadInputError(f"{option} must be at least {low}, got {value}")
     measurements = scene.load_measurements()
+    out = claim_output_dir(args.out, "raytrace", args.claims) if args.out else None
     progress = None if args.json else _progress
     if args.run is not None:
         from brdf_infer.posterior import load_run_draws
@@ -723,8 +727,8 @@ def _command_raytrace(args: argparse.Namespace) -> None:
         )
     for warning in payload["warnings"]:
         _progress(f"warning: {warning}")
-    if args.out:
-        _write_raytrace(Path(args.out), scene, measurements, payload)
+    if out is not None:
+        _write_raytrace(out, scene, measurements, payload)
     if args.json:
         _emit_json(payload)
         return
@@ -871,7 +875,7 @@ def _command_sbc(args: argparse.Namespace) -> None:
         raise BadInputError(
             f"must be 1 … 10, got {settings.warmup_tree_depth}", field="--warmup-tree-depth"
         )
-    out = check_output_dir(args.out or Path("reports") / scene.name / "sbc")
+    out = claim_output_dir(args.out or Path("reports") / scene.name / "sbc", "sbc", args.claims)
     _progress(
         f"simulation-based calibration of scene '{scene.name}': {settings.replicates} "
         f"replicates, truth ranked among {settings.draws} draws ..."
@@ -921,10 +925,10 @@ def _command_batch(args: argparse.Namespace) -> None:
         force=args.force,
     )
     settings.check()
-    out = check_output_dir(args.out or Path("reports") / "batch")
+    out = claim_output_dir(args.out or Path("reports") / "batch", "batch", args.claims)
     try:  # SIGINT and SIGTERM stop the batch, keeping the complete run folders
         result = run_batch_until_signalled(
-            args.scenes, out, settings, model=args.model, progress=_progress
+            args.scenes, out, settings, model=args.model, progress=_progress, resume=args.resume
         )
     except BatchInterrupted as interrupted:
         # the complete run folders and batch.json are on disk, nothing half-written is left;
@@ -1162,6 +1166,12 @@ def build_parser() -> argparse.ArgumentParser:
         "sharded over every device (auto: threads on a single CPU, else vmap)",
     )
     batch.add_argument("--out", help="output directory (default: reports/batch)")
+    batch.add_argument(
+        "--resume",
+        action="store_true",
+        help="keep the scenes whose run folders in --out are complete (same scene, data and "
+        "settings) and run the rest",
+    )
     batch.add_argument("--json", action="store_true", help="one JSON object on stdout")
     _model_argument(batch)
     _force_argument(batch)
@@ -1329,7 +1339,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         disable_compilation_cache()
     try:
         require_float64()
-        with placement(args.command, getattr(args, "device", "auto")):
+        # args.claims: the output folders the command holds (one writer per folder)
+        with (
+            contextlib.ExitStack() as args.claims,
+            placement(args.command, getattr(args, "device", "auto")),
+        ):
             args.handler(args)
     except (BadInputError, Float32Error) as error:
         print(f"brdf-infer: error: {error}", file=sys.stderr)

@@ -45,4 +45,12 @@ class BadInputError(ValueError):
             where.append(f"line {self.line}")
         if self.field is not None:
             where.append(f"field '{self.field}'")
-        return (", ".join(where) + ": " if where else "") + self.problem
+        return _one_line((", ".join(where) + ": " if where else "") + self.problem)
+
+
+def _one_line(text: str) -> str:
+    """``text`` with every unprintable character (a line break, a NUL in a key or a file
+    name) escaped, so that the message stays one line."""
+    if text.isprintable():
+        return text
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)

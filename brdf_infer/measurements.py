@@ -124,6 +124,13 @@ def _read_rows(path: Path) -> tuple[list[str], list[tuple[int, list[str]]]]:
         raise BadInputError("no such file", file=path) from None
     except (OSError, UnicodeDecodeError) as error:
         raise BadInputError(f"cannot read: {error}", file=path) from None
+    if "\x00" in text:  # names would lose it (NumPy strips trailing NULs): rows would merge
+        line = text.count("\n", 0, text.index("\x00")) + 1
+        raise BadInputError(
+            "contains a NUL character (a binary file, or UTF-16? save it as UTF-8 text)",
+            file=path,
+            line=line,
+        )
     reader = csv.reader(text.splitlines())
     rows = [(reader.line_num, cells) for cells in reader if any(c.strip() for c in cells)]
     if not rows:

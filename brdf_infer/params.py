@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import math
+import sys
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -79,6 +80,15 @@ def params_to_dict(params: Params) -> dict[str, float]:
     return {name: float(value) for name, value in zip(PARAM_NAMES, params, strict=True)}
 
 
+_LARGEST_INTEGER = int(sys.float_info.max)
+
+
+def _short(value: Any) -> str:
+    """``repr(value)``, cut to 60 characters."""
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
 def params_from_mapping(mapping: Any, *, source: str = "parameters") -> Params:
     """Build ``Params`` from a mapping with the six field names, validating every value.
 
@@ -98,7 +108,9 @@ def params_from_mapping(mapping: Any, *, source: str = "parameters") -> Params:
             raise BadInputError("missing parameter", file=source, field=name)
         value = mapping[name]
         if isinstance(value, bool) or not isinstance(value, int | float):
-            raise BadInputError(f"not a number: {value!r}", file=source, field=name)
+            raise BadInputError(f"not a number: {_short(value)}", file=source, field=name)
+        if isinstance(value, int) and abs(value) > _LARGEST_INTEGER:  # float() would overflow
+            raise BadInputError(f"not finite: {_short(value)}", file=source, field=name)
         if not math.isfinite(value):
             raise BadInputError(f"not finite: {value!r}", file=source, field=name)
         values[name] = float(value)
@@ -124,6 +136,8 @@ def resolve_params(name_or_file: str) -> Params:
             content = json.loads(name_or_file)
         except json.JSONDecodeError as error:
             raise BadInputError(f"not valid JSON: {error.msg}", field="--params") from None
+        except RecursionError:
+            raise BadInputError("not valid JSON: nested too deeply", field="--params") from None
         return params_from_mapping(content, source="--params")
     path = Path(name_or_file)
     if not path.exists():
@@ -137,6 +151,8 @@ def resolve_params(name_or_file: str) -> Params:
         raise BadInputError(f"cannot read: {error}", file=path) from None
     except json.JSONDecodeError as error:
         raise BadInputError(f"not valid JSON: {error.msg}", file=path, line=error.lineno) from None
+    except RecursionError:
+        raise BadInputError("not valid JSON: nested too deeply", file=path) from None
     if isinstance(content, dict) and isinstance(content.get("params"), dict):
         content = content["params"]
     return params_from_mapping(content, source=str(path))

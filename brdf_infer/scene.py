@@ -368,13 +368,18 @@ class Scene:
             ("measurements", self.measurements_path),
             ("outputs.tis_reference", self.outputs.tis_reference),
         ):
-            if path is not None and not path.is_file():
+            if path is None:
+                continue
+            try:
+                if path.is_file():
+                    continue
                 what = "is not a file" if path.exists() else "no such file"
-                raise BadInputError(
-                    f"{what}: {path.resolve()} (named by scene '{self.name}')",
-                    file=self.path,
-                    field=key,
-                )
+                where = path.resolve()
+            except (OSError, ValueError) as error:  # a name too long, a NUL in it
+                what, where = f"cannot read ({getattr(error, 'strerror', None) or error})", path
+            raise BadInputError(
+                f"{what}: {where} (named by scene '{self.name}')", file=self.path, field=key
+            )
         self.load_measurements()
         self.load_tis_reference()
 
@@ -517,6 +522,33 @@ def _parse_studies(document: dict, path: Path) -> Studies:
     )
 
 
+def _scene_name(document: dict, path: Path) -> str:
+    """``name``: it names the scene's results folder (``reports/<name>``, a batch's
+    ``OUT/<name>``), so it is a plain folder name."""
+    name = _string(document, "name", path)
+    if not name.strip() or name in (".", "..") or any(c in name for c in "/\\\x00"):
+        raise BadInputError(
+            f"expected a non-empty name without '/', got {name!r} (it names the results folder)",
+            file=path,
+            field="name",
+        )
+    return name
+
+
+def _selection(paper: dict, path: Path) -> str:
+    """``[paper_fit] selection``: a name of :data:`brdf_infer.paper_fit.SELECTIONS`."""
+    from brdf_infer.paper_fit import SELECTIONS
+
+    name = _string(paper, "selection", path, default="paper")
+    if name not in SELECTIONS:
+        raise BadInputError(
+            f"unknown selection {name!r} (known: {', '.join(SELECTIONS)})",
+            file=path,
+            field="paper_fit.selection",
+        )
+    return name
+
+
 def _string(document: dict, key: str, path: Path, default: str | None = None) -> str:
     value = document.get(key, default)
     if value is None:
@@ -590,7 +622,7 @@ def _parse_instrument(document: dict, path: Path, scene_series: dict) -> Instrum
     table = _table(document, "instrument", path, {"model", "nodes", "candidates", "series"})
     model = _choice(table, "model", path, INSTRUMENT_MODELS, defaults.model, "instrument.")
     nodes = table.get("nodes", defaults.nodes)
-    if isinstance(nodes, bool) or nodes not in NODE_SHAPES:
+    if isinstance(nodes, bool) or not isinstance(nodes, int) or nodes not in NODE_SHAPES:
         raise BadInputError(
             f"expected one of {', '.join(map(str, NODE_SHAPES))}, got {nodes!r}",
             file=path,
@@ -839,7 +871,9 @@ def parse_scene(document: dict, path: Path) -> Scene:
         {"theta_i_deg", "tis", "maps", "tis_reference", "reference_params"},
     )
     reference_params = outputs.get("reference_params")
-    if reference_params is not None and reference_params not in PARAMETER_SETS:
+    if reference_params is not None and (
+        not isinstance(reference_params, str) or reference_params not in PARAMETER_SETS
+    ):
         raise BadInputError(
             f"unknown parameter set {reference_params!r} (known: {', '.join(PARAMETER_SETS)})",
             file=path,
@@ -866,7 +900,7 @@ def parse_scene(document: dict, path: Path) -> Scene:
     wavelength = document.get("wavelength_nm")
     studies = _parse_studies(document, path)
     scene = Scene(
-        name=_string(document, "name", path),
+        name=_scene_name(document, path),
         path=path,
         description=_string(document, "description", path, default=""),
         wavelength_nm=None if wavelength is None else _number(document, "wavelength_nm", path),
@@ -879,7 +913,7 @@ def parse_scene(document: dict, path: Path) -> Scene:
         paper_fit=PaperFitSettings(
             alpha=_number(paper, "alpha", path, default=4.5, positive=True),
             theta_s0_deg=_number(paper, "theta_s0_deg", path, default=-12.0),
-            selection=_string(paper, "selection", path, default="paper"),
+            selection=_selection(paper, path),
         ),
         outputs=OutputSettings(
             theta_i_deg=tuple(float(v) for v in theta_i_out) if theta_i_out else None,

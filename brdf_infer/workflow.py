@@ -291,9 +291,26 @@ def run(
         progress: called with one line per step.
 
     Raises:
-        BadInputError: a setting out of range, an unknown family or study, or (without
-            ``settings.force``) a failed plausibility check; nothing is written then.
+        BadInputError: a setting out of range, an unknown family or study, (without
+            ``settings.force``) a failed plausibility check, or another process writing
+            ``out``; nothing is written then.
     """
+    from brdf_infer._outlock import writing
+
+    with writing(out, "run"):  # one writer; an interrupted run leaves ``out`` incomplete
+        return _run(scene, measurements, out, settings, example=example, progress=progress)
+
+
+def _run(
+    scene: Scene,
+    measurements: Measurements,
+    out: Path,
+    settings: RunSettings,
+    *,
+    example: Path | None,
+    progress: Callable[[str], None],
+) -> RunResult:
+    """:func:`run` with ``out`` held."""
     from brdf_infer._atomic import atomic_write_json
     from brdf_infer.model import REFERENCE_FAMILY
     from brdf_infer.plausibility import measurement_checks, require_plausible

@@ -111,6 +111,15 @@ def test_malformed_measurement_csv(tmp_path, capsys, case):
     assert "m.csv" in line
 
 
+def test_a_nul_character_is_refused_with_its_line(tmp_path):
+    """Found by the generated inputs: a NUL after a name ('1\\x00') was dropped by NumPy, so
+    two different rows became duplicates in the loaded table."""
+    path = tmp_path / "m.csv"
+    path.write_bytes(with_row('II,"1"\x00,30,30,1e-4,1e-5').encode())
+    with pytest.raises(BadInputError, match=r"m.csv, line 4: contains a NUL character"):
+        load_measurements(path)
+
+
 def test_missing_and_unreadable_measurement_paths(tmp_path, capsys):
     scene = write_scene(tmp_path, None)
     message = expect_bad_input(capsys, "fit", str(scene), match="no such file: ")
@@ -197,6 +206,34 @@ SCENE_CASES = {
         SCENE.replace("[errors]", '[errors]\nangle_method = "exact"'),
         "field 'errors.angle_method'",
     ),
+    # found by the generated inputs (tests/test_loader_inputs.py): each was a traceback, a
+    # message of two lines, or a scene that loaded and failed later
+    "a key with a line break": (
+        SCENE.replace("[errors]", '[errors]\n"a\\nb" = 1'),
+        "field 'errors.a\\nb': unknown key",
+    ),
+    "instrument nodes a list": (SCENE + "[instrument]\nnodes = [3]\n", "'instrument.nodes'"),
+    "reference parameters a list": (
+        SCENE + "[outputs]\nreference_params = ['uv-paper']\n",
+        "field 'outputs.reference_params'",
+    ),
+    "a measurements name too long": (
+        SCENE.replace('"m.csv"', '"' + "m" * 300 + '.csv"'),
+        "field 'measurements': cannot read (File name too long)",
+    ),
+    "a NUL in the measurements name": (
+        SCENE.replace('"m.csv"', '"m\\u0000.csv"'),
+        "field 'measurements': cannot read (embedded null byte)",
+    ),
+    "a name that climbs out of the results folder": (
+        SCENE.replace('name = "tiny"', 'name = "../up"'),
+        "field 'name': expected a non-empty name without '/'",
+    ),
+    "an empty name": (SCENE.replace('name = "tiny"', 'name = " "'), "field 'name'"),
+    "an unknown selection": (
+        SCENE + "[paper_fit]\nselection = 'all'\n",
+        "field 'paper_fit.selection': unknown selection 'all'",
+    ),
 }
 
 
@@ -224,6 +261,10 @@ PARAM_CASES = {
         {"brdf0": -1, "a1": 1e-4, "a2": 0, "a3": 0, "alpha": 4.5, "theta_s0": -12},
         "field 'brdf0': must be > 0",
     ),
+    "an integer too large for a float (was a traceback)": (
+        {"brdf0": 0.01, "a1": 10**400, "a2": 0, "a3": 0, "alpha": 4.5, "theta_s0": -12},
+        "field 'a1': not finite: 1000",
+    ),
 }
 
 
@@ -239,6 +280,10 @@ def test_parameter_file_not_json(tmp_path, capsys):
     path = tmp_path / "p.json"
     path.write_text("{brdf0: 1")
     expect_bad_input(capsys, "tis", "--params", str(path), match="not valid JSON")
+    path.write_text("[" * 100_000 + "]" * 100_000)  # deeper than the parser's stack
+    expect_bad_input(capsys, "tis", "--params", str(path), match="nested too deeply")
+    deep = '{"a": ' + "[" * 100_000 + "]" * 100_000 + "}"
+    expect_bad_input(capsys, "tis", "--params", deep, match="field '--params': not valid JSON")
 
 
 def test_bad_options_are_one_line_usage_errors(capsys):

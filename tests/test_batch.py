@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from brdf_infer._arviz import az
+from brdf_infer._outlock import LOCK_FILE
 from tests.helpers import (
     SUITE_WARMUP,
     fewer_rows,
@@ -178,6 +179,72 @@ def test_readers_of_run_folders_take_a_batch_scene(batch_run, capsys):
     assert json.loads(text)["median"][0] == pytest.approx(entry["tis"]["median"][at], rel=1e-12)
 
 
+def _fixture_scenes(folder: Path) -> list[str]:
+    """The scenes of ``batch_run``, in its order."""
+    return [str(folder / f"{name}.toml") for name in ("a", "b", "c", "percent", "broken")]
+
+
+def _comparable(payload: dict) -> dict:
+    """batch.json without its timings and folder paths."""
+    scenes = [{**e, "out": e["out"] and Path(e["out"]).name} for e in payload["scenes"]]
+    return {k: v for k, v in payload.items() if "seconds" not in k} | {"scenes": scenes}
+
+
+def test_resume_keeps_complete_scenes_and_gives_the_rest_their_uninterrupted_draws(
+    batch_run, tmp_path, capsys
+):
+    """The batch killed outright after writing a and b (a stale lock and c's half-written
+    folder left): resumed, it keeps a and b and runs c alone through the program of the whole
+    group (padded to a's rows, as before), so c's draws are the uninterrupted batch's, bit for
+    bit, and batch.json is the same. A resume with other settings is refused in one line."""
+    import shutil
+    import subprocess
+    import sys
+
+    folder, out, payload = batch_run
+    resumed = tmp_path / "out"
+    shutil.copytree(out, resumed)
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    shutil.move(resumed / "c", resumed / f".c.partial-{dead.pid}")
+    (resumed / f".c.partial-{dead.pid}" / "summary.json").unlink()
+    (resumed / LOCK_FILE).write_text(json.dumps({"pid": dead.pid, "command": "batch"}))
+    kept = (resumed / "a" / "posterior.nc").stat().st_mtime_ns
+    code, _, err = run_cli(
+        "batch", *_fixture_scenes(folder), *SMALL, "--out", str(resumed), "--resume", capsys=capsys
+    )
+    assert code == 0, err
+    assert "resume: 2 scene(s) complete" in err and "2 complete already" in err
+    assert (resumed / "a" / "posterior.nc").stat().st_mtime_ns == kept
+    assert sorted(p.name for p in resumed.iterdir()) == ["a", "b", "batch.json", "c"]
+    ours = az.from_netcdf(resumed / "c" / "posterior.nc").posterior
+    theirs = az.from_netcdf(out / "c" / "posterior.nc").posterior
+    for name in ("brdf0", "a1", "alpha", "theta_s0", "repeatability"):
+        np.testing.assert_array_equal(np.asarray(ours[name]), np.asarray(theirs[name]))
+    again = json.loads((resumed / "batch.json").read_text())
+    assert _comparable(again) == _comparable(payload)
+    before = {p: p.stat().st_mtime_ns for p in resumed.rglob("*")}
+    code, out_text, err = run_cli(
+        "batch",
+        *_fixture_scenes(folder),
+        *SMALL,
+        "--seed",
+        "1",
+        "--out",
+        str(resumed),
+        "--resume",
+        capsys=capsys,
+    )
+    assert code == 2 and out_text == "" and "Traceback" not in err, err
+    last = err.strip().splitlines()[-1]  # after the progress lines of the skipped scenes
+    assert last == (
+        f"brdf-infer: error: {resumed / 'a'}, field '--resume': holds a complete run of another "
+        "batch (differs in: --seed); run the batch without --resume to replace it, or into "
+        "another --out"
+    )
+    assert {p: p.stat().st_mtime_ns for p in resumed.rglob("*")} == before
+
+
 def test_batch_of_only_broken_scenes_is_one_error_line(tmp_path, capsys):
     (tmp_path / "x.toml").write_text('name = "x"\n')
     code, out, err = run_cli(
@@ -304,7 +371,8 @@ def _check_interrupted_folder(out: Path, code: int, stderr: str) -> int:
     """Only complete run folders and batch.json in ``out``, listed as such; returns their
     number."""
     assert "Traceback" not in stderr
-    assert not [p.name for p in out.iterdir() if p.name.startswith(".")]  # no partial folder
+    # no partial folder; the lock file marks the batch's folder incomplete until it is resumed
+    assert [p.name for p in out.iterdir() if p.name.startswith(".")] == [LOCK_FILE]
     folders = sorted(p for p in out.iterdir() if p.is_dir())
     for folder in folders:
         assert {p.name for p in folder.iterdir()} == {"posterior.nc", "summary.json", "bands.json"}
@@ -323,7 +391,7 @@ def _check_interrupted_folder(out: Path, code: int, stderr: str) -> int:
     assert last == (
         f"brdf-infer: interrupted ({'SIGINT' if code == 130 else 'SIGTERM'}): "
         f"{len(folders)} of 12 scene(s) complete in {out} (listed in batch.json); "
-        "no partial folder left"
+        "no partial folder left (continue with --resume)"
     )
     return len(folders)
 

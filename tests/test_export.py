@@ -10,6 +10,7 @@ import pytest
 from scipy import integrate
 
 from brdf_infer.cli import main
+from brdf_infer.errors import BadInputError
 from brdf_infer.export import (
     BsdfFile,
     read_bsdf,
@@ -159,6 +160,48 @@ def test_malformed_bsdf_files_are_one_line_and_exit_2(tmp_path, capsys, change, 
     code, out, err = run_cli("export", "--check", str(path), capsys=capsys)
     assert code == 2 and out == ""
     assert err.count("\n") == 1 and str(path) in err and match in err, err
+
+
+def test_other_tools_files_tabs_and_header_order_are_read(tmp_path):
+    """Words separated by tabs only, and header lines in another order (as other tools write
+    them), read as the tidy file (found by the generated inputs: a tab after a keyword was
+    refused)."""
+    from brdf_infer.export import read_bsdf
+
+    tidy, untidy = tmp_path / "tidy.bsdf", tmp_path / "untidy.bsdf"
+    tidy.write_text(GOOD)
+    lines = GOOD.replace("Source Measured", "Source\tMeasured").splitlines()
+    lines = [line.replace(" ", "\t") for line in lines if not line.startswith("#")]
+    header = lines[:14]
+    header = header[4:8] + header[:4] + header[12:14] + header[8:12]  # counted ones, keywords
+    untidy.write_text("\n".join(header + lines[14:]) + "\n")
+    ours, theirs = read_bsdf(untidy), read_bsdf(tidy)
+    for name in ("theta_i_deg", "azimuth_deg", "radial_deg", "tis", "bsdf"):
+        np.testing.assert_array_equal(getattr(ours, name), getattr(theirs, name))
+    assert (ours.symmetry, ours.scatter_type, ours.source) == (
+        "PlaneSymmetrical",
+        "BRDF",
+        "Measured",
+    )
+    untidy.write_text(GOOD.replace("SampleRotation 1\n0\n", ""))
+    with pytest.raises(BadInputError, match="line 14: the header lacks 'SampleRotation'"):
+        read_bsdf(untidy)
+
+
+def test_a_direction_listed_twice_is_one_measurement_row(tmp_path):
+    """Radial 0 is the specular ray in every azimuth row: one row, not one per azimuth (a
+    CSV may not repeat a row either); an angle of incidence of 90° or more is refused."""
+    from brdf_infer.bsdf_measurements import measurements_from_bsdf
+
+    path = tmp_path / "t.bsdf"
+    path.write_text(GOOD.replace("AngleOfIncidence 1\n0", "AngleOfIncidence 1\n20"))
+    rows = measurements_from_bsdf(path)
+    # azimuth 0 and 180 at radial 0: the specular ray twice (one row); radial 90 at azimuth
+    # 0 is θs = −70°, at azimuth 180 below the horizon
+    np.testing.assert_allclose(rows.theta_s_deg, [20.0, -70.0], rtol=1e-12)
+    path.write_text(GOOD.replace("AngleOfIncidence 1\n0", "AngleOfIncidence 1\n95"))
+    with pytest.raises(BadInputError, match="field 'AngleOfIncidence': angles of incidence"):
+        measurements_from_bsdf(path)
 
 
 def test_check_reads_a_good_file_and_integrates_it(tmp_path, capsys):

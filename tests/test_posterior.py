@@ -272,19 +272,27 @@ def test_sigterm_leaves_a_resumable_checkpoint_and_exit_130(tmp_path):
 
 
 def test_interrupted_netcdf_write_keeps_the_previous_file(nuts_run, tmp_path, monkeypatch):
+    import os
+
     target = tmp_path / "posterior.nc"
     target.write_bytes(b"previous")
 
-    def failing(self, path, *args, **kwargs):
-        with open(path, "wb") as handle:
-            handle.write(b"half")
+    def failing(handle):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(az.InferenceData, "to_netcdf", failing)
+    monkeypatch.setattr(os, "fsync", failing)  # interrupted before the file is in place
     with pytest.raises(KeyboardInterrupt):
         write_inference_data(nuts_run.idata, target)
+    monkeypatch.undo()
     assert target.read_bytes() == b"previous"
     assert [p.name for p in tmp_path.iterdir()] == ["posterior.nc"]
+    write_inference_data(nuts_run.idata, target)  # the same file as ArviZ writes
+    ours = az.from_netcdf(target)
+    nuts_run.idata.to_netcdf(str(tmp_path / "arviz.nc"))
+    theirs = az.from_netcdf(tmp_path / "arviz.nc")
+    assert ours.groups() == theirs.groups() and ours.attrs == theirs.attrs
+    for group in theirs.groups():
+        assert ours[group].identical(theirs[group]), group
 
 
 def test_the_earlier_spread_error_model_stays_reachable(lya, capsys, tmp_path):

@@ -26,7 +26,7 @@ from brdf_infer.bench._misspec import misspec_rows
 from brdf_infer.bench._misspec import section_text as misspec_text
 from brdf_infer.bench._raytrace import raytrace_rows
 from brdf_infer.bench._robustness import HEADERS as ROBUSTNESS_HEADERS
-from brdf_infer.bench._robustness import robustness_rows
+from brdf_infer.bench._robustness import LOADER_HEADERS, loader_rows, robustness_rows
 from brdf_infer.bench._samplers import sampler_rows
 from brdf_infer.bench._sbc import HEADERS as SBC_HEADERS
 from brdf_infer.bench._sbc import sbc_rows
@@ -103,6 +103,7 @@ def write_report(out: Path, quick: bool, progress=print) -> Path:
     traces, reference_rays = raytrace_rows(scene, quick)
     progress("benchmark 5/12: sampling robustness ...")
     robustness = robustness_rows(scene, quick, progress)
+    loaders = loader_rows(500 if quick else 5000, progress)
     progress("benchmark 6/12: simulation-based calibration ...")
     calibrations = sbc_rows(scene, quick, progress)
     progress("benchmark 7/12: misspecification ...")
@@ -289,6 +290,22 @@ def write_report(out: Path, quick: bool, progress=print) -> Path:
         "error model of its file.",
         "",
         _markdown_table(ROBUSTNESS_HEADERS, [row.cells for row in robustness]),
+        "",
+        "## Bad input",
+        "",
+        "Every loader of user files on generated inputs (Hypothesis, the same inputs every run; "
+        "`brdf_infer/bench/_loader_inputs.py`): measurement CSVs of both quantities with "
+        "`phi_s_deg`, other delimiters, encodings and byte-order marks, line endings, quoting, "
+        "huge, tiny and non-finite numbers, duplicated rows and columns; scene TOML with every "
+        "table and key, wrong types, unknown keys, odd paths; Zemax .BSDF files with tabs, "
+        "header lines out of order, counts that disagree with the data, Tristimulus, truncation; "
+        "parameter JSON files and inline objects. Half the inputs are well-formed. Each must "
+        "end in a result that holds what the loader promises or in one line naming the file "
+        "or option (exit 2), with no file written; the last column counts every other outcome "
+        "(`tests/test_loader_inputs.py` runs the same in its `slow` set).",
+        "",
+        _markdown_table(LOADER_HEADERS, [row.cells for row in loaders]),
+        *[f"- {row.loader}: {failure}" for row in loaders for failure in row.failures],
         "",
         "## Simulation-based calibration",
         "",

@@ -215,7 +215,10 @@ def write_stress_report(out: Path, quick: bool, progress=print) -> Path:
         f"{StressSettings().scenes} scenes, `batch --mode vmap` over two forced CPU devices, "
         "`posterior lya` (chains side by side), and two Python threads executing the "
         "posterior's compiled, vmapped constraining map and potential "
-        f"{StressSettings().calls} times each (brdf_infer.bench._stress). Before the "
+        f"{StressSettings().calls} times each, and {StressSettings().processes} processes of "
+        "`fit lya --method lsq` started at once on one fresh cache folder (a new folder every "
+        "repetition, at most 5: each compiles cold four times over; they must all finish "
+        "with the same result) (brdf_infer.bench._stress). Before the "
         "posterior's linear algebra left LAPACK, both batch paths and the two threads hung "
         "(jaxlib 0.10.2's LAPACK handlers wait on the intra-op pool from a pool thread); "
         "the posterior, then sequential, did not.",

@@ -6,9 +6,10 @@ over XLA's intra-op thread pool and block until the pieces are done
 on a pool thread (it does, right after a kernel that XLA split over the pool) and two programs
 execute at once, every pool thread (two on a 2-core machine) can end up waiting for pieces
 queued behind itself: the process deadlocks, idle, and SIGTERM does not end it. The paths here
-run what the package runs concurrently (``batch`` in threads and vmap mode, ``posterior``, and
-two threads evaluating one compiled posterior program) in a child process each, so a deadlock
-is a timeout that is reported, never a hung test suite or benchmark.
+run what the package runs concurrently (``batch`` in threads and vmap mode, ``posterior``, two
+threads evaluating one compiled posterior program, and four processes compiling into one fresh
+persistent compilation cache) in a child process each, so a deadlock is a timeout that is
+reported, never a hung test suite or benchmark.
 
 :func:`stress_rows` runs every path ``repeats`` times for the benchmark report;
 ``tests/test_concurrency.py`` runs each path ``BRDF_INFER_STRESS_REPEATS`` times (default 1).
@@ -83,6 +84,45 @@ POTENTIAL_SCRIPT = textwrap.dedent(
         w.join()
     print("ok", len(done), "threads x", calls, "calls", flush=True)
     sys.exit(0 if len(done) == threads else 1)
+    """
+)
+
+# Several processes started at once on one fresh compilation cache folder, each compiling
+# and writing the same programs (JAX writes an entry in place, without a lock; a reader that
+# finds one half-written cannot decompress it and compiles the program itself): every one must
+# finish, with the same result. Prints the cache files and JAX's complaints about entries.
+SHARED_CACHE_SCRIPT = textwrap.dedent(
+    """
+    import json, os, subprocess, sys, tempfile
+
+    processes, command = int(sys.argv[1]), sys.argv[2:]
+    cache = tempfile.mkdtemp(prefix="cache-", dir=".")  # fresh for every repetition
+    env = dict(os.environ, BRDF_INFER_CACHE=cache)
+    children = [
+        subprocess.Popen(
+            [sys.executable, "-m", "brdf_infer", *command],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+        )
+        for _ in range(processes)
+    ]
+    done = [child.communicate() for child in children]
+
+    def without_timings(value):
+        if isinstance(value, dict):
+            return {k: without_timings(v) for k, v in value.items() if "seconds" not in k}
+        return [without_timings(v) for v in value] if isinstance(value, list) else value
+
+    failed = [k for k, child in enumerate(children) if child.returncode != 0]
+    for k in failed:
+        print(f"process {k} exited with {children[k].returncode}:", done[k][1][-3000:])
+    results = [json.loads(out) for out, _ in done] if not failed else []
+    if results and any(without_timings(r) != without_timings(results[0]) for r in results):
+        print("the processes disagree:", *(json.dumps(r)[:500] for r in results), sep="\\n")
+        failed.append("results")
+    complaints = sum(err.count("persistent compilation cache") for _, err in done)
+    print(f"{processes} processes, {len(os.listdir(cache))} cache files, "
+          f"{complaints} cache complaints, same results: {not failed}", flush=True)
+    sys.exit(1 if failed else 0)
     """
 )
 
@@ -241,6 +281,7 @@ class StressSettings:
     points: int = 2000  # potential path: points per chain
     calls: int = 20  # potential path: calls per thread
     threads: int = 2  # potential path: Python threads
+    processes: int = 4  # shared-cache path: processes on one fresh cache folder
     timeout: float = 150.0  # per repetition [s]: a cold repetition (compiling) takes 30–80 s
 
 
@@ -251,6 +292,7 @@ class StressPath:
     name: str
     command: Callable[[Path, StressSettings], tuple[list[str], dict[str, str]]]
     needs_scenes: bool = field(default=False)
+    most_repeats: int | None = None  # a cap on the benchmark's repetitions (a costly path)
 
 
 def child_environment(cache: Path, extra: dict[str, str] | None = None) -> dict[str, str]:
@@ -312,6 +354,16 @@ def potential_command(folder: Path, settings: StressSettings) -> tuple[list[str]
     return [sys.executable, "-c", POTENTIAL_SCRIPT, *map(str, counts)], {}
 
 
+def shared_cache_command(
+    folder: Path, settings: StressSettings
+) -> tuple[list[str], dict[str, str]]:
+    """``settings.processes`` processes at once of ``brdf-infer fit lya --method lsq`` on one
+    fresh cache folder (:data:`SHARED_CACHE_SCRIPT`)."""
+    del folder
+    command = ["fit", "lya", "--method", "lsq", "--starts", "2", "--json"]
+    return [sys.executable, "-c", SHARED_CACHE_SCRIPT, str(settings.processes), *command], {}
+
+
 PATHS: dict[str, StressPath] = {
     "batch threads": StressPath(
         "batch threads", lambda f, s: batch_command(f, s, "threads"), needs_scenes=True
@@ -323,6 +375,9 @@ PATHS: dict[str, StressPath] = {
     ),
     "posterior lya": StressPath("posterior lya", posterior_command),
     "potential, threads": StressPath("potential, threads", potential_command),
+    "four processes, one fresh cache": StressPath(
+        "four processes, one fresh cache", shared_cache_command, most_repeats=5
+    ),  # every repetition compiles cold, four times over: ≈ 75 s on 2 cores
 }
 
 
@@ -374,10 +429,11 @@ def stress_rows(
     paths: Sequence[str] | None = None,
     progress: Callable[[str], None] = print,
 ) -> list[StressRow]:
-    """Every stress path ``repeats`` times, each repetition in a fresh process under the
-    watchdog (``settings.timeout`` seconds). Each path gets a fresh compilation cache folder of
-    its own, so its first repetition compiles (as a first run on a new machine does) and the
-    others load the programs from it."""
+    """Every stress path ``repeats`` times (at most its ``most_repeats``), each repetition in
+    a fresh process under the watchdog (``settings.timeout`` seconds). Each path gets a fresh
+    compilation cache folder of its own, so its first repetition compiles (as a first run on a
+    new machine does) and the others load the programs from it (the shared-cache path makes a
+    new folder for every repetition)."""
     settings = settings or StressSettings()
     rows = []
     with tempfile.TemporaryDirectory(prefix="brdf_infer_stress_") as root:
@@ -385,12 +441,13 @@ def stress_rows(
             folder = Path(root) / f"path{index}"
             hangs = failures = 0
             seconds = 0.0
-            for k in range(repeats):
+            count = min(repeats, PATHS[name].most_repeats or repeats)
+            for k in range(count):
                 watched = run_path(name, folder, settings)
                 seconds += watched.seconds
                 hangs += watched.hung
                 failures += not watched.hung and not watched.ok
                 state = "hung" if watched.hung else ("ok" if watched.ok else "failed")
-                progress(f"  stress {name}: {k + 1}/{repeats} {state} ({watched.seconds:.1f} s)")
-            rows.append(StressRow(name, repeats, hangs, failures, seconds / repeats))
+                progress(f"  stress {name}: {k + 1}/{count} {state} ({watched.seconds:.1f} s)")
+            rows.append(StressRow(name, count, hangs, failures, seconds / count))
     return rows

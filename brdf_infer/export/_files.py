@@ -41,6 +41,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from brdf_infer._atomic import atomic_write_bytes, atomic_write_json
+from brdf_infer._outlock import writing
 from brdf_infer.errors import BadInputError
 from brdf_infer.export._abg import AbgFit, fit_abg
 from brdf_infer.export._grid import (
@@ -531,6 +532,11 @@ def run_export(
 def record_export(run: Path, result: dict) -> Path:
     """Note an export of ``run`` in ``run/exports.json`` (one entry per format and folder), so
     that ``brdf-infer report`` can show it."""
+    with writing(run, "export", option="--run", adds=True):
+        return _record_export(run, result)
+
+
+def _record_export(run: Path, result: dict) -> Path:
     path = run / EXPORTS_FILE
     try:
         entries = json.loads(path.read_text())["exports"] if path.is_file() else []

@@ -175,29 +175,62 @@ def _is_number(word: str) -> bool:
     return True
 
 
-def _keyword(lines: _Lines, keyword: str) -> tuple[int, str]:
-    """The value after ``keyword`` on the next line."""
-    number, text = lines.next(f"'{keyword}'")
-    name, _, value = text.partition(" ")
-    if name != keyword:
-        raise lines.error(f"expected '{keyword}', found '{text[:40]}'", number)
-    return number, value.strip()
+def _split(text: str) -> tuple[str, str]:
+    """(keyword, the rest) of a line; any run of blanks (spaces, tabs) separates them."""
+    words = text.split(None, 1)
+    return (words[0], words[1].strip()) if len(words) == 2 else (text, "")
 
 
-def _counted_angles(lines: _Lines, keyword: str) -> np.ndarray:
-    number, value = _keyword(lines, keyword)
+_KEYWORDS = ("Source", "Symmetry", "SpectralContent", "ScatterType")
+_COUNTED = ("SampleRotation", "AngleOfIncidence", "ScatterAzimuth", "ScatterRadial")
+
+
+def _counted_angles(lines: _Lines, keyword: str, number: int, value: str) -> np.ndarray:
     try:
         count = int(value)
     except ValueError:
-        raise lines.error(f"'{keyword}' needs a count, found '{value}'", number) from None
+        raise lines.error(f"'{keyword}' needs a count, found '{value[:40]}'", number) from None
     if count < 1:
         raise lines.error(f"'{keyword}' needs a positive count, found {count}", number)
     number, text = lines.next(f"the {count} values of '{keyword}'")
     return _numbers(lines, number, text, count, keyword)
 
 
+def _header(lines: _Lines) -> tuple[dict[str, tuple[int, str]], dict[str, np.ndarray]]:
+    """The header up to ``DataBegin``, its lines in any order: (keyword → (line, value),
+    counted keyword → its values)."""
+    keywords: dict[str, tuple[int, str]] = {}
+    counted: dict[str, np.ndarray] = {}
+    spectral = None
+    while True:
+        number, text = lines.next("'DataBegin'")
+        if text == "DataBegin":
+            break
+        name, value = _split(text)
+        if name in keywords or name in counted:
+            raise lines.error(f"'{name}' appears twice", number)
+        if name in _KEYWORDS:
+            keywords[name] = (number, value)
+        elif name in _COUNTED:
+            counted[name] = _counted_angles(lines, name, number, value)
+        elif spectral is None and not value and name in ("Monochrome", "Tristimulus"):
+            spectral = (number, name)
+        else:
+            raise lines.error(f"unexpected '{text[:40]}' in the header", number)
+    missing = [name for name in (*_KEYWORDS, *_COUNTED) if name not in keywords | counted]
+    if missing:
+        raise lines.error(f"the header lacks '{missing[0]}' before 'DataBegin'", number)
+    if spectral is None:
+        raise lines.error("expected 'Monochrome' before 'DataBegin'", number)
+    if spectral[1] != "Monochrome":
+        raise lines.error(f"'{spectral[1]}' data are not supported (Monochrome)", spectral[0])
+    return keywords, counted
+
+
 def read_bsdf(path: str | Path) -> BsdfFile:
     """Read a tabular BSDF file (plane-symmetric or asymmetric, monochrome).
+
+    The header's lines may come in any order, and any run of spaces and tabs separates words.
 
     Raises:
         BadInputError: the file is missing, unreadable or malformed; the message names the
@@ -211,32 +244,26 @@ def read_bsdf(path: str | Path) -> BsdfFile:
     except (OSError, UnicodeDecodeError) as error:
         raise BadInputError(f"cannot read: {error}", file=path) from None
     lines = _Lines(path, text)
-    _, source = _keyword(lines, "Source")
-    number, symmetry = _keyword(lines, "Symmetry")
+    keywords, counted = _header(lines)
+    source = keywords["Source"][1]
+    number, symmetry = keywords["Symmetry"]
     if symmetry not in _SYMMETRIES:
         raise lines.error(f"Symmetry must be one of {', '.join(_SYMMETRIES)}", number)
-    number, spectral = _keyword(lines, "SpectralContent")
+    number, spectral = keywords["SpectralContent"]
     if spectral != "Monochrome":
-        raise lines.error(f"SpectralContent '{spectral}' is not supported (Monochrome)", number)
-    number, scatter_type = _keyword(lines, "ScatterType")
+        raise lines.error(
+            f"SpectralContent '{spectral[:40]}' is not supported (Monochrome)", number
+        )
+    number, scatter_type = keywords["ScatterType"]
     if scatter_type not in ("BRDF", "BTDF"):
-        raise lines.error(f"ScatterType must be BRDF or BTDF, found '{scatter_type}'", number)
-    rotation = _counted_angles(lines, "SampleRotation")
-    theta_i = _counted_angles(lines, "AngleOfIncidence")
-    azimuth = _counted_angles(lines, "ScatterAzimuth")
-    radial = _counted_angles(lines, "ScatterRadial")
-    number, text = lines.next("'Monochrome'")
-    if text != "Monochrome":
-        raise lines.error(f"expected 'Monochrome', found '{text[:40]}'", number)
-    number, text = lines.next("'DataBegin'")
-    if text != "DataBegin":
-        raise lines.error(f"expected 'DataBegin', found '{text[:40]}'", number)
+        raise lines.error(f"ScatterType must be BRDF or BTDF, found '{scatter_type[:40]}'", number)
+    rotation, theta_i, azimuth, radial = (counted[name] for name in _COUNTED)
     tis = np.empty((rotation.size, theta_i.size))
     bsdf = np.empty((rotation.size, theta_i.size, azimuth.size, radial.size))
     for r in range(rotation.size):
         for a in range(theta_i.size):
             number, text = lines.next(f"'TIS' of angle of incidence {theta_i[a]:g}")
-            name, _, value = text.partition(" ")
+            name, value = _split(text)
             if name != "TIS":
                 raise lines.error(f"expected 'TIS <value>', found '{text[:40]}'", number)
             tis[r, a] = _numbers(lines, number, value, 1, "TIS")[0]

@@ -2,9 +2,8 @@
 
 from __future__ import annotations
 
+import io
 import json
-import os
-import tempfile
 import time
 from pathlib import Path
 from typing import Any
@@ -16,7 +15,8 @@ from numpyro.infer import Predictive
 
 import brdf_infer
 from brdf_infer._arviz import az
-from brdf_infer._atomic import atomic_write_json, publish
+from brdf_infer._atomic import atomic_write_bytes, atomic_write_json
+from brdf_infer._outlock import require_complete
 from brdf_infer.errors import BadInputError
 from brdf_infer.model import REFERENCE_FAMILY, ModelFamily, family
 from brdf_infer.params import PARAM_NAMES
@@ -205,16 +205,40 @@ def diagnostics(
     return result
 
 
+def netcdf_bytes(idata: az.InferenceData) -> bytes:
+    """``idata`` as the netCDF file ``InferenceData.to_netcdf`` writes (h5netcdf, every group,
+    numbers compressed), built in memory.
+
+    In memory, so that writing it to disk is one plain atomic write: when HDF5 itself fails
+    to write a file (a full disk), its half-open file makes the process crash later (h5py
+    3.16 frees it with a segmentation fault), after the error was reported.
+    """
+    import xarray as xr
+
+    buffer = io.BytesIO()
+    mode = "w"
+    if idata.attrs:
+        xr.Dataset(attrs=idata.attrs).to_netcdf(buffer, mode=mode, engine="h5netcdf", group="/")
+        mode = "a"
+    for group in idata.groups():
+        data = getattr(idata, group)
+        encoding = {
+            name: {"zlib": True}
+            for name, values in data.variables.items()
+            if np.issubdtype(values.dtype, np.number) or values.dtype == bool
+        }
+        data.to_netcdf(buffer, mode=mode, group=group, engine="h5netcdf", encoding=encoding)
+        mode = "a"
+    return buffer.getvalue()
+
+
 def write_inference_data(idata: az.InferenceData, path: Path) -> None:
-    """Write netCDF atomically: a temporary file beside ``path``, then ``os.replace``."""
-    handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    os.close(handle)
-    try:
-        idata.to_netcdf(temporary)
-        publish(temporary, path)
-    except BaseException:
-        Path(temporary).unlink(missing_ok=True)
-        raise
+    """Write ``idata`` to ``path`` as netCDF, atomically (:func:`netcdf_bytes`).
+
+    Raises:
+        OSError: the write failed (naming ``path``; ``path`` is unchanged).
+    """
+    atomic_write_bytes(path, netcdf_bytes(idata))
 
 
 def write_results(out: Path, idata: az.InferenceData, summary: dict, bands: dict) -> None:
@@ -226,6 +250,7 @@ def write_results(out: Path, idata: az.InferenceData, summary: dict, bands: dict
 
 
 def _run_posterior_group(run: Path):
+    require_complete(run)
     path = run / POSTERIOR_FILE
     if not path.is_file():
         raise BadInputError("no posterior.nc here (run 'brdf-infer posterior' first)", file=run)

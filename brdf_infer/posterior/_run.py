@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import hashlib
 import json
@@ -14,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from brdf_infer._arviz import az
+from brdf_infer._outlock import writing
 from brdf_infer.error_model import ERROR_MODELS
 from brdf_infer.errors import BadInputError
 from brdf_infer.measurements import Measurements
@@ -106,6 +108,7 @@ def run_fingerprint(model: PosteriorModel, measurements: Measurements) -> dict[s
             measurements.theta_s_deg,
             measurements.reflectance,
             np.zeros(0) if measurements.reflectance_err is None else measurements.reflectance_err,
+            *(() if measurements.phi_s_deg is None else (measurements.phi_s_deg,)),
         )
     )
     scene = model.scene
@@ -208,47 +211,49 @@ def run_posterior(
         raise BadInputError(
             "--resume continues an emcee run; NUTS runs are not checkpointed", field="--resume"
         )
-    started = time.perf_counter()
-    scene = with_error_model(scene, error_model)
-    name = scene.model.family if model is None else model
-    model = build_model(scene, measurements, name)
-    if sampler == "nuts":
-        what = f"{chains} chains x ({warmup} warmup + {draws} draws)"
-    else:
-        dimension = FlatPotential(model).dimension
-        settings = emcee_settings(dimension, walkers, steps, warmup, seed)
-        if resume:
-            identity = {**run_fingerprint(model, measurements), "dimension": str(dimension)}
-            load_checkpoint(None if out is None else out / CHECKPOINT_FILE, settings, identity)
-        what = f"{settings['walkers']} walkers x {steps} steps ({warmup} burn-in)"
-    if announce is not None:
-        announce(f"posterior of scene '{scene.name}' ({name}) with {sampler}: {what}")
-    if sampler == "nuts":
-        result = run_nuts(
-            model,
-            chains=chains,
-            warmup=warmup,
-            draws=draws,
-            seed=seed,
-            target_accept=target_accept,
-            progress=progress,
-        )
-    else:
-        checkpoint = None if out is None else out / CHECKPOINT_FILE
-        if out is not None:
-            out.mkdir(parents=True, exist_ok=True)
-        result = run_emcee(
-            model,
-            walkers=walkers,
-            steps=steps,
-            burn=warmup,
-            seed=seed,
-            checkpoint=checkpoint,
-            resume=resume,
-            fingerprint=run_fingerprint(model, measurements),
-            progress=progress,
-        )
-    return complete_run(model, measurements, result, seed, out, started, forced=forced)
+    claim = contextlib.nullcontext() if out is None else writing(out, "posterior")
+    with claim:  # one writer per folder; an interrupted run leaves it marked incomplete
+        started = time.perf_counter()
+        scene = with_error_model(scene, error_model)
+        name = scene.model.family if model is None else model
+        model = build_model(scene, measurements, name)
+        if sampler == "nuts":
+            what = f"{chains} chains x ({warmup} warmup + {draws} draws)"
+        else:
+            dimension = FlatPotential(model).dimension
+            settings = emcee_settings(dimension, walkers, steps, warmup, seed)
+            if resume:
+                identity = {**run_fingerprint(model, measurements), "dimension": str(dimension)}
+                load_checkpoint(None if out is None else out / CHECKPOINT_FILE, settings, identity)
+            what = f"{settings['walkers']} walkers x {steps} steps ({warmup} burn-in)"
+        if announce is not None:
+            announce(f"posterior of scene '{scene.name}' ({name}) with {sampler}: {what}")
+        if sampler == "nuts":
+            result = run_nuts(
+                model,
+                chains=chains,
+                warmup=warmup,
+                draws=draws,
+                seed=seed,
+                target_accept=target_accept,
+                progress=progress,
+            )
+        else:
+            checkpoint = None if out is None else out / CHECKPOINT_FILE
+            if out is not None:
+                out.mkdir(parents=True, exist_ok=True)
+            result = run_emcee(
+                model,
+                walkers=walkers,
+                steps=steps,
+                burn=warmup,
+                seed=seed,
+                checkpoint=checkpoint,
+                resume=resume,
+                fingerprint=run_fingerprint(model, measurements),
+                progress=progress,
+            )
+        return complete_run(model, measurements, result, seed, out, started, forced=forced)
 
 
 class _StepClock:
@@ -331,6 +336,7 @@ def complete_run(
         "pi_brdf0": pi_brdf0,
         "seconds": dict(result.seconds),
         "forced": list(forced),
+        "fingerprint": run_fingerprint(model, measurements),  # what ran: for a resume
     }
     summary["verdict"] = posterior_verdict(summary, bands, theta_i_band, forced).as_json()
     clock.lap("predictive")

@@ -11,6 +11,7 @@ import numpy as np
 
 from brdf_infer._arviz import az
 from brdf_infer._atomic import atomic_write_bytes
+from brdf_infer._outlock import require_complete, writing
 from brdf_infer.compare import COMPARE_FILE
 from brdf_infer.errors import BadInputError
 from brdf_infer.model import REFERENCE_FAMILY, fold_statement
@@ -59,9 +60,22 @@ def _load(run: Path):
 
 def write_report(run: Path, progress=print) -> tuple[Path, Verdict]:
     """Write ``run/report.html`` and ``run/figures/*.png``; returns the path and the run's
-    verdict (the one the run recorded, rendered as it stands)."""
+    verdict (the one the run recorded, rendered as it stands).
+
+    Raises:
+        BadInputError: ``run`` is no complete run folder (:mod:`brdf_infer._outlock`: one
+            being written, or left incomplete by a writer that stopped), or another process
+            writes its report.
+    """
     started = time.perf_counter()
-    idata, summary, bands = _load(run)
+    require_complete(run)
+    loaded = _load(run)
+    with writing(run, "report", option="RUN_DIR", adds=True):
+        return _write_report(run, loaded, started, progress)
+
+
+def _write_report(run: Path, loaded, started: float, progress) -> tuple[Path, Verdict]:
+    idata, summary, bands = loaded
     attrs = idata.posterior.attrs
     scene = load_scene(attrs["scene_file"])
     member, physical = family_draws(idata.posterior)
