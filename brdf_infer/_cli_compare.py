@@ -7,8 +7,8 @@ import json
 import sys
 from collections.abc import Callable, Sequence
 
+from brdf_infer._nuts_settings import check_nuts_settings
 from brdf_infer._outdir import claim_output_dir
-from brdf_infer.errors import BadInputError
 
 DEFAULT_MODELS = ("strumik2024", "abg", "harvey-shack", "lambertian", "lambertian+abg")
 
@@ -25,6 +25,12 @@ def add_compare_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--warmup", type=int, default=500, help="NUTS warmup per chain")
     parser.add_argument("--draws", type=int, default=1000, help="NUTS draws per chain")
     parser.add_argument("--seed", type=int, default=0, help="random seed")
+    parser.add_argument(
+        "--target-accept",
+        type=float,
+        default=0.9,  # CompareSettings.target_accept (not imported here: arviz)
+        help="NUTS target acceptance (0.9: one setting for families that diverge more easily)",
+    )
     parser.add_argument(
         "--no-refit", action="store_true", help="no exact refits where Pareto k > 0.7"
     )
@@ -52,13 +58,10 @@ def command_compare(
         warmup=args.warmup,
         draws=args.draws,
         seed=args.seed,
+        target_accept=args.target_accept,
         refit=not args.no_refit,
     )
-    for field in ("chains", "warmup", "draws"):
-        if getattr(settings, field) < 1:
-            raise BadInputError(
-                f"must be at least 1, got {getattr(settings, field)}", field=f"--{field}"
-            )
+    check_nuts_settings(settings)
     scene, measurements = scene_and_measurements(args.scene)
     out = claim_output_dir(args.out, "compare", args.claims) if args.out else None
     progress(
