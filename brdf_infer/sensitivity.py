@@ -31,7 +31,6 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import json
 import time
 import tomllib
 import warnings
@@ -392,8 +391,7 @@ def sensitivity(
         BadInputError: a scene the study cannot answer for, a variant that is not a valid
             ``[errors]`` table, or settings out of range.
     """
-    from brdf_infer.posterior import NutsProgram, build_posterior_model, chain_keys
-    from brdf_infer.posterior._padding import pad_datasets
+    from brdf_infer.posterior import build_posterior_model, chain_keys, programs_by_structure
 
     check_scene(scene)
     settings.check()
@@ -401,22 +399,15 @@ def sensitivity(
     runs = [Variant(BASELINE), *(default_variants(scene) if variants is None else variants)]
     scenes = [variant_scene(scene, run) for run in runs]
     models = [build_posterior_model(s, measurements) for s in scenes]
-    groups: dict[str, list[int]] = {}
-    for index, each in enumerate(scenes):
-        key = json.dumps(each.errors.structure(), sort_keys=True, default=str)
-        groups.setdefault(key, []).append(index)
     keys = chain_keys(settings.seed, 1, settings.chains)[0]
     angles = tis_angles(scene, measurements)
     results: list[VariantResult | None] = [None] * len(runs)
     scaling: dict = {}
-    for members in groups.values():
-        datasets = pad_datasets([models[index].data for index in members])
-        program = NutsProgram(
-            dataclasses.replace(models[members[0]], data=datasets[0]),
-            warmup=settings.warmup,
-            target_accept=settings.target_accept,
-        )
-        for index, data in zip(members, datasets, strict=True):
+    grouped = programs_by_structure(
+        models, warmup=settings.warmup, target_accept=settings.target_accept
+    )
+    for program, members in grouped:
+        for index, data in members:
             clock = time.perf_counter()
             output = program.run(
                 data, keys, settings.draws, progress=progress, description=runs[index].name

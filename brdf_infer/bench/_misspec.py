@@ -19,7 +19,6 @@ fitted.
 from __future__ import annotations
 
 import dataclasses
-import json
 import time
 from dataclasses import dataclass, field
 from typing import Any
@@ -27,8 +26,7 @@ from typing import Any
 import numpy as np
 
 from brdf_infer.measurements import Measurements
-from brdf_infer.posterior import NutsProgram, build_posterior_model, chain_keys
-from brdf_infer.posterior._padding import pad_datasets
+from brdf_infer.posterior import build_posterior_model, chain_keys, programs_by_structure
 from brdf_infer.sbc import (
     SbcResult,
     SbcSettings,
@@ -184,10 +182,6 @@ def simulate_case(
     raise RuntimeError(f"{case.name}: simulated ln R not finite after {MAX_REDRAWS} redraws")
 
 
-def _structure(scene: Scene) -> str:
-    return json.dumps(scene.errors.structure(), sort_keys=True, default=str)
-
-
 def run_cases(
     scene: Scene,
     measurements: Measurements,
@@ -209,20 +203,16 @@ def run_cases(
     for case in cases:  # every case checked before any sampling
         case_scene(scene, case.simulated)
     models = [build_posterior_model(each, measurements) for each in fitted]
-    groups: dict[str, list[int]] = {}
-    for index, each in enumerate(fitted):
-        groups.setdefault(_structure(each), []).append(index)
     keys = chain_keys(settings.seed + 1, settings.replicates, 1)
     results: list[MisspecResult | None] = [None] * len(cases)
-    for members in groups.values():
-        datasets = pad_datasets([models[index].data for index in members])
-        program = NutsProgram(
-            dataclasses.replace(models[members[0]], data=datasets[0]),
-            warmup=settings.warmup,
-            target_accept=settings.target_accept,
-            warmup_tree_depth=settings.warmup_tree_depth,
-        )
-        for index, data in zip(members, datasets, strict=True):
+    grouped = programs_by_structure(
+        models,
+        warmup=settings.warmup,
+        target_accept=settings.target_accept,
+        warmup_tree_depth=settings.warmup_tree_depth,
+    )
+    for program, members in grouped:
+        for index, data in members:
             case = cases[index]
             if progress is not None:
                 progress(f"  misspecification, {case.name}, {settings.replicates} replicates")

@@ -20,7 +20,7 @@ from brdf_infer.posterior._model import (
     PosteriorModel,
     build_posterior_model,
 )
-from brdf_infer.posterior._nuts import NutsProgram, chain_keys
+from brdf_infer.posterior._nuts import NutsProgram, chain_keys, programs_by_structure
 from brdf_infer.posterior._power_scaling import power_scaling
 from brdf_infer.posterior._results import (
     BANDS_FILE,
@@ -80,6 +80,7 @@ __all__ = [
     "model_name",
     "pointwise_loo_terms",
     "power_scaling",
+    "programs_by_structure",
     "run_emcee",
     "run_fold",
     "run_nuts",

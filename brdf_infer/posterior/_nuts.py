@@ -385,3 +385,35 @@ def chain_keys(seed: int, datasets: int, chains: int) -> jnp.ndarray:
     """PRNG keys of shape (datasets, chains, 2) from one seed."""
     keys = jax.random.split(jax.random.PRNGKey(seed), datasets * chains)
     return keys.reshape(datasets, chains, *keys.shape[1:])
+
+
+def programs_by_structure(
+    models: list[PosteriorModel], **program_options
+) -> list[tuple[NutsProgram, list[tuple[int, ModelData]]]]:
+    """One NUTS program per error-model structure among ``models``, each with its members'
+    data padded to one shape (:func:`brdf_infer.posterior._padding.pad_datasets`).
+
+    Error-model options that are data of the compiled likelihood (calibration, rotation
+    coupling, images per row) share a program; the others (``scene.errors.structure()``)
+    compile their own. ``program_options`` go to :class:`NutsProgram`.
+
+    Returns:
+        (program, [(index into ``models``, padded data), ...]) per structure, in the order of
+        each structure's first model.
+    """
+    import dataclasses
+    import json
+
+    from brdf_infer.posterior._padding import pad_datasets
+
+    groups: dict[str, list[int]] = {}
+    for index, model in enumerate(models):
+        key = json.dumps(model.scene.errors.structure(), sort_keys=True, default=str)
+        groups.setdefault(key, []).append(index)
+    programs = []
+    for members in groups.values():
+        datasets = pad_datasets([models[index].data for index in members])
+        first = dataclasses.replace(models[members[0]], data=datasets[0])
+        padded = list(zip(members, datasets, strict=True))
+        programs.append((NutsProgram(first, **program_options), padded))
+    return programs
