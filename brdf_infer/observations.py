@@ -95,6 +95,21 @@ def through_instrument(point_log_reflectance, kernel: Kernel | None, log_brdf) -
     )
 
 
+# latent scattering angles (``angle_method = "latent"``) can be pushed past grazing by a
+# camera or rotation error; ln cos θs is held at its value here beyond it instead of NaN
+GRAZING_LIMIT_DEG = 89.9
+
+
+def log_cos_theta_s(theta_s_deg) -> jnp.ndarray:
+    """ln cos θs of Eq. (6), finite for every θs: |θs| ≥ :data:`GRAZING_LIMIT_DEG` counts as
+    that limit (ln cos 89.9° = −6.35), with a zero gradient there (a double ``where``: the
+    clipped angle, not the raw one, goes into the logarithm)."""
+    theta = jnp.asarray(theta_s_deg, float)
+    inside = jnp.abs(theta) < GRAZING_LIMIT_DEG
+    safe = jnp.where(inside, theta, GRAZING_LIMIT_DEG)
+    return jnp.log(jnp.cos(safe * DEG))
+
+
 def log_reflectance_at(
     theta_i_deg,
     theta_s_deg,
@@ -105,7 +120,7 @@ def log_reflectance_at(
 ) -> jnp.ndarray:
     """ln R(θi, θs) up to the constant ln Ω: ln BRDF + ln cos θs (for the angle slopes); with
     ``rows``, each row's own kind (no cos θs for BRDF rows, Eq. 8 out of the plane)."""
-    log_cos = jnp.log(jnp.cos(jnp.asarray(theta_s_deg, float) * DEG))
+    log_cos = log_cos_theta_s(theta_s_deg)
     if rows is None:
         return log_brdf_inplane(theta_i_deg, theta_s_deg, params, fold, constants) + log_cos
     log_brdf = row_log_brdf(theta_i_deg, theta_s_deg, params, fold, constants, rows.phi_s_deg)

@@ -191,3 +191,21 @@ def test_steep_folding_constants_stay_finite(params, a, theta_sf, theta, theta_i
     log_value, log_grads = jax.value_and_grad(log_tis, argnums=1)(theta_i, params, True, constants)
     assert np.isfinite(log_value) and all_finite(log_grads)
     assert not np.isnan(float(tis(theta_i, params, True, constants)))  # +inf beyond 1e308
+
+
+def test_ln_cos_theta_s_is_finite_past_grazing_with_a_finite_gradient():
+    """A latent scattering angle pushed past 90° (``angle_method = "latent"``) gives the
+    grazing limit's ln cos θs and a zero slope, never NaN; below the limit it is ln cos θs."""
+    from brdf_infer.observations import GRAZING_LIMIT_DEG, log_cos_theta_s
+
+    angles = jnp.array([0.0, 45.0, 85.0, 89.89, 90.0, 95.0, 180.0, -91.0])
+    values = log_cos_theta_s(angles)
+    slopes = jax.vmap(jax.grad(log_cos_theta_s))(angles)
+    assert np.all(np.isfinite(values)) and np.all(np.isfinite(slopes))
+    inside = np.abs(np.asarray(angles)) < GRAZING_LIMIT_DEG
+    np.testing.assert_allclose(
+        values[inside], np.log(np.cos(np.radians(np.asarray(angles)[inside]))), rtol=1e-14
+    )
+    limit = np.log(np.cos(np.radians(GRAZING_LIMIT_DEG)))
+    np.testing.assert_allclose(values[~inside], limit, rtol=1e-14)
+    np.testing.assert_array_equal(slopes[~inside], 0.0)

@@ -15,12 +15,11 @@ import jax
 import jax.numpy as jnp
 import numpyro
 
-from brdf_infer._units import DEG
 from brdf_infer.error_model import angle_slopes, covariance_factors
 from brdf_infer.errors import BadInputError
 from brdf_infer.measurements import Measurements
 from brdf_infer.model import ModelFamily
-from brdf_infer.observations import through_instrument
+from brdf_infer.observations import log_cos_theta_s, through_instrument
 from brdf_infer.posterior._model import (
     LikelihoodParts,
     ModelData,
@@ -83,7 +82,7 @@ class FamilyPosteriorModel:
     def log_reflectance_at(self, theta_i_deg, theta_s_deg, physical: dict, rows) -> jnp.ndarray:
         """ln R(θi, θs) up to the constant ln Ω: ln BRDF + ln cos θs (no cos θs for BRDF rows)."""
         log_brdf = self.family.log_brdf_rows(theta_i_deg, theta_s_deg, physical, rows.phi_s_deg)
-        log_cos = jnp.log(jnp.cos(jnp.asarray(theta_s_deg, float) * DEG))
+        log_cos = log_cos_theta_s(theta_s_deg)
         return log_brdf + rows.cos_weight * log_cos
 
     def likelihood_parts(self, physical: dict, scales, data: ModelData | None = None):
