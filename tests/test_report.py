@@ -102,6 +102,7 @@ def test_report_opens_with_the_verdict_then_the_sections(good_report, nuts_run):
             "Verdict",
             '<div class="result">',
             "TIS(θi = 18°)",
+            "TIS(θi = 70°)",  # the article's angle, as on stdout, though no row has θi = 70°
             "π·BRDF0",
             "In-plane BRDF at the scene",
             "The run",

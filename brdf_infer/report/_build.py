@@ -31,6 +31,7 @@ from brdf_infer.report._instruments import MEANINGS, instruments_section
 from brdf_infer.report._raytrace import figure_png, plot_detector_images, plot_raytrace
 from brdf_infer.report._sensitivity import sensitivity_section
 from brdf_infer.scene import load_scene
+from brdf_infer.sensitivity import tis_angles
 from brdf_infer.verdict import PARETO_K_LIMIT, Verdict
 
 REPORT_FILE = "report.html"
@@ -197,7 +198,7 @@ def _write_report(run: Path, loaded, started: float, progress) -> tuple[Path, Ve
             f"emcee ≥ {THRESHOLDS['tau_multiple']} autocorrelation times."
         )
         + "</p>",
-        _result_box(summary, bands, scene.band_theta_i_deg(rows), member.name),
+        _result_box(summary, bands, tis_angles(scene, rows), member.name),
         _fold_note(bands) if "tis" in bands else "",
         *(_html.figure(png, caption) for name, caption, png in figures if name == "brdf_bands"),
         _studies_line(run),
@@ -418,8 +419,8 @@ def _family_priors_table(member) -> str:
 
 
 def _result_box(summary: dict, bands: dict, angles, model: str = REFERENCE_FAMILY) -> str:
-    """The answer first: TIS at the scene's incidence angles and π·BRDF0 (``strumik2024``),
-    95 % intervals."""
+    """The answer first: TIS at ``angles`` (the scene's incidence angles and the article's 70°)
+    and π·BRDF0 (``strumik2024``), 95 % intervals."""
     rows = []
     if "tis" in bands:
         grid = np.asarray(bands["tis"]["theta_i_deg"])
