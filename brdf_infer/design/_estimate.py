@@ -8,9 +8,10 @@ measured residual r = y − μ and a draw θ, the shared effects are z | y, θ ~
     C = I + Wᵀ D⁻¹ W,   m_z = C⁻¹ Wᵀ D⁻¹ r        (Woodbury; one q × q Cholesky).
 
 A new row c of the same series and sample loads on the same effects, y_c = μ_c + w_c·z + e_c
-(w_c: τ on its sample's column, σ_cal on its calibration group's; its own sample-rotation
-setting and camera position are new, so they enter its own variance d_c with the value noise
-and the repeatability). So a set of new rows has, per draw, the conditional predictive
+(w_c: τ on its sample's column, σ_cal on its calibration group's, σ_rot g_rot on its rotation
+setting's where that (series, sample, θi) was measured before; a new setting's rotation error
+and the row's camera position are its own, so they enter its own variance d_c with the value
+noise and the repeatability). So a set of new rows has, per draw, the conditional predictive
 
     y_new | y, θ ~ N(μ_new + W_new m_z,  diag(d_new) + B Bᵀ),   B = W_new L_C⁻ᵀ,
 
@@ -30,9 +31,11 @@ estimate EIG ≈ (1/J) Σ_j [ln p(y_j | θ_{s_j}) − ln (1/S) Σ_s p(y_j | θ_s
 
 Approximations: the S draws stand for the posterior (the weights' variance is the price: the
 weighted variance is biased low where the ESS is small); the angle errors of a new row enter
-linearised, as in the ``linearised`` likelihood; the new rows' own rotation settings are taken
-independent of each other. Where the mean ESS falls below :data:`ESS_FLOOR` the importance
-estimate is replaced by the linear-Gaussian (Bayes linear) one,
+linearised, as in the ``linearised`` likelihood; two new rows at one new θi setting are taken
+with independent rotation errors (as if the sample were turned again for each), and a group
+measured once so far (a sample, calibration or setting of one row) is taken as new. Where
+the mean ESS falls below :data:`ESS_FLOOR` the importance estimate is replaced by the
+linear-Gaussian (Bayes linear) one,
 Var(T) − Cov(T, y) Var(y)⁻¹ Cov(y, T) over the joint predictive of (θ, y), which is exact
 for a jointly normal (T, y) and needs no weights.
 """

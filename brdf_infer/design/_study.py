@@ -192,8 +192,22 @@ def predictive(run: DesignRun, candidates: Candidates, draws: dict) -> RowPredic
         or [-1] * len(new)
     )
     calibration_col = np.where(calibration_col >= 0, calibration_col + sample_shared, -1)
+    # a row at a (series, sample, θi) already measured shares that setting's rotation error
+    settings = list(
+        zip(measurements.series, measurements.sample, measurements.theta_i_deg, strict=True)
+    )
+    rotation_shared = columns - group_members(settings)[0].shape[1]
+    rotation_col = np.array(
+        [
+            _shared_column(settings, key)
+            for key in zip(new.series, new.sample, new.theta_i_deg, strict=True)
+        ]
+    )
+    rotation_col = np.where(rotation_col >= 0, rotation_col + rotation_shared, -1)
     one_hot_sample = jnp.asarray(sample_col[:, None] == np.arange(columns)[None, :], float)
     one_hot_cal = jnp.asarray(calibration_col[:, None] == np.arange(columns)[None, :], float)
+    one_hot_rotation = jnp.asarray(rotation_col[:, None] == np.arange(columns)[None, :], float)
+    rotation_new = jnp.asarray(rotation_col < 0, float)
     fold, constants = scene.model.fold, scene.model.constants
     params = Params(*(jnp.asarray(draws[name]) for name in PARAM_NAMES))
     count = params.brdf0.shape[0]
@@ -217,12 +231,15 @@ def predictive(run: DesignRun, candidates: Candidates, draws: dict) -> RowPredic
             )
         else:
             g_rot = g_cam = jnp.zeros_like(mean)
-        loading = tau * one_hot_sample + calibration * one_hot_cal
+        rotation = g_rot * errors.rotation_deg * angles
+        loading = (
+            tau * one_hot_sample + calibration * one_hot_cal + rotation[:, None] * one_hot_rotation
+        )
         own = (
             layout.sigma_row**2
             + rep**2
             + (g_cam * errors.camera_deg * angles) ** 2
-            + (g_rot * errors.rotation_deg * angles) ** 2
+            + rotation_new * rotation**2
             + jnp.asarray(sample_col < 0, float) * tau**2
             + jnp.asarray(calibration_col < 0, float) * calibration**2
         )
