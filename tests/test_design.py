@@ -125,6 +125,10 @@ def test_design_json_contract_and_map(nuts_run, candidates_csv, tmp_path, capsys
     assert payload["seconds"] > 0
     assert json.loads((out / "design.json").read_text())["target"] == "tis_70deg"
     assert (out / "design.png").read_bytes()[:4] == b"\x89PNG"
+    from brdf_infer.report._design import design_section
+
+    section = "".join(design_section(out))
+    assert "Where to measure next" in section and "<img" in section
 
 
 @pytest.mark.parametrize(
@@ -203,3 +207,18 @@ def test_scene_design_table_is_read(tmp_path):
     scene = parse_scene(document, tmp_path / "x.scene.toml")
     assert scene.design.theta_i_deg == (20.0, 60.0) and scene.design.budget == 2
     assert scene.studies.design == "pi_brdf0"
+
+
+@pytest.mark.slow
+def test_expected_sd_agrees_with_nuts_refits(nuts_run):
+    """The estimate of the expected posterior sd of TIS(70°) after one more row against the
+    average of NUTS refits with that row simulated from the posterior (best, median, worst
+    candidate; the refit average's own Monte Carlo error is a few per cent)."""
+    from brdf_infer.bench._design import RefitSettings, refit_check
+
+    rows = refit_check(
+        nuts_run.out, "tis:70", "II", RefitSettings(replicates=3), progress=lambda _: None
+    )
+    assert [r["pick"] for r in rows] == ["best", "median", "worst"]
+    for row in rows:
+        assert 0.85 < row["estimate_sd"] / row["refit_sd"] < 1.15, row
