@@ -31,7 +31,14 @@ from brdf_infer.posterior import NutsProgram, build_posterior_model, chain_keys
 from brdf_infer.posterior._model import build_model_data
 
 STRATEGIES = ("initial", "design", "random", "article")
-HEADERS = ["rows added", "mean 95 % width TIS [%]", "vs initial", "covers truth", "seeds"]
+HEADERS = [
+    "rows added",
+    "mean 95 % width TIS [%]",
+    "vs initial",
+    "mean sd vs initial",
+    "covers truth",
+    "seeds",
+]
 
 
 @dataclass(frozen=True)
@@ -112,6 +119,7 @@ def payoff(
         return {n: np.reshape(output.sites[n], -1) for n in names if n in output.sites}
 
     widths = {k: [] for k in STRATEGIES}
+    sds = {k: [] for k in STRATEGIES}
     covered = {k: [] for k in STRATEGIES}
     chosen_settings = []
     for seed in range(settings.seeds):
@@ -158,6 +166,7 @@ def payoff(
             values = np.asarray(tis(jnp.asarray(settings.theta_i_deg), params, fold, constants))
             low, high = np.quantile(values, [0.025, 0.975])
             widths[name].append(float(high - low))
+            sds[name].append(float(np.std(values)))
             covered[name].append(bool(low <= true_tis <= high))
         progress(f"  design pay-off seed {seed + 1}/{settings.seeds}")
     return {
@@ -167,6 +176,8 @@ def payoff(
         "seeds": settings.seeds,
         "width": {k: float(np.mean(v)) for k, v in widths.items()},
         "widths": widths,
+        "sd": {k: float(np.mean(v)) for k, v in sds.items()},
+        "sds": sds,
         "covered": {k: int(np.sum(v)) for k, v in covered.items()},
         "chosen": chosen_settings,
         "seconds": time.perf_counter() - start,
@@ -187,6 +198,7 @@ def payoff_rows(result: dict) -> list[list[str]]:
             labels[k],
             f"{100 * result['width'][k]:.3f}",
             f"{result['width'][k] / initial:.3f}",
+            f"{result['sd'][k] / result['sd']['initial']:.3f}",
             f"{result['covered'][k]}/{result['seeds']}",
             str(result["seeds"]),
         ]

@@ -143,11 +143,11 @@ def set_outcome(
         "jkl,jl->jk", lower[simulated_draws], standard
     )  # (J, k)
     log_det = jnp.sum(jnp.log(jnp.diagonal(lower, axis1=1, axis2=2)), axis=1)  # (S,)
+    identity = jnp.broadcast_to(jnp.eye(lower.shape[-1]), lower.shape)
+    inverse = jsl.solve_triangular(lower, identity, lower=True)  # L⁻¹ of every draw, once
 
     def log_density(outcome):  # ln p(y_j | θ_s) for every s, up to a constant
-        whitened = jax.vmap(lambda low, r: jsl.solve_triangular(low, r, lower=True))(
-            lower, outcome[None, :] - mean
-        )
+        whitened = jnp.einsum("skl,sl->sk", inverse, outcome[None, :] - mean)
         return -0.5 * jnp.sum(whitened**2, axis=1) - log_det
 
     log_p = jax.vmap(log_density)(outcomes)  # (J, S)
