@@ -22,6 +22,7 @@ from typing import Any, NoReturn
 import numpy as np
 
 from brdf_infer._cli_compare import add_compare_arguments, command_compare
+from brdf_infer._cli_design import add_design_arguments, command_design
 from brdf_infer._cli_export import add_export_arguments, command_export
 from brdf_infer._cli_fold import add_fold_arguments, chosen_fold, refuse_fold
 from brdf_infer._cli_sensitivity import add_sensitivity_arguments, command_sensitivity
@@ -499,6 +500,11 @@ def _command_compare(args: argparse.Namespace) -> None:
         return scene, measurements
 
     command_compare(args, scene_and_measurements, _table, _progress)
+
+
+def _command_design(args: argparse.Namespace) -> None:
+    _headless()
+    command_design(args, _table, _progress)
 
 
 def _command_sensitivity(args: argparse.Namespace) -> None:
@@ -1290,6 +1296,14 @@ def build_parser() -> argparse.ArgumentParser:
     )
     add_sensitivity_arguments(sensitivity)
     sensitivity.set_defaults(handler=_command_sensitivity)
+
+    design = command(
+        "design",
+        "where to measure next: the expected posterior sd of a target after new rows at each "
+        "feasible setting, and the best K settings together",
+    )
+    add_design_arguments(design)
+    design.set_defaults(handler=_command_design)
 
     report = command("report", "HTML report of a posterior run: the answer, then diagnostics")
     report.add_argument("run_dir", help="directory of a posterior run (posterior.nc, ...)")

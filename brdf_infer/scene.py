@@ -83,6 +83,17 @@ Schema (keys other than these are errors; defaults in brackets)::
     instruments = ["aperture", "image"]      # [] posteriors under other instrument models
     raytrace = true                          # [false] ray-trace the posterior ([raytrace])
     compare = ["strumik2024", "abg"]         # [] model families compared by PSIS-LOO
+    design = "tis:70"                        # [unset] where to measure next for this target
+                                             #   (brdf_infer.design; tis:THETA, pi_brdf0, ...)
+    [design]                                 # the settings a new row may take (brdf-infer design)
+    theta_i_deg = [10.0, 85.0]               # [[10, 85]] θi range [deg]
+    theta_s_deg = [-85.0, 85.0]              # [[-85, 85]] signed in-plane θs range [deg]
+    step_deg = 5.0                           # [5] grid step [deg]
+    source_clearance_deg = 10.0              # [10] least lab angle |θi + θs| between the
+                                             #   camera and the incident beam [deg]
+    series = "II"                            # [the series with the most rows] the series
+                                             #   (aperture, calibration) a new row joins
+    budget = 3                               # [3] rows chosen together
 """
 
 from __future__ import annotations
@@ -259,6 +270,7 @@ class Studies:
     raytrace: bool = False
     compare: tuple[str, ...] = ()
     sensitivity: bool = False
+    design: str | None = None
 
     def requested(self) -> list[str]:
         """One phrase per study asked for."""
@@ -267,7 +279,32 @@ class Studies:
         asked += ["ray traces"] * self.raytrace
         asked += [f"comparison of {', '.join(self.compare)}"] if self.compare else []
         asked += ["sensitivity to the error-model assumptions"] * self.sensitivity
+        asked += [f"where to measure next ({self.design})"] if self.design else []
         return asked
+
+
+@dataclass(frozen=True)
+class DesignSettings:
+    """The ``[design]`` table: the settings a new row may take (:mod:`brdf_infer.design`).
+
+    Attributes:
+        theta_i_deg: (low, high) incidence angles [deg].
+        theta_s_deg: (low, high) signed in-plane scattering angles [deg] (> 0: forward side).
+        step_deg: grid step in θi and θs [deg].
+        source_clearance_deg: the least lab angle |θi + θs| between the camera and the
+            incident beam [deg]; the camera cannot stand in the beam (θs = −θi is the
+            retro-reflection direction, the source itself).
+        series: the series whose aperture and calibration a new row shares (None: the series
+            with the most rows).
+        budget: rows chosen together by default.
+    """
+
+    theta_i_deg: tuple[float, float] = (10.0, 85.0)
+    theta_s_deg: tuple[float, float] = (-85.0, 85.0)
+    step_deg: float = 5.0
+    source_clearance_deg: float = 10.0
+    series: str | None = None
+    budget: int = 3
 
 
 @dataclass(frozen=True)
@@ -289,6 +326,7 @@ class Scene:
     studies: Studies = field(default_factory=Studies)
     bsdf_thinning: tuple[int, int] = (1, 1)
     instrument: InstrumentSettings = field(default_factory=InstrumentSettings)
+    design: DesignSettings = field(default_factory=DesignSettings)
 
     def setup_of(self, series: str) -> RaytraceSettings | None:
         """The beam geometry of a series: ``[instrument.series.NAME]``, else the
@@ -519,6 +557,69 @@ def _parse_studies(document: dict, path: Path) -> Studies:
         raytrace=_boolean(table, "raytrace", path, "studies.", False),
         compare=_compare_families(compare, path, field_name),
         sensitivity=_boolean(table, "sensitivity", path, "studies.", False),
+        design=_design_target(table, path),
+    )
+
+
+def _design_target(table: dict, path: Path) -> str | None:
+    from brdf_infer._design_target import parse_target
+
+    if "design" not in table:
+        return None
+    parse_target(table["design"], field="studies.design", file=path)
+    return table["design"].strip()
+
+
+def _angle_range(table: dict, key: str, path: Path, default, low: float, high: float):
+    value = table.get(key, list(default))
+    if not (
+        isinstance(value, list)
+        and len(value) == 2
+        and all(isinstance(v, int | float) and not isinstance(v, bool) for v in value)
+        and low <= value[0] <= value[1] <= high
+    ):
+        raise BadInputError(
+            f"expected [low, high] with {low:g} <= low <= high <= {high:g} deg, got {value!r}",
+            file=path,
+            field=f"design.{key}",
+        )
+    return (float(value[0]), float(value[1]))
+
+
+def _parse_design(document: dict, path: Path, series: dict) -> DesignSettings:
+    """The ``[design]`` table (:class:`DesignSettings`)."""
+    table = _table(document, "design", path, set(DesignSettings.__dataclass_fields__))
+    defaults = DesignSettings()
+    name = table.get("series")
+    if name is not None and name not in series:
+        raise BadInputError(
+            f"no series {name!r} in the scene (known: {', '.join(series)})",
+            file=path,
+            field="design.series",
+        )
+    clearance = _number(table, "source_clearance_deg", path, default=defaults.source_clearance_deg)
+    if not 0.0 <= clearance < 90.0:
+        raise BadInputError(
+            f"expected an angle in [0, 90) deg, got {clearance:g}",
+            file=path,
+            field="design.source_clearance_deg",
+        )
+    try:
+        step = _number(table, "step_deg", path, default=defaults.step_deg, positive=True)
+    except BadInputError as error:
+        raise BadInputError(error.problem, file=path, field="design.step_deg") from None
+    budget = table.get("budget", defaults.budget)
+    if isinstance(budget, bool) or not isinstance(budget, int) or not 1 <= budget <= 10:
+        raise BadInputError(
+            f"expected an integer in [1, 10], got {budget!r}", file=path, field="design.budget"
+        )
+    return DesignSettings(
+        theta_i_deg=_angle_range(table, "theta_i_deg", path, defaults.theta_i_deg, 0.0, 89.0),
+        theta_s_deg=_angle_range(table, "theta_s_deg", path, defaults.theta_s_deg, -89.0, 89.0),
+        step_deg=step,
+        source_clearance_deg=clearance,
+        series=name,
+        budget=budget,
     )
 
 
@@ -574,6 +675,7 @@ _TOP_KEYS = {
     "compare",
     "studies",
     "bsdf",
+    "design",
 }
 
 
@@ -931,6 +1033,7 @@ def parse_scene(document: dict, path: Path) -> Scene:
         studies=studies,
         bsdf_thinning=thinning,
         instrument=_parse_instrument(document, path, series),
+        design=_parse_design(document, path, series),
     )
     check_instrument(scene, scene.instrument.model, field="instrument.model")
     return scene

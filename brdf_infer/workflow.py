@@ -328,11 +328,12 @@ def _run(
     instruments = instruments if reference else []
     traces = studies.raytrace and scene.raytrace is not None and reference
     sensitive = studies.sensitivity and reference
+    designed = bool(studies.design) and reference
     _check_studies(scene, instruments, sensitive)
     implausible = measurement_checks(scene, measurements)
     require_plausible(implausible, settings.force)
     steps = 4 + len(error_models) + bool(instruments) + traces + bool(studies.compare)
-    steps += sensitive
+    steps += sensitive + designed
     step = iter(range(1, steps + 1))
     paper = None
     if reference:
@@ -423,6 +424,12 @@ def _run(
             out,
             sensitivity(scene, measurements, settings=SensitivitySettings(seed=settings.seed)),
         )
+    if designed:
+        from brdf_infer.design import DesignOptions, design, load_design_run, write_design
+
+        progress(f"[{next(step)}/{steps}] where to measure next for {studies.design}")
+        options = DesignOptions(budget=scene.design.budget, seed=settings.seed)
+        write_design(out, design(load_design_run(out, scene), studies.design, options=options))
     atomic_write_json(
         out / STUDIES_FILE,
         {"run": studies.requested(), "not_run": not_run(scene, studies) if reference else []},

@@ -10,6 +10,7 @@ from brdf_infer.bench._batch import HEADERS as BATCH_HEADERS
 from brdf_infer.bench._batch import batch_rows
 from brdf_infer.bench._cache import HEADERS as CACHE_HEADERS
 from brdf_infer.bench._cache import cache_rows
+from brdf_infer.bench._design_payoff import design_section
 from brdf_infer.bench._export import ABG_HEADERS, GRID_HEADERS, abg_rows, grid_rows
 from brdf_infer.bench._families import comparison_row, quadrature_rows
 from brdf_infer.bench._fits import fit_rows
@@ -109,6 +110,8 @@ def write_report(out: Path, quick: bool, progress=print) -> Path:
     progress("benchmark 7/12: misspecification ...")
     misspecified = misspec_rows(scene, quick, progress)
     misspec_before, misspec_after = misspec_text(misspecified)
+    progress("benchmark: experimental design (estimate against refit, pay-off) ...")
+    design_lines = design_section(quick, progress)
     progress("benchmark 8/12: exports ...")
     grids, abgs = grid_rows(quick), abg_rows(quick)
     progress("benchmark 9/12: model families ...")
@@ -442,6 +445,7 @@ def write_report(out: Path, quick: bool, progress=print) -> Path:
         "",
         _markdown_table(BIAS_HEADERS, biases),
         "",
+        *design_lines,
     ]
     atomic_write_bytes(out, "\n".join(sections).encode())
     return out

@@ -26,6 +26,7 @@ from brdf_infer.posterior import (
 )
 from brdf_infer.report import _figures, _html, _noise
 from brdf_infer.report._compare import compare_figure, compare_table_html
+from brdf_infer.report._design import design_section
 from brdf_infer.report._export import abg_table, load_exports, plot_export
 from brdf_infer.report._instruments import MEANINGS, instruments_section
 from brdf_infer.report._raytrace import figure_png, plot_detector_images, plot_raytrace
@@ -296,6 +297,7 @@ def _write_report(run: Path, loaded, started: float, progress) -> tuple[Path, Ve
         *_export_section(exports, figures),
         *_compare_section(run),
         *sensitivity_section(run),
+        *design_section(run),
         *instruments_section(run),
         *(
             ["<h2>Ray-tracing validation (Sec. 6)</h2>", _raytrace_table(traces)]
@@ -648,7 +650,11 @@ def _comparison(run: Path, idata) -> str:
 
 
 EXAMPLE_FIGURES = ("brdf_bands", "tis_band", "hemisphere", "predictive", "raytrace", "instrument")
-STUDY_FIGURES = ("compare", "sensitivity")  # written by the studies into the run folder itself
+STUDY_FIGURES = (
+    "compare",
+    "sensitivity",
+    "design",
+)  # written by the studies into the run folder itself
 
 
 def write_example(run: Path, example: Path) -> Path:

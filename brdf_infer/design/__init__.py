@@ -1,0 +1,47 @@
+"""Where to measure next: Bayesian experimental design from a posterior run
+(``brdf-infer design``)."""
+
+from brdf_infer._design_target import DesignTarget, parse_target
+from brdf_infer.design._candidates import (
+    Candidates,
+    design_series,
+    grid_candidates,
+    reachable,
+    read_candidates,
+)
+from brdf_infer.design._estimate import ESS_FLOOR, candidate_outcomes, set_outcome
+from brdf_infer.design._study import (
+    DESIGN_FIGURE,
+    DESIGN_FILE,
+    DesignOptions,
+    DesignResult,
+    DesignRun,
+    design,
+    load_design_run,
+    read_design,
+    target_values,
+    write_design,
+)
+
+__all__ = [
+    "DESIGN_FIGURE",
+    "DESIGN_FILE",
+    "ESS_FLOOR",
+    "Candidates",
+    "DesignOptions",
+    "DesignResult",
+    "DesignRun",
+    "DesignTarget",
+    "candidate_outcomes",
+    "design",
+    "design_series",
+    "grid_candidates",
+    "load_design_run",
+    "parse_target",
+    "reachable",
+    "read_candidates",
+    "read_design",
+    "set_outcome",
+    "target_values",
+    "write_design",
+]

@@ -1,0 +1,415 @@
+"""Where to measure next: ``brdf-infer design`` (Bayesian experimental design from a run).
+
+For every candidate setting (:mod:`._candidates`) the expected posterior sd of a target after
+one more row there, its ratio to today's sd and the expected information gain, estimated from
+the run's own posterior draws by importance reweighting (:mod:`._estimate`); with a budget of
+K rows, K settings chosen together, greedily on the joint expected result of the set (each step
+adds the candidate that, measured together with those already chosen, leaves the smallest
+expected sd — not K times the single best).
+
+The new rows' predictive is their conditional given the measured rows under the scene's own
+error model (shared calibration and sample effects), so the answer depends on which series a
+row joins. The run must be of the scene (its name and its rows).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from brdf_infer._design_target import DesignTarget, parse_target
+from brdf_infer.design._candidates import Candidates, design_series, grid_candidates
+from brdf_infer.design._estimate import (
+    ESS_FLOOR,
+    RowPredictive,
+    candidate_outcomes,
+    row_predictive,
+)
+from brdf_infer.error_model import (
+    angle_slopes,
+    calibration_groups,
+    group_members,
+    noise_layout,
+)
+from brdf_infer.errors import BadInputError
+from brdf_infer.measurements import Measurements
+from brdf_infer.model import log_brdf_inplane, tis
+from brdf_infer.observations import (
+    build_observation_model,
+    log_reflectance_at,
+    predicted_log_reflectance,
+)
+from brdf_infer.params import PARAM_NAMES, Params
+from brdf_infer.posterior import POSTERIOR_FILE, build_posterior_model, interval95
+from brdf_infer.scene import Scene, load_scene
+
+DESIGN_FILE, DESIGN_FIGURE = "design.json", "design.png"
+
+
+@dataclass(frozen=True)
+class DesignOptions:
+    """How the expectation is estimated.
+
+    Attributes:
+        draws: posterior draws used (evenly thinned from the run) [-].
+        simulations: simulated outcomes J per candidate set [-].
+        budget: rows chosen together (K).
+        seed: random seed of the simulated outcomes.
+    """
+
+    draws: int = 1000
+    simulations: int = 128
+    budget: int = 3
+    seed: int = 0
+
+    def check(self) -> None:
+        """Raises BadInputError naming the option out of range."""
+        for name, low, high in (("draws", 50, 100000), ("simulations", 8, 4096), ("budget", 1, 10)):
+            value = getattr(self, name)
+            if not low <= value <= high:
+                raise BadInputError(f"expected {low}..{high}, got {value}", field=f"--{name}")
+
+
+@dataclass(frozen=True)
+class DesignRun:
+    """What the study reads from a run folder and its scene.
+
+    Attributes:
+        scene, measurements: the scene of the run and its rows.
+        sites: every draw of the run's sites needed by the likelihood (flattened).
+        path: the run's posterior.nc.
+    """
+
+    scene: Scene
+    measurements: Measurements
+    sites: dict[str, np.ndarray]
+    path: Path
+
+
+def load_design_run(run: str | Path, scene: Scene | str | None = None) -> DesignRun:
+    """The run folder's draws and its scene (``scene``: check the run is of this one).
+
+    Raises:
+        BadInputError: no readable posterior.nc, a run of another scene or other rows, a run
+            of a family other than ``strumik2024``.
+    """
+    from brdf_infer._arviz import az
+
+    path = Path(run) / POSTERIOR_FILE
+    if not path.is_file():
+        raise BadInputError("no posterior.nc here (run 'brdf-infer run' first)", file=run)
+    try:
+        idata = az.from_netcdf(path)
+    except (OSError, ValueError) as error:
+        raise BadInputError(f"cannot read: {error}", file=path) from None
+    attrs = idata.posterior.attrs
+    if attrs.get("model", "strumik2024") != "strumik2024":
+        raise BadInputError(f"a run of {attrs['model']}, not of strumik2024", file=path)
+    if scene is None:
+        scene = load_scene(attrs.get("scene_file", "lya"))
+    elif isinstance(scene, str):
+        scene = load_scene(scene)
+    if attrs.get("scene") != scene.name:
+        raise BadInputError(
+            f"a run of scene '{attrs.get('scene')}', not of '{scene.name}'", file=path
+        )
+    measurements = scene.load_measurements()
+    observed = np.asarray(idata.observed_data["obs"])
+    if observed.shape != (len(measurements),) or not np.allclose(
+        observed, np.log(measurements.reflectance)
+    ):
+        raise BadInputError(f"a run on other rows than scene '{scene.name}' has now", file=path)
+    names = [*PARAM_NAMES, "sample_sd", "repeatability"]
+    sites = {
+        name: np.asarray(idata.posterior[name]).reshape(-1)
+        for name in names
+        if name in idata.posterior
+    }
+    return DesignRun(scene, measurements, sites, path)
+
+
+def target_values(target: DesignTarget, params: Params, scene: Scene) -> np.ndarray:
+    """(draws, P) values of the target per draw (P = 1, or the free parameters for ``all``)."""
+    fold, constants = scene.model.fold, scene.model.constants
+    if target.kind == "tis":
+        values = tis(jnp.asarray(target.angles_deg[0]), params, fold, constants)
+    elif target.kind == "brdf":
+        values = jnp.exp(log_brdf_inplane(*target.angles_deg, params, fold, constants))
+    elif target.kind == "pi_brdf0":
+        values = math.pi * params.brdf0
+    elif target.kind == "param":
+        values = getattr(params, target.parameter)
+    else:
+        return np.stack([np.asarray(getattr(params, n)) for n in scene.free_parameters], axis=1)
+    return np.asarray(values, float).reshape(-1, 1)
+
+
+def _candidate_measurements(candidates: Candidates, measurements: Measurements) -> Measurements:
+    """The candidates as rows whose σ is the median relative σ of their series' rows."""
+    rows = candidates.as_measurements(measurements)
+    if measurements.reflectance_err is None:
+        return rows
+    relative = measurements.reflectance_err / measurements.reflectance
+    median = {s: float(np.median(relative[measurements.series == s])) for s in set(rows.series)}
+    error = np.array([median[s] for s in rows.series]) * rows.reflectance
+    return Measurements(**{**rows.__dict__, "reflectance_err": error})
+
+
+def _shared_column(keys: list, key) -> int:
+    """Column of ``key`` among the groups of two or more rows (−1: none, the row is new)."""
+    unique = list(dict.fromkeys(keys))
+    counts = {k: keys.count(k) for k in unique}
+    shared = [k for k in unique if counts[k] > 1]
+    return shared.index(key) if key in shared else -1
+
+
+def predictive(run: DesignRun, candidates: Candidates, draws: dict) -> RowPredictive:
+    """Every draw's conditional predictive of every candidate row (:mod:`._estimate`)."""
+    scene, measurements = run.scene, run.measurements
+    model = build_posterior_model(scene, measurements)
+    parts = model.draw_parts(draws)
+    residual = model.data.rows.log_reflectance[None, :] - parts.mean
+    new = _candidate_measurements(candidates, measurements)
+    rows = build_observation_model(scene, new).data
+    layout = noise_layout(scene.errors, new)
+    errors = scene.errors
+    samples = list(measurements.sample)
+    groups = calibration_groups(errors, measurements)
+    sample_shared = group_members(samples)[0].shape[1]
+    new_groups = calibration_groups(errors, new)
+    columns = parts.factor.shape[2]
+    sample_col = np.array([_shared_column(samples, s) for s in new.sample])
+    calibration_col = np.array(
+        [-1 if groups is None else _shared_column(groups, g) for g in (new_groups or [])]
+        or [-1] * len(new)
+    )
+    calibration_col = np.where(calibration_col >= 0, calibration_col + sample_shared, -1)
+    # a row at a (series, sample, θi) already measured shares that setting's rotation error
+    settings = list(
+        zip(measurements.series, measurements.sample, measurements.theta_i_deg, strict=True)
+    )
+    rotation_shared = columns - group_members(settings)[0].shape[1]
+    rotation_col = np.array(
+        [
+            _shared_column(settings, key)
+            for key in zip(new.series, new.sample, new.theta_i_deg, strict=True)
+        ]
+    )
+    rotation_col = np.where(rotation_col >= 0, rotation_col + rotation_shared, -1)
+    one_hot_sample = jnp.asarray(sample_col[:, None] == np.arange(columns)[None, :], float)
+    one_hot_cal = jnp.asarray(calibration_col[:, None] == np.arange(columns)[None, :], float)
+    one_hot_rotation = jnp.asarray(rotation_col[:, None] == np.arange(columns)[None, :], float)
+    rotation_new = jnp.asarray(rotation_col < 0, float)
+    fold, constants = scene.model.fold, scene.model.constants
+    params = Params(*(jnp.asarray(draws[name]) for name in PARAM_NAMES))
+    count = params.brdf0.shape[0]
+    sample_sd = jnp.asarray(draws.get("sample_sd", np.zeros(count)))
+    if "repeatability" in draws:
+        repeatability = jnp.asarray(draws["repeatability"])
+    else:  # fixed by the scene (learned: a site of the run)
+        fixed = float(errors.repeatability) if errors.model == "generative" else 0.0
+        repeatability = jnp.full(count, fixed)
+    calibration = float(layout.calibration_sd)
+    angles = errors.angles_on
+
+    def one(p, tau, rep, res, factor, diagonal):
+        mean = predicted_log_reflectance(p, rows, fold, constants)
+        if angles:
+            g_rot, g_cam = angle_slopes(
+                lambda ti, ts: log_reflectance_at(ti, ts, p, fold, constants, rows),
+                rows.theta_i_deg,
+                rows.theta_s_deg,
+                layout.theta_s_per_rotation,
+            )
+        else:
+            g_rot = g_cam = jnp.zeros_like(mean)
+        rotation = g_rot * errors.rotation_deg * angles
+        loading = (
+            tau * one_hot_sample + calibration * one_hot_cal + rotation[:, None] * one_hot_rotation
+        )
+        own = (
+            layout.sigma_row**2
+            + rep**2
+            + (g_cam * errors.camera_deg * angles) ** 2
+            + rotation_new * rotation**2
+            + jnp.asarray(sample_col < 0, float) * tau**2
+            + jnp.asarray(calibration_col < 0, float) * calibration**2
+        )
+        return row_predictive(res, factor, diagonal, mean, loading, own)
+
+    program = jax.jit(jax.vmap(one))
+    return program(params, sample_sd, repeatability, residual, parts.factor, parts.diagonal)
+
+
+@dataclass(frozen=True)
+class DesignResult:
+    """The study's answer (:meth:`as_json` is the JSON contract of ``brdf-infer design``)."""
+
+    target: DesignTarget
+    current: dict[str, Any]
+    candidates: list[dict[str, Any]]
+    chosen: list[dict[str, Any]]
+    budget: int
+    seconds: float
+    measured: list[dict[str, Any]]
+    options: DesignOptions
+
+    def as_json(self) -> dict[str, Any]:
+        return {
+            "target": self.target.name,
+            "target_label": self.target.label,
+            "current": self.current,
+            "candidates": self.candidates,
+            "chosen": self.chosen,
+            "budget": self.budget,
+            "seconds": self.seconds,
+            "draws": self.options.draws,
+            "simulations": self.options.simulations,
+            "ess_floor": ESS_FLOOR,
+            "measured": self.measured,
+        }
+
+
+def _entry(candidates: Candidates, index: int, outcome) -> dict:
+    """A candidate's JSON entry (the target standardised to today's sd 1): the importance
+    estimate, the linear one where the ESS collapses."""
+    ess = float(outcome.ess[index])
+    weighted = ess >= ESS_FLOOR
+    variance = np.asarray(
+        outcome.variance_weighted[index] if weighted else outcome.variance_linear[index]
+    )
+    # E_y[Var(T | D, y)] <= Var(T | D) (total variance): a ratio above 1 is Monte Carlo noise
+    ratios = np.sqrt(np.minimum(variance, 1.0))
+    ratio = float(np.exp(np.mean(np.log(np.maximum(ratios, 1e-300)))))  # geometric mean
+    return {
+        **candidates.row(index),
+        "expected_sd": float(ratios[0]) if len(variance) == 1 else ratio,
+        "sd_ratio": ratio,
+        "eig_nats": float(outcome.eig[index]),
+        "ess": ess,
+        "method": "importance" if weighted else "linear",
+    }
+
+
+def design(
+    run: DesignRun,
+    target: str | DesignTarget = "tis:70",
+    candidates: Candidates | None = None,
+    options: DesignOptions = DesignOptions(),
+    series: str | None = None,
+) -> DesignResult:
+    """Where to measure next for ``target`` (module docstring).
+
+    Args:
+        run: the run folder's draws and scene (:func:`load_design_run`).
+        target: a target string (:mod:`brdf_infer._design_target`) or a parsed one.
+        candidates: the settings to consider (default: the scene's ``[design]`` grid in the
+            design series).
+        options: draws, simulations, budget and seed.
+        series: the series new grid rows join (default: ``[design] series`` or the series
+            with the most rows).
+    """
+    start = time.perf_counter()
+    options.check()
+    target = parse_target(target) if isinstance(target, str) else target
+    scene, measurements = run.scene, run.measurements
+    if candidates is None:
+        candidates = grid_candidates(scene.design, design_series(scene, measurements, series))
+    total = len(run.sites["brdf0"])
+    keep = np.unique(np.linspace(0, total - 1, min(options.draws, total)).round().astype(int))
+    draws = {name: values[keep] for name, values in run.sites.items()}
+    params = Params(*(jnp.asarray(draws[name]) for name in PARAM_NAMES))
+    values = target_values(target, params, scene)
+    scale = np.std(values, axis=0)
+    scale = np.where(scale > 0, scale, 1.0)
+    row_predictive_ = predictive(run, candidates, draws)
+    key_simulate, key_draws = jax.random.split(jax.random.PRNGKey(options.seed))
+    standard = jax.random.normal(key_simulate, (options.simulations, options.budget))
+    count = len(keep)
+    simulated = (jnp.arange(options.simulations) * count) // options.simulations
+    simulated = (simulated + jax.random.randint(key_draws, (), 0, count)) % count
+    standardised = jnp.asarray(values / scale)
+    chosen_index: list[int] = []
+    chosen, single = [], []
+    for step in range(options.budget):
+        outcome = candidate_outcomes(
+            row_predictive_,
+            jnp.asarray(chosen_index, int),
+            standardised,
+            standard[:, : step + 1],
+            simulated,
+        )
+        entries = [_entry(candidates, i, outcome) for i in range(len(candidates))]
+        for entry in entries:  # back to the target's units (standardised above)
+            if target.kind != "all":
+                entry["expected_sd"] *= float(scale[0])
+        order = _order(entries, target)
+        if step == 0:
+            single = [entries[i] for i in order]
+        chosen_index.append(order[0])
+        chosen.append({**entries[order[0]], "step": step + 1})
+    current = _current(target, run, scene, scale)
+    measured = [
+        {
+            "series": str(s),
+            "theta_i_deg": float(i),
+            "theta_s_deg": float(t),
+        }
+        for s, i, t in zip(
+            measurements.series, measurements.theta_i_deg, measurements.theta_s_deg, strict=True
+        )
+    ]
+    return DesignResult(
+        target=target,
+        current=current,
+        candidates=single,
+        chosen=chosen,
+        budget=options.budget,
+        seconds=time.perf_counter() - start,
+        measured=measured,
+        options=options,
+    )
+
+
+def _order(entries: list[dict], target: DesignTarget) -> list[int]:
+    """Candidates best first: by expected sd (by expected information gain for ``all``)."""
+    if target.kind == "all":
+        return sorted(range(len(entries)), key=lambda i: -entries[i]["eig_nats"])
+    return sorted(range(len(entries)), key=lambda i: entries[i]["expected_sd"])
+
+
+def _current(target: DesignTarget, run: DesignRun, scene: Scene, scale) -> dict[str, Any]:
+    """Today's median, 95 % interval and sd of the target over every draw of the run (sd: over
+    the thinned draws the expectation uses, so that the ratio compares like with like)."""
+    if target.kind == "all":
+        return {"median": None, "lo95": None, "hi95": None, "sd": 1.0}
+    params = Params(*(jnp.asarray(run.sites[name]) for name in PARAM_NAMES))
+    values = target_values(target, params, scene)[:, 0]
+    return {**interval95(values), "sd": float(scale[0])}
+
+
+def write_design(out: str | Path, result: DesignResult) -> list[Path]:
+    """design.json and the map design.png into ``out``, atomically."""
+    from brdf_infer._atomic import atomic_write_bytes, atomic_write_json
+    from brdf_infer.design._figure import design_figure
+
+    out = Path(out)
+    payload = result.as_json()
+    return [
+        atomic_write_json(out / DESIGN_FILE, payload),
+        atomic_write_bytes(out / DESIGN_FIGURE, design_figure(payload)),
+    ]
+
+
+def read_design(out: str | Path) -> dict[str, Any] | None:
+    """design.json of a run folder, or None."""
+    path = Path(out) / DESIGN_FILE
+    return json.loads(path.read_text()) if path.is_file() else None

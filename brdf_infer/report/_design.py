@@ -1,0 +1,63 @@
+"""Report section "Where to measure next" from a run folder's ``design.json``."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from brdf_infer.report import _html
+
+DESIGN_HEADERS = ["step", "θi [deg]", "θs [deg]", "series", "expected sd", "sd ratio", "EIG [nats]"]
+
+
+def design_rows(payload: dict) -> list[list[str]]:
+    """One row per chosen setting, in the order chosen."""
+    return [
+        [
+            str(c["step"]),
+            f"{c['theta_i_deg']:g}",
+            f"{c['theta_s_deg']:g}",
+            c["series"],
+            f"{c['expected_sd']:.3g}",
+            f"{c['sd_ratio']:.3f}",
+            f"{c['eig_nats']:.2f}",
+        ]
+        for c in payload["chosen"]
+    ]
+
+
+def design_section(run: Path) -> list[str]:
+    """The report's section from ``run/design.json`` (none when the run has none); the map is
+    the study's own ``design.png`` (the report computes nothing)."""
+    from brdf_infer.design import DESIGN_FIGURE, DESIGN_FILE
+
+    path = run / DESIGN_FILE
+    if not path.is_file():
+        return []
+    payload = json.loads(path.read_text())
+    current = payload["current"]
+    today = ""
+    if current.get("median") is not None:
+        today = (
+            f" Today: {current['median']:.4g} ({current['lo95']:.4g}–{current['hi95']:.4g}, "
+            f"95 %), sd {current['sd']:.3g}."
+        )
+    parts = [
+        "<h2>Where to measure next</h2>",
+        f"<p>The settings that, measured together, are expected to shrink "
+        f"{_html.escape(payload.get('target_label', payload['target']))} most "
+        f"(budget {payload['budget']}; each row's predictive given the rows measured so far, "
+        f"by importance reweighting of the posterior draws; <code>design.json</code> lists "
+        f"every candidate).{today}</p>",
+        _html.table(DESIGN_HEADERS, design_rows(payload)),
+    ]
+    figure = run / DESIGN_FIGURE
+    if figure.is_file():
+        parts.append(
+            _html.figure(
+                figure.read_bytes(),
+                "Expected sd ratio after one more row at each reachable setting; measured rows "
+                "and the chosen settings (numbered, in the order chosen) marked.",
+            )
+        )
+    return parts

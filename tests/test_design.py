@@ -1,0 +1,224 @@
+"""Where to measure next (``brdf-infer design``): the conditional predictive of a new row, the
+expected posterior variance against closed forms, the JSON contract and bad input."""
+
+import json
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from brdf_infer.design import (
+    DesignOptions,
+    design,
+    load_design_run,
+    parse_target,
+    read_candidates,
+    set_outcome,
+)
+from brdf_infer.design._estimate import RowPredictive, row_predictive
+from brdf_infer.errors import BadInputError
+from tests.helpers import run_cli
+
+CONTRACT_KEYS = {
+    "theta_i_deg",
+    "theta_s_deg",
+    "phi_s_deg",
+    "series",
+    "expected_sd",
+    "sd_ratio",
+    "eig_nats",
+    "ess",
+}
+
+
+def test_new_row_predictive_is_the_dense_gaussian_conditional():
+    """μ_c + w_c·m_z and d_c + B Bᵀ equal the conditional of the new rows given the measured
+    ones, computed from the dense joint covariance [W; W_new][W; W_new]ᵀ + diag(D, d)."""
+    rng = np.random.default_rng(1)
+    n, q, c = 9, 4, 3
+    factor, new_factor = rng.normal(size=(n, q)), rng.normal(size=(c, q))
+    diagonal, own = rng.uniform(0.2, 1.0, n), rng.uniform(0.2, 1.0, c)
+    residual, new_mean = rng.normal(size=n), rng.normal(size=c)
+    got = row_predictive(residual, factor, diagonal, new_mean, new_factor, own)
+    joint = np.vstack([factor, new_factor])
+    cov = joint @ joint.T + np.diag(np.concatenate([diagonal, own]))
+    gain = cov[n:, :n] @ np.linalg.inv(cov[:n, :n])
+    mean = new_mean + gain @ residual
+    conditional = cov[n:, n:] - gain @ cov[:n, n:]
+    np.testing.assert_allclose(got.mean, mean, rtol=1e-10)
+    covariance = np.asarray(got.loading @ got.loading.T + np.diag(got.own))
+    np.testing.assert_allclose(covariance, conditional, rtol=1e-10)
+
+
+def test_expected_variance_matches_the_normal_closed_form():
+    """θ ~ N(0, 1) draws, a new row y = θ + N(0, σ²): E[Var(θ | y)] = σ²/(1 + σ²) for one row,
+    σ²/(2 + σ²) for two; the importance estimate, the linear one and the EIG (½ ln(1 + k/σ²))
+    agree with it."""
+    draws, sigma2, outcomes = 1024, 0.5, 512
+    theta = jax.random.normal(jax.random.PRNGKey(0), (draws,))
+    predictive = RowPredictive(
+        mean=theta[:, None], loading=jnp.zeros((draws, 1, 1)), own=jnp.full((draws, 1), sigma2)
+    )
+    for k in (1, 2):
+        standard = jax.random.normal(jax.random.PRNGKey(k), (outcomes, k))
+        simulated = jnp.arange(outcomes) * (draws // outcomes)
+        outcome = jax.jit(set_outcome)(
+            predictive, jnp.zeros(k, int), theta[:, None], standard, simulated
+        )
+        exact = sigma2 / (k + sigma2)
+        assert float(outcome.variance_weighted[0]) == pytest.approx(exact, rel=0.1)
+        assert float(outcome.variance_linear[0]) == pytest.approx(exact, rel=0.05)
+        assert float(outcome.eig) == pytest.approx(0.5 * np.log(1 + k / sigma2), rel=0.15)
+        assert float(outcome.ess) > 100
+
+
+def test_targets_parse_and_unknown_ones_are_refused():
+    assert parse_target("tis:70").name == "tis_70deg"
+    assert parse_target("brdf:45,-20").name == "brdf_45_-20deg"
+    assert parse_target("theta_s0").parameter == "theta_s0"
+    for bad in ("tis", "tis:95", "brdf:45", "gloss", "all:1"):
+        with pytest.raises(BadInputError, match="target"):
+            parse_target(bad)
+
+
+@pytest.fixture(scope="module")
+def candidates_csv(tmp_path_factory):
+    path = tmp_path_factory.mktemp("design") / "candidates.csv"
+    path.write_text(
+        "series,theta_i_deg,theta_s_deg\nII,45,-30\nII,60,80\nI,30,30\nII,20,20\nII,80,-40\n"
+    )
+    return path
+
+
+def test_design_json_contract_and_map(nuts_run, candidates_csv, tmp_path, capsys):
+    out = tmp_path / "out"
+    code, stdout, stderr = run_cli(
+        "design",
+        str(nuts_run.out),
+        "--candidates",
+        str(candidates_csv),
+        "--budget",
+        "2",
+        "--draws",
+        "300",
+        "--simulations",
+        "32",
+        "--out",
+        str(out),
+        "--json",
+        capsys=capsys,
+    )
+    assert code == 0, stderr
+    payload = json.loads(stdout)
+    assert payload["target"] == "tis_70deg" and payload["budget"] == 2
+    assert set(payload["current"]) == {"median", "lo95", "hi95", "sd"}
+    assert payload["current"]["lo95"] < payload["current"]["median"] < payload["current"]["hi95"]
+    assert len(payload["candidates"]) == 5 and len(payload["chosen"]) == 2
+    for entry in payload["candidates"] + payload["chosen"]:
+        assert set(entry) >= CONTRACT_KEYS
+        assert 0 < entry["sd_ratio"] <= 1 and entry["ess"] > 0 and entry["eig_nats"] >= 0
+    expected = [c["expected_sd"] for c in payload["candidates"]]
+    assert expected == sorted(expected)
+    assert payload["chosen"][0]["expected_sd"] == expected[0]
+    assert payload["chosen"][1]["expected_sd"] <= payload["chosen"][0]["expected_sd"] * 1.001
+    assert payload["seconds"] > 0
+    assert json.loads((out / "design.json").read_text())["target"] == "tis_70deg"
+    assert (out / "design.png").read_bytes()[:4] == b"\x89PNG"
+    from brdf_infer.report._design import design_section
+
+    section = "".join(design_section(out))
+    assert "Where to measure next" in section and "<img" in section
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--target", "gloss"], "field '--target': unknown target"),
+        (["--scene", "lya-fixed"], "a run of scene 'lya', not of 'lya-fixed'"),
+        (["--series", "III"], "field '--series': no measured series 'III'"),
+        (["--budget", "0"], "field '--budget'"),
+    ],
+)
+def test_bad_design_input_is_one_line_and_writes_nothing(
+    nuts_run, tmp_path, capsys, extra, message
+):
+    out = tmp_path / "out"
+    code, stdout, stderr = run_cli(
+        "design", str(nuts_run.out), "--out", str(out), *extra, capsys=capsys
+    )
+    assert code == 2 and message in stderr and len(stderr.strip().splitlines()) == 1
+    assert not out.exists() and stdout == ""
+
+
+def test_candidates_the_instrument_cannot_reach_name_file_row_and_field(nuts_run, tmp_path):
+    run = load_design_run(nuts_run.out)
+    rows = {
+        "theta_i_deg,theta_s_deg\n30,40\n5,40\n": "row 2, field 'theta_i_deg'",
+        "theta_i_deg,theta_s_deg\n30,-32\n": "row 1, field 'theta_s_deg'",  # in the beam
+        "series,theta_i_deg,theta_s_deg\nIV,30,40\n": "row 1, field 'series'",
+        "theta_i_deg,theta_s_deg\n30,abc\n": "row 1, field 'theta_s_deg'",
+    }
+    for k, (text, where) in enumerate(rows.items()):
+        path = tmp_path / f"c{k}.csv"
+        path.write_text(text)
+        with pytest.raises(BadInputError, match=where):
+            read_candidates(path, run.scene, run.measurements, "II")
+
+
+def test_library_design_of_all_parameters_ranks_by_information(nuts_run, candidates_csv):
+    run = load_design_run(nuts_run.out)
+    candidates = read_candidates(candidates_csv, run.scene, run.measurements, "II")
+    result = design(run, "all", candidates, DesignOptions(draws=200, simulations=16, budget=1))
+    gains = [c["eig_nats"] for c in result.as_json()["candidates"]]
+    assert gains == sorted(gains, reverse=True)
+    assert result.as_json()["current"]["sd"] == 1.0
+
+
+@pytest.mark.parametrize(
+    ("table", "field"),
+    [
+        ({"design": {"theta_i_deg": [50, 10]}}, "design.theta_i_deg"),
+        ({"design": {"series": "IV"}}, "design.series"),
+        ({"design": {"budget": 0}}, "design.budget"),
+        ({"design": {"reach": 1}}, "design.reach"),
+        ({"studies": {"design": "gloss"}}, "studies.design"),
+    ],
+)
+def test_scene_design_tables_are_checked_on_load(tmp_path, table, field):
+    from brdf_infer.scene import parse_scene
+
+    document = {"name": "x", "measurements": "m.csv", "series": {"I": {}}, **table}
+    document["series"]["I"] = {"aperture_diameter_mm": 7.2, "aperture_distance_mm": 103.8}
+    with pytest.raises(BadInputError, match=f"field '{field}'"):
+        parse_scene(document, tmp_path / "x.scene.toml")
+
+
+def test_scene_design_table_is_read(tmp_path):
+    from brdf_infer.scene import parse_scene
+
+    document = {
+        "name": "x",
+        "measurements": "m.csv",
+        "series": {"I": {"aperture_diameter_mm": 7.2, "aperture_distance_mm": 103.8}},
+        "design": {"theta_i_deg": [20, 60], "step_deg": 10, "series": "I", "budget": 2},
+        "studies": {"design": "pi_brdf0"},
+    }
+    scene = parse_scene(document, tmp_path / "x.scene.toml")
+    assert scene.design.theta_i_deg == (20.0, 60.0) and scene.design.budget == 2
+    assert scene.studies.design == "pi_brdf0"
+
+
+@pytest.mark.slow
+def test_expected_sd_agrees_with_nuts_refits(nuts_run):
+    """The estimate of the expected posterior sd of TIS(70°) after one more row against the
+    average of NUTS refits with that row simulated from the posterior (best, median, worst
+    candidate; the refit average's own Monte Carlo error is a few per cent)."""
+    from brdf_infer.bench._design import RefitSettings, refit_check
+
+    rows = refit_check(
+        nuts_run.out, "tis:70", "II", RefitSettings(replicates=3), progress=lambda _: None
+    )
+    assert [r["pick"] for r in rows] == ["best", "median", "worst"]
+    for row in rows:
+        assert 0.85 < row["estimate_sd"] / row["refit_sd"] < 1.15, row
