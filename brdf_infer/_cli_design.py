@@ -8,6 +8,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from brdf_infer._outdir import check_output_dir
+from brdf_infer._outlock import writing
 
 
 def add_design_arguments(parser: argparse.ArgumentParser) -> None:
@@ -90,6 +91,10 @@ def command_design(
         f"budget {options.budget} ..."
     )
     result = design(run, target, candidates, options, series)
+    # into the run folder: added to a finished run (its own lock, the run stays complete);
+    # elsewhere: one writer per folder
+    adds = Path(out).resolve() == Path(args.run_dir).resolve()
+    args.claims.enter_context(writing(out, "design", adds=adds))
     write_design(out, result)
     payload = result.as_json()
     if args.json:

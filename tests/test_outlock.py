@@ -73,11 +73,12 @@ def test_one_writer_per_folder_and_a_dead_writers_folder_is_incomplete(tmp_path,
         ["report", str(folder)],
         ["export", "--run", str(folder), "--out", str(tmp_path / "bsdf")],
         ["raytrace", "--run", str(folder)],
+        ["design", str(folder), "--out", str(tmp_path / "design")],
     ):
         line = _one_error_line(*run_cli(*argv, capsys=capsys))
         assert line.startswith(f"brdf-infer: error: {folder}: incomplete: 'brdf-infer run' ")
         assert "stopped before finishing it; run that command again" in line
-    assert not (tmp_path / "bsdf").exists()
+    assert not (tmp_path / "bsdf").exists() and not (tmp_path / "design").exists()
     adding = writing(folder, "report", adds=True)  # report only adds to a complete folder
     with pytest.raises(BadInputError, match="incomplete"), adding:
         pass

@@ -102,7 +102,9 @@ def load_design_run(run: str | Path, scene: Scene | str | None = None) -> Design
             of a family other than ``strumik2024``.
     """
     from brdf_infer._arviz import az
+    from brdf_infer._outlock import require_complete
 
+    require_complete(run)  # not a folder a writer is writing or left unfinished
     path = Path(run) / POSTERIOR_FILE
     if not path.is_file():
         raise BadInputError("no posterior.nc here (run 'brdf-infer run' first)", file=run)
