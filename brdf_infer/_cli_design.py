@@ -7,14 +7,13 @@ import json
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
+from brdf_infer._design_options import DesignOptions
 from brdf_infer._outdir import check_output_dir
 from brdf_infer._outlock import writing
 
 
 def add_design_arguments(parser: argparse.ArgumentParser) -> None:
     """The options of ``brdf-infer design``."""
-    from brdf_infer.design import DesignOptions
-
     defaults = DesignOptions()
     parser.add_argument("run_dir", help="directory of a posterior run (posterior.nc, ...)")
     parser.add_argument(

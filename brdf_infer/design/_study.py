@@ -25,6 +25,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from brdf_infer._design_options import DesignOptions
 from brdf_infer._design_target import DesignTarget, parse_target
 from brdf_infer.design._candidates import Candidates, design_series, grid_candidates
 from brdf_infer.design._estimate import (
@@ -52,30 +53,6 @@ from brdf_infer.posterior import POSTERIOR_FILE, build_posterior_model, interval
 from brdf_infer.scene import Scene, load_scene
 
 DESIGN_FILE, DESIGN_FIGURE = "design.json", "design.png"
-
-
-@dataclass(frozen=True)
-class DesignOptions:
-    """How the expectation is estimated.
-
-    Attributes:
-        draws: posterior draws used (evenly thinned from the run) [-].
-        simulations: simulated outcomes J per candidate set [-].
-        budget: rows chosen together (K).
-        seed: random seed of the simulated outcomes.
-    """
-
-    draws: int = 1000
-    simulations: int = 128
-    budget: int = 3
-    seed: int = 0
-
-    def check(self) -> None:
-        """Raises BadInputError naming the option out of range."""
-        for name, low, high in (("draws", 50, 100000), ("simulations", 8, 4096), ("budget", 1, 10)):
-            value = getattr(self, name)
-            if not low <= value <= high:
-                raise BadInputError(f"expected {low}..{high}, got {value}", field=f"--{name}")
 
 
 @dataclass(frozen=True)
@@ -305,7 +282,7 @@ def design(
     run: DesignRun,
     target: str | DesignTarget = "tis:70",
     candidates: Candidates | None = None,
-    options: DesignOptions = DesignOptions(),
+    options: DesignOptions | None = None,
     series: str | None = None,
 ) -> DesignResult:
     """Where to measure next for ``target`` (module docstring).
@@ -315,11 +292,12 @@ def design(
         target: a target string (:mod:`brdf_infer._design_target`) or a parsed one.
         candidates: the settings to consider (default: the scene's ``[design]`` grid in the
             design series).
-        options: draws, simulations, budget and seed.
+        options: draws, simulations, budget and seed (default :class:`DesignOptions`).
         series: the series new grid rows join (default: ``[design] series`` or the series
             with the most rows).
     """
     start = time.perf_counter()
+    options = DesignOptions() if options is None else options
     options.check()
     target = parse_target(target) if isinstance(target, str) else target
     scene, measurements = run.scene, run.measurements
