@@ -16,8 +16,8 @@ from tests.helpers import REPO, run_cli
     "geometry",
     [
         # each geometry compiles its own sampler and runs the default 4 × 1000 draws: the slow
-        # set and the benchmark (seeds 0-2 of each); the README's single-series scene is fitted
-        # in the suite and runs to a report in the slow set
+        # set and the benchmark (seeds 0-2 of each); the README's single-series scene is loaded
+        # and predicted in the suite and runs to a report in the slow set
         pytest.param("single-series", marks=pytest.mark.slow),
         pytest.param("grazing", marks=pytest.mark.slow),
         pytest.param("specular", marks=pytest.mark.slow),
@@ -57,14 +57,18 @@ def readme_scene_folder(tmp_path):
     return tmp_path / "scene.toml"
 
 
-def test_readme_scene_example_loads_and_fits(tmp_path, capsys):
-    """The README's scene is valid as printed and its model fits (least squares); the run to a
-    report, which compiles a sampler of its own, is the slow test below."""
+def test_readme_scene_example_loads_and_predicts_its_rows(tmp_path, capsys):
+    """The README's scene is valid as printed and its model predicts every row (`predict`
+    with the article's parameters); the run to a report, which compiles a sampler and a fit of
+    its own, is the slow test below."""
     scene = readme_scene_folder(tmp_path)
-    code, stdout, err = run_cli("fit", str(scene), "--method", "lsq", "--json", capsys=capsys)
+    code, stdout, err = run_cli(
+        "predict", str(scene), "--params", "uv-paper", "--json", capsys=capsys
+    )
     assert code == 0, err
-    fit = json.loads(stdout)
-    assert 0 < fit["params"]["brdf0"] < 1, fit["params"]
+    rows = json.loads(stdout)["rows"]
+    assert len(rows) == 24  # series I of the bundled data: 6 samples × 4 angles
+    assert all(0 < row["predicted"] < 1 for row in rows), rows[0]
 
 
 @pytest.mark.slow  # its own sampler (one series): ≈ 50 s of compiling and sampling

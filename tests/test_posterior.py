@@ -295,6 +295,7 @@ def test_interrupted_netcdf_write_keeps_the_previous_file(nuts_run, tmp_path, mo
         assert ours[group].identical(theirs[group]), group
 
 
+@pytest.mark.slow  # a sampler of its own; test_error_model checks the spread model's sites
 def test_the_earlier_spread_error_model_stays_reachable(lya, capsys, tmp_path):
     code, out, err = run_cli(
         "posterior",
