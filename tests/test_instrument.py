@@ -325,6 +325,7 @@ def test_ray_tracer_honours_the_scenes_fold_switch(lya):
         assert fold < no_fold and point_fold < point_no_fold
 
 
+@pytest.mark.slow  # ≈ 25 s cold: two least-squares programs, one through the image kernel
 def test_fit_takes_the_instrument_model(lya, capsys):
     """Least squares through the image kernel. The kernel is linear in the BRDF, so if the
     image ratio read c × Eq. (6) on every row the fit would return BRDF0/c with the same shape;

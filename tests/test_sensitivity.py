@@ -169,6 +169,7 @@ def test_power_scaling_components_are_the_models_log_density(lya):
         assert float(got[0, 0]) == pytest.approx(expected, rel=1e-10)
 
 
+@pytest.mark.slow  # ≈ 17 s: the planted prior compiles a sampler of its own
 def test_power_scaling_flags_a_prior_that_conflicts_with_the_data(calibration_study, lya):
     """Planted fault: ln BRDF0's prior N(−5.5, 0.1) (BRDF0 ≈ 0.0041 sr⁻¹) where the data put
     ln BRDF0 near −4.35 (0.013 sr⁻¹), 11 prior sds away. The prior then pulls the level, and
