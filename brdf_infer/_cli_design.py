@@ -61,8 +61,10 @@ def command_design(
     from brdf_infer.design import (
         DESIGN_FIGURE,
         DESIGN_FILE,
+        DESIGN_HEADERS,
         DesignOptions,
         design,
+        design_rows,
         design_series,
         load_design_run,
         parse_target,
@@ -105,24 +107,7 @@ def command_design(
             f"{target.label} today: {current['median']:.4g} "
             f"({current['lo95']:.4g}–{current['hi95']:.4g}), sd {current['sd']:.3g}"
         )
-    headers = ["step", "θi [deg]", "θs [deg]", "series", "expected sd", "sd ratio", "EIG [nats]"]
     print(f"chosen together (budget {options.budget}):")
-    print(
-        table(
-            headers,
-            [
-                [
-                    str(c["step"]),
-                    f"{c['theta_i_deg']:g}",
-                    f"{c['theta_s_deg']:g}",
-                    c["series"],
-                    f"{c['expected_sd']:.3g}",
-                    f"{c['sd_ratio']:.3f}",
-                    f"{c['eig_nats']:.2f}",
-                ]
-                for c in payload["chosen"]
-            ],
-        )
-    )
+    print(table(DESIGN_HEADERS, design_rows(payload)))
     print(f"{len(payload['candidates'])} candidates, {payload['seconds']:.1f} s")
     print(f"written: {out / DESIGN_FILE}, {out / DESIGN_FIGURE}")

@@ -22,10 +22,12 @@ from brdf_infer.design._study import (
     target_values,
     write_design,
 )
+from brdf_infer.design._table import DESIGN_HEADERS, design_rows
 
 __all__ = [
     "DESIGN_FIGURE",
     "DESIGN_FILE",
+    "DESIGN_HEADERS",
     "ESS_FLOOR",
     "Candidates",
     "DesignOptions",
@@ -34,6 +36,7 @@ __all__ = [
     "DesignTarget",
     "candidate_outcomes",
     "design",
+    "design_rows",
     "design_series",
     "grid_candidates",
     "load_design_run",
