@@ -14,6 +14,8 @@ away from numerically hopeless corners.
 
 from __future__ import annotations
 
+import dataclasses
+import json
 import os
 import sys
 import threading
@@ -30,6 +32,7 @@ from numpyro.infer.hmc import hmc
 from brdf_infer._compile_clock import compile_clock
 from brdf_infer._sharding import gather_batch, shard_batch
 from brdf_infer.posterior._model import ModelData, PosteriorModel
+from brdf_infer.posterior._padding import pad_datasets
 from brdf_infer.posterior._potential import FlatPotential
 
 INIT_CANDIDATES = 16
@@ -401,11 +404,6 @@ def programs_by_structure(
         (program, [(index into ``models``, padded data), ...]) per structure, in the order of
         each structure's first model.
     """
-    import dataclasses
-    import json
-
-    from brdf_infer.posterior._padding import pad_datasets
-
     groups: dict[str, list[int]] = {}
     for index, model in enumerate(models):
         key = json.dumps(model.scene.errors.structure(), sort_keys=True, default=str)
