@@ -222,3 +222,28 @@ def test_expected_sd_agrees_with_nuts_refits(nuts_run):
     assert [r["pick"] for r in rows] == ["best", "median", "worst"]
     for row in rows:
         assert 0.85 < row["estimate_sd"] / row["refit_sd"] < 1.15, row
+
+
+@pytest.mark.slow  # ≈ 40 s: the main job at reduced settings plus the design study
+def test_run_does_the_design_study_the_scene_asks_for(tmp_path, capsys):
+    """``[studies] design = TARGET`` makes ``run`` write design.json and design.png beside the
+    posterior and the report's "Where to measure next" section; studies.json lists it."""
+    from brdf_infer.scene import scene_file
+
+    source = scene_file("lya").parent
+    for name in ("lya_measurements.csv", "lya_tis_reference.csv"):
+        (tmp_path / name).write_bytes((source / name).read_bytes())
+    scene = tmp_path / "lya.scene.toml"
+    text = (source / "lya.scene.toml").read_text()
+    scene.write_text(text + '\n[studies]\ndesign = "pi_brdf0"\n')
+    out = tmp_path / "run"
+    argv = ["run", str(scene), "--out", str(out), "--chains", "2", "--warmup", "300"]
+    code, _, err = run_cli(*argv, "--draws", "500", capsys=capsys)
+    assert code == 0, err
+    payload = json.loads((out / "design.json").read_text())
+    assert payload["target"] == "pi_brdf0" and len(payload["chosen"]) == payload["budget"]
+    assert (out / "design.png").read_bytes()[:4] == b"\x89PNG"
+    assert json.loads((out / "studies.json").read_text())["run"] == [
+        "where to measure next (pi_brdf0)"
+    ]
+    assert "Where to measure next" in (out / "report.html").read_text()
