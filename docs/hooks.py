@@ -1,4 +1,5 @@
-"""MkDocs hook: the repository's own Markdown files outside ``docs/`` join the site.
+"""MkDocs hooks: the repository's own Markdown files outside ``docs/`` join the site, and
+escaped pipes in table cells' code render as pipes.
 
 The pages in ``docs/`` link to ``../reports/benchmarks.md``, ``../data/README.md`` and the
 like, the paths that are right when the repository is browsed. MkDocs only knows the files
@@ -10,6 +11,7 @@ checked like any other, and a link to a file that is not there still fails the b
 from __future__ import annotations
 
 import posixpath
+import re
 from pathlib import Path
 
 from mkdocs.structure.files import File, Files, InclusionLevel
@@ -43,3 +45,9 @@ def on_files(files: Files, config) -> Files:
                 )
             )
     return files
+
+
+def on_page_content(html: str, page, config, files) -> str:
+    r"""A ``|`` in a table cell's code span is written ``\|`` (GitHub's tables need it);
+    Python-Markdown leaves the backslash in the code, so it is taken out here."""
+    return re.sub(r"<code>.*?</code>", lambda m: m.group(0).replace("\\|", "|"), html, flags=re.S)
