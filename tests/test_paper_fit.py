@@ -70,7 +70,7 @@ def test_paper_selection_reproduces_published_uv_coefficients(lya):
 
 def test_sigma_e_is_reported_as_reproduced_not_as_published(lya):
     """σE (Sec. 5.1: mean |ln BRDF_fitted − ln BRDF_measured| over the fitted points) of the
-    reproduced fit, against plain numpy; 6.94 % where the paper reports 6.4 % (README)."""
+    reproduced fit, against plain numpy; 6.94 % where the paper reports 6.4 % (docs/paper.md)."""
     scene, measurements = lya
     design, y = paper_regression(select_points(scene, measurements, "paper"))
     scale = np.abs(design).max(axis=0)  # the power columns reach 1e15: equilibrate first
