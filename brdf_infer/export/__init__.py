@@ -2,18 +2,10 @@
 parameter set or of a posterior (median, 95 % bounds and single draws), and a reader of
 .BSDF files."""
 
-from brdf_infer.export._abg import (
-    AbgFit,
-    abg_bsdf,
-    abg_integral,
-    abg_log_bsdf,
-    beta_distance,
-    fit_abg,
-)
+from brdf_infer.export._abg import AbgFit, fit_abg
 from brdf_infer.export._files import (
     ABG_COLUMNS,
     EXPORTS_FILE,
-    FORMATS,
     Source,
     draw_indices,
     export_abg,
@@ -41,15 +33,10 @@ __all__ = [
     "DEFAULT_RADIAL_STEP_DEG",
     "DEFAULT_THETA_I_DEG",
     "EXPORTS_FILE",
-    "FORMATS",
     "AbgFit",
     "BsdfFile",
     "ScatterGrid",
     "Source",
-    "abg_bsdf",
-    "abg_integral",
-    "abg_log_bsdf",
-    "beta_distance",
     "brdf_table",
     "draw_indices",
     "export_abg",

@@ -56,7 +56,6 @@ from brdf_infer.params import HemisphereConstants, Params, params_to_dict
 from brdf_infer.posterior import family_tis_band, tis_band
 from brdf_infer.posterior._bands import FAMILY_TIS_DRAWS
 
-FORMATS = ("zemax-bsdf", "abg")
 EXPORTS_FILE = "exports.json"  # in a run folder: the exports made from it, for the report
 ABG_COLUMNS = ("theta_i_deg", "A", "B", "g", "tis_model", "tis_abg", "rms_log_error")
 _MEANING = {
