@@ -42,15 +42,10 @@ import numpy as np
 
 from brdf_infer._atomic import atomic_write_bytes, atomic_write_json
 from brdf_infer._outlock import writing
+from brdf_infer.bsdf_file import BSDF_SOURCE, BsdfFile, specular_frame_to_model, write_bsdf
 from brdf_infer.errors import BadInputError
 from brdf_infer.export._abg import AbgFit, fit_abg
-from brdf_infer.export._grid import (
-    ScatterGrid,
-    brdf_table,
-    specular_frame_to_model,
-    table_integral,
-)
-from brdf_infer.export._zemax import BSDF_SOURCE, BsdfFile, write_bsdf
+from brdf_infer.export._grid import ScatterGrid, brdf_table, table_integral
 from brdf_infer.model import ModelFamily, fold_statement, tis
 from brdf_infer.params import HemisphereConstants, Params, params_to_dict
 from brdf_infer.posterior import family_tis_band, tis_band
