@@ -49,8 +49,8 @@ def command_compare(
         CompareSettings,
         check_family_names,
         compare_families,
-        write_comparison,
     )
+    from brdf_infer.report import write_comparison
 
     names = check_family_names(args.models)
     settings = CompareSettings(

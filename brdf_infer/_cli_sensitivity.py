@@ -44,10 +44,11 @@ def command_sensitivity(
     progress: Callable[[str], None],
 ) -> None:
     """Run ``brdf-infer sensitivity`` (every option and variant checked before sampling)."""
-    from brdf_infer.report._sensitivity import (
+    from brdf_infer.report import (
         SENSITIVITY_HEADERS,
         power_scaling_rows,
         sensitivity_rows,
+        write_sensitivity,
     )
     from brdf_infer.sensitivity import (
         SENSITIVITY_FIGURE,
@@ -57,7 +58,6 @@ def command_sensitivity(
         default_variants,
         parse_variant,
         sensitivity,
-        write_sensitivity,
     )
 
     settings = SensitivitySettings(

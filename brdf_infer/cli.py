@@ -847,13 +847,8 @@ def _instrument_argument(parser: argparse.ArgumentParser) -> None:
 
 def _command_sbc(args: argparse.Namespace) -> None:
     _headless()
-    from brdf_infer.sbc import (
-        COVERAGE_LEVELS,
-        SbcSettings,
-        check_planted_fault,
-        run_sbc,
-        write_sbc,
-    )
+    from brdf_infer.report import write_sbc
+    from brdf_infer.sbc import COVERAGE_LEVELS, SbcSettings, check_planted_fault, run_sbc
 
     _checked_model(args.model)
     check_planted_fault(args.planted_fault, field="--planted-fault")

@@ -18,9 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from brdf_infer.bench._report import _markdown_table
-from brdf_infer.posterior import build_model
-from brdf_infer.posterior._model import build_posterior_model
-from brdf_infer.posterior._potential import FlatPotential
+from brdf_infer.posterior import FlatPotential, build_model, build_posterior_model
 from brdf_infer.scene import Scene
 
 PROCESS_HEADERS = [

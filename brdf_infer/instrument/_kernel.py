@@ -120,6 +120,11 @@ def _row_kernel(
     )
 
 
+def clear_row_kernel_cache() -> None:
+    """Forget the row kernels built so far (a benchmark times the build, not the cache)."""
+    _row_kernel.cache_clear()
+
+
 @functools.lru_cache(maxsize=4)
 def _uniforms(candidates: int) -> np.ndarray:
     return sobol_uniforms(candidates)
