@@ -27,13 +27,23 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from brdf_infer.design import DesignOptions, design, load_design_run, target_values
-from brdf_infer.design._candidates import Candidates
-from brdf_infer.design._study import _candidate_measurements, predictive
+from brdf_infer.design import (
+    Candidates,
+    DesignOptions,
+    candidate_measurements,
+    design,
+    load_design_run,
+    predictive,
+    target_values,
+)
 from brdf_infer.measurements import Measurements
 from brdf_infer.params import PARAM_NAMES, Params
-from brdf_infer.posterior import NutsProgram, build_posterior_model, chain_keys
-from brdf_infer.posterior._model import build_model_data
+from brdf_infer.posterior import (
+    NutsProgram,
+    build_model_data,
+    build_posterior_model,
+    chain_keys,
+)
 
 HEADERS = [
     "candidate",
@@ -140,7 +150,7 @@ def refit_check(
             np.asarray(conditional.own[:, 0])
             + np.sum(np.asarray(conditional.loading[:, 0]) ** 2, 1)
         )
-        new_row = _candidate_measurements(candidate, measurements)
+        new_row = candidate_measurements(candidate, measurements)
         start = time.perf_counter()
         variances = []
         for replicate in range(settings.replicates):

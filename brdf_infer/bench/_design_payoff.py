@@ -22,13 +22,25 @@ import jax.numpy as jnp
 import numpy as np
 
 from brdf_infer.bench._design import _augmented
-from brdf_infer.design import DesignOptions, design, grid_candidates, load_design_run
-from brdf_infer.design._candidates import Candidates
-from brdf_infer.design._study import DesignRun, _candidate_measurements, predictive
+from brdf_infer.bench._tables import markdown_table, timed_command
+from brdf_infer.design import (
+    Candidates,
+    DesignOptions,
+    DesignRun,
+    candidate_measurements,
+    design,
+    grid_candidates,
+    load_design_run,
+    predictive,
+)
 from brdf_infer.model import tis
 from brdf_infer.params import PARAM_NAMES, Params
-from brdf_infer.posterior import NutsProgram, build_posterior_model, chain_keys
-from brdf_infer.posterior._model import build_model_data
+from brdf_infer.posterior import (
+    NutsProgram,
+    build_model_data,
+    build_posterior_model,
+    chain_keys,
+)
 
 STRATEGIES = ("initial", "design", "random", "article")
 HEADERS = [
@@ -188,7 +200,7 @@ def payoff(
             else:
                 candidates = _subset(rows_of[name], np.arange(budget))
                 values = _simulate(truth_run, candidates, truth, normals[:budget])
-                rows = _candidate_measurements(candidates, initial)
+                rows = candidate_measurements(candidates, initial)
                 draws = fit(_augmented(initial, rows, values), seed + 7)
             width, sd, inside = interval(draws)
             width_list.append(width)
@@ -261,12 +273,10 @@ COMMAND_HEADERS = ["compilation cache", "wall [s]", "design's own seconds", "cho
 def command_rows(run_dir: str | Path, scratch: Path) -> list[list[str]]:
     """``brdf-infer design RUN_DIR --target tis:70 --budget 3 --json`` in fresh processes,
     with an empty compilation cache and then the same cache again."""
-    from brdf_infer.bench._speed import _timed_command
-
     rows = []
     argv = ["design", str(run_dir), "--target", "tis:70", "--budget", "3"]
     for state in ("cold", "warm"):
-        wall, payload = _timed_command(argv, scratch / "cache", scratch / f"design-{state}")
+        wall, payload = timed_command(argv, scratch / "cache", scratch / f"design-{state}")
         chosen = ", ".join(
             f"({c['theta_i_deg']:g}, {c['theta_s_deg']:g})" for c in payload["chosen"]
         )
@@ -349,7 +359,7 @@ def design_section(quick: bool, progress=print) -> list[str]:
         f"The command on this section's run ({chains * draws} draws of the bundled scene), "
         "fresh processes, wall time from start to exit:",
         "",
-        _markdown(COMMAND_HEADERS, commands),
+        markdown_table(COMMAND_HEADERS, commands),
         "",
         "Estimate against refit: the expected posterior sd of TIS(70°) after one more row at "
         "the best, median and worst grid candidate, against NUTS refits with that row "
@@ -361,11 +371,11 @@ def design_section(quick: bool, progress=print) -> list[str]:
         "",
         "The bundled scene (42 rows), a new series-II row:",
         "",
-        _markdown(REFIT_HEADERS, refit_rows(refits)),
+        markdown_table(REFIT_HEADERS, refit_rows(refits)),
         "",
         "Series I's 24 specular rows alone (the first campaign), a new series-I row:",
         "",
-        _markdown(REFIT_HEADERS, refit_rows(first_refits)),
+        markdown_table(REFIT_HEADERS, refit_rows(first_refits)),
         "",
     ]
     for result in results:
@@ -383,12 +393,7 @@ def design_section(quick: bool, progress=print) -> list[str]:
             f"NUTS; {result['seeds']} seeds with common random numbers "
             f"({result['seconds']:.0f} s).",
             "",
-            _markdown(HEADERS, payoff_rows(result)),
+            markdown_table(HEADERS, payoff_rows(result)),
             "",
         ]
     return lines
-
-
-def _markdown(headers: list[str], rows: list[list[str]]) -> str:
-    lines = ["| " + " | ".join(headers) + " |", "|" + "---|" * len(headers)]
-    return "\n".join(lines + ["| " + " | ".join(row) + " |" for row in rows])

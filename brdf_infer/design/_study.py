@@ -142,11 +142,6 @@ def candidate_measurements(candidates: Candidates, measurements: Measurements) -
     return Measurements(**{**rows.__dict__, "reflectance_err": error})
 
 
-# The name bench/_design.py and bench/_design_payoff.py import until they take
-# candidate_measurements from brdf_infer.design (tests/test_import_graph.py: PENDING).
-_candidate_measurements = candidate_measurements
-
-
 def _shared_column(keys: list, key) -> int:
     """Column of ``key`` among the groups of two or more rows (−1: none, the row is new)."""
     unique = list(dict.fromkeys(keys))
