@@ -89,6 +89,66 @@ def _augmented(measurements: Measurements, rows: Measurements, log_values) -> Me
     )
 
 
+class _Refits:
+    """NUTS refits of one design run with the same keys per replicate (common random numbers):
+    one compiled program per data shape."""
+
+    def __init__(self, run, target, settings: RefitSettings):
+        self.run, self.target, self.settings = run, target, settings
+        self.keys = [
+            chain_keys(settings.seed + 100 * replicate, 1, settings.chains)[0]
+            for replicate in range(settings.replicates)
+        ]
+        self.programs: dict[int, NutsProgram] = {}
+
+    def variance(self, measurements: Measurements, replicate: int) -> float:
+        """Posterior variance of the target from a NUTS refit of ``measurements``."""
+        scene, settings = self.run.scene, self.settings
+        if len(measurements) not in self.programs:
+            model = build_posterior_model(scene, measurements)
+            self.programs[len(measurements)] = NutsProgram(model, warmup=settings.warmup)
+        program = self.programs[len(measurements)]
+        data = build_model_data(scene, measurements)
+        sites = program.run(data, self.keys[replicate], settings.draws).sites
+        params = Params(*(jnp.asarray(np.reshape(sites[n], -1)) for n in PARAM_NAMES))
+        return float(np.var(target_values(self.target, params, scene)[:, 0]))
+
+
+def _candidate(entry: dict) -> Candidates:
+    return Candidates(
+        np.array([entry["series"]]),
+        np.array([entry["theta_i_deg"]]),
+        np.array([entry["theta_s_deg"]]),
+        np.array([np.nan]),
+    )
+
+
+def _refit_variances(refits: _Refits, entry: dict, draws: dict, rng, label: str, progress):
+    """Variances of the target over replicates, each refit with the candidate's row simulated
+    from its conditional predictive under a random draw of the posterior."""
+    run, replicates = refits.run, refits.settings.replicates
+    candidate = _candidate(entry)
+    conditional = predictive(run, candidate, draws)
+    loading = np.asarray(conditional.loading[:, 0])
+    sd = np.sqrt(np.asarray(conditional.own[:, 0]) + np.sum(loading**2, 1))
+    new_row = candidate_measurements(candidate, run.measurements)
+    variances = []
+    for replicate in range(replicates):
+        s = int(rng.integers(len(sd)))
+        log_value = float(conditional.mean[s, 0]) + sd[s] * float(rng.standard_normal())
+        augmented = _augmented(run.measurements, new_row, log_value)
+        variances.append(refits.variance(augmented, replicate))
+        progress(f"  design refit {label} {replicate + 1}/{replicates}")
+    return np.array(variances)
+
+
+def _monte_carlo_error(values: np.ndarray) -> float:
+    """Standard error of the mean of ``values`` (NaN for one value)."""
+    if len(values) < 2:
+        return float("nan")
+    return float(np.std(values, ddof=1) / np.sqrt(len(values)))
+
+
 def refit_check(
     run_dir: str | Path,
     target: str = "tis:70",
@@ -114,77 +174,30 @@ def refit_check(
     result = design(run, target, options=options, series=series)
     ordered = result.candidates
     picks = {"best": 0, "median": len(ordered) // 2, "worst": len(ordered) - 1}
-    scene, measurements = run.scene, run.measurements
     total = len(run.sites["brdf0"])
     keep = np.linspace(0, total - 1, min(settings.design_draws, total)).round().astype(int)
-    keep = np.unique(keep)
-    draws = {name: values[keep] for name, values in run.sites.items()}
+    draws = {name: values[np.unique(keep)] for name, values in run.sites.items()}
     rng = np.random.default_rng(settings.seed)
-    keys = [
-        chain_keys(settings.seed + 100 * replicate, 1, settings.chains)[0]
-        for replicate in range(settings.replicates)
-    ]
-
-    def variance(program: NutsProgram, data, replicate: int) -> float:
-        sites = program.run(data, keys[replicate], settings.draws).sites
-        params = Params(*(jnp.asarray(np.reshape(sites[n], -1)) for n in PARAM_NAMES))
-        return float(np.var(target_values(result.target, params, scene)[:, 0]))
-
-    today = NutsProgram(build_posterior_model(scene, measurements), warmup=settings.warmup)
-    today_data = build_model_data(scene, measurements)
-    today_variances = np.array(
-        [variance(today, today_data, replicate) for replicate in range(settings.replicates)]
-    )
-    program = None
+    refits = _Refits(run, result.target, settings)
+    today = np.array([refits.variance(run.measurements, r) for r in range(settings.replicates)])
     rows = []
     for pick, index in picks.items():
         entry = ordered[index]
-        candidate = Candidates(
-            np.array([entry["series"]]),
-            np.array([entry["theta_i_deg"]]),
-            np.array([entry["theta_s_deg"]]),
-            np.array([np.nan]),
-        )
-        conditional = predictive(run, candidate, draws)
-        sd = np.sqrt(
-            np.asarray(conditional.own[:, 0])
-            + np.sum(np.asarray(conditional.loading[:, 0]) ** 2, 1)
-        )
-        new_row = candidate_measurements(candidate, measurements)
         start = time.perf_counter()
-        variances = []
-        for replicate in range(settings.replicates):
-            s = int(rng.integers(len(keep)))
-            log_value = float(conditional.mean[s, 0]) + sd[s] * float(rng.standard_normal())
-            augmented = _augmented(measurements, new_row, log_value)
-            if program is None:
-                program = NutsProgram(
-                    build_posterior_model(scene, augmented), warmup=settings.warmup
-                )
-            variances.append(variance(program, build_model_data(scene, augmented), replicate))
-            progress(f"  design refit {pick} {replicate + 1}/{settings.replicates}")
-        variances = np.array(variances)
-        ratios = np.sqrt(variances / today_variances)
-        spread = settings.replicates > 1
+        variances = _refit_variances(refits, entry, draws, rng, pick, progress)
+        ratios = np.sqrt(variances / today)
+        refit_sd = float(np.sqrt(np.mean(variances)))
         rows.append(
             {
                 "pick": pick,
                 **{k: entry[k] for k in ("theta_i_deg", "theta_s_deg", "series")},
                 "estimate_sd": entry["expected_sd"],
                 "estimate_ratio": entry["sd_ratio"],
-                "refit_sd": float(np.sqrt(np.mean(variances))),
-                "refit_mc": float(
-                    0.5
-                    * np.std(variances, ddof=1)
-                    / np.sqrt(len(variances))
-                    / np.sqrt(np.mean(variances))
-                )
-                if spread
-                else float("nan"),
+                "refit_sd": refit_sd,
+                # the sd's error from the variance's: d sd = d var / (2 sd)
+                "refit_mc": _monte_carlo_error(variances) / (2 * refit_sd),
                 "refit_ratio": float(np.mean(ratios)),
-                "refit_ratio_mc": float(np.std(ratios, ddof=1) / np.sqrt(len(ratios)))
-                if spread
-                else float("nan"),
+                "refit_ratio_mc": _monte_carlo_error(ratios),
                 "ess": entry["ess"],
                 "replicates": settings.replicates,
                 "today_sd": result.current["sd"],

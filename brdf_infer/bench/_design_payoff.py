@@ -14,6 +14,7 @@ it covers the true TIS(θ). Every fit of one row count runs through one compiled
 
 from __future__ import annotations
 
+import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -21,7 +22,8 @@ from pathlib import Path
 import jax.numpy as jnp
 import numpy as np
 
-from brdf_infer.bench._design import _augmented
+from brdf_infer.bench._design import HEADERS as REFIT_HEADERS
+from brdf_infer.bench._design import RefitSettings, _augmented, refit_check, refit_rows
 from brdf_infer.bench._tables import markdown_table, timed_command
 from brdf_infer.design import (
     Candidates,
@@ -33,6 +35,7 @@ from brdf_infer.design import (
     load_design_run,
     predictive,
 )
+from brdf_infer.measurements import Measurements
 from brdf_infer.model import tis
 from brdf_infer.params import PARAM_NAMES, Params
 from brdf_infer.posterior import (
@@ -40,7 +43,9 @@ from brdf_infer.posterior import (
     build_model_data,
     build_posterior_model,
     chain_keys,
+    run_posterior,
 )
+from brdf_infer.scene import Scene, load_scene
 
 STRATEGIES = ("initial", "design", "random", "article")
 HEADERS = [
@@ -118,6 +123,86 @@ def _design_rows(picked: list[dict]) -> Candidates:
     )
 
 
+class _Experiment:
+    """The pay-off experiment's fixed parts: the scene, the truth, the candidate grid and one
+    compiled NUTS program per data shape."""
+
+    def __init__(self, base: DesignRun, settings: PayoffSettings):
+        self.scene, self.settings = base.scene, settings
+        geometry, self.series = base.measurements, settings.series
+        if settings.initial_series is not None:
+            geometry = geometry.subset(geometry.series == settings.initial_series)
+            self.series = settings.initial_series
+        self.geometry, self.path = geometry, base.path
+        self.truth = _truth(base)
+        self.true_tis = float(self.tis(self.truth)[0])
+        self.grid = grid_candidates(self.scene.design, self.series)
+        self.programs: dict[int, NutsProgram] = {}
+
+    def tis(self, draws: dict) -> np.ndarray:
+        """TIS(θ) of each draw."""
+        params = Params(*(jnp.asarray(draws[n]) for n in PARAM_NAMES))
+        model = self.scene.model
+        angle = jnp.asarray(self.settings.theta_i_deg)
+        return np.asarray(tis(angle, params, model.fold, model.constants))
+
+    def fit(self, measurements: Measurements, seed: int) -> dict[str, np.ndarray]:
+        """NUTS draws of the parameters and noise scales given ``measurements``."""
+        rows, settings = len(measurements), self.settings
+        if rows not in self.programs:
+            model = build_posterior_model(self.scene, measurements)
+            self.programs[rows] = NutsProgram(model, warmup=settings.warmup)
+        output = self.programs[rows].run(
+            build_model_data(self.scene, measurements),
+            chain_keys(seed, 1, settings.chains)[0],
+            settings.draws,
+        )
+        names = [*PARAM_NAMES, "sample_sd", "repeatability"]
+        return {n: np.reshape(output.sites[n], -1) for n in names if n in output.sites}
+
+    def interval(self, draws: dict) -> tuple[float, float, bool]:
+        """95 % width and sd of TIS(θ), and whether the interval covers the true TIS."""
+        values = self.tis(draws)
+        low, high = np.quantile(values, [0.025, 0.975])
+        return float(high - low), float(np.std(values)), bool(low <= self.true_tis <= high)
+
+    def initial_data(self, rng) -> Measurements:
+        """The initial design's rows simulated from the truth by the generative error model."""
+        geometry = self.geometry
+        parts = build_posterior_model(self.scene, geometry).draw_parts(self.truth)
+        noise = np.asarray(parts.factor[0]) @ rng.standard_normal(parts.factor.shape[2])
+        noise += np.sqrt(np.asarray(parts.diagonal[0])) * rng.standard_normal(len(geometry))
+        empty = geometry.subset(np.zeros(len(geometry), bool))
+        return _augmented(empty, geometry, np.asarray(parts.mean[0]) + noise)
+
+    def seed(self, seed: int) -> tuple[dict, list]:
+        """One seed: {(strategy, budget): (width, sd, covered)} and design's chosen settings."""
+        settings, largest = self.settings, max(self.settings.budgets)
+        rng = np.random.default_rng(1000 + seed)
+        initial = self.initial_data(rng)
+        sites = self.fit(initial, seed)
+        run = DesignRun(self.scene, initial, sites, self.path)
+        target = f"tis:{settings.theta_i_deg:g}"
+        options = DesignOptions(budget=largest, seed=seed)
+        picked = design(run, target, self.grid, options).chosen
+        rows_of = {
+            "design": _design_rows(picked),
+            "random": _subset(self.grid, rng.choice(len(self.grid), largest, replace=False)),
+            "article": _article(rng, largest, self.series),
+        }
+        normals = rng.standard_normal(largest)
+        truth_run = DesignRun(self.scene, initial, self.truth, self.path)
+        outcomes = {("initial", 0): self.interval(sites)}
+        for budget in settings.budgets:
+            for name in STRATEGIES[1:]:
+                candidates = _subset(rows_of[name], np.arange(budget))
+                values = _simulate(truth_run, candidates, self.truth, normals[:budget])
+                rows = candidate_measurements(candidates, initial)
+                draws = self.fit(_augmented(initial, rows, values), seed + 7)
+                outcomes[(name, budget)] = self.interval(draws)
+        return outcomes, [(c["theta_i_deg"], c["theta_s_deg"]) for c in picked]
+
+
 def payoff(
     run_dir: str | Path, settings: PayoffSettings = PayoffSettings(), progress=print
 ) -> dict:
@@ -128,97 +213,30 @@ def payoff(
     by where the rows are, not by luck; each budget's rows extend the smaller budget's.
     """
     start = time.perf_counter()
-    base = load_design_run(run_dir)
-    scene, geometry = base.scene, base.measurements
-    series = settings.series
-    if settings.initial_series is not None:
-        geometry = geometry.subset(geometry.series == settings.initial_series)
-        series = settings.initial_series
-    truth = _truth(base)
-    true_params = Params(*(jnp.asarray(truth[n]) for n in PARAM_NAMES))
-    fold, constants = scene.model.fold, scene.model.constants
-    true_tis = float(tis(jnp.asarray(settings.theta_i_deg), true_params, fold, constants)[0])
-    grid = grid_candidates(scene.design, series)
-    largest = max(settings.budgets)
-    programs: dict[int, NutsProgram] = {}
-
-    def fit(measurements, seed):
-        rows = len(measurements)
-        if rows not in programs:
-            programs[rows] = NutsProgram(
-                build_posterior_model(scene, measurements), warmup=settings.warmup
-            )
-        output = programs[rows].run(
-            build_model_data(scene, measurements),
-            chain_keys(seed, 1, settings.chains)[0],
-            settings.draws,
-        )
-        names = [*PARAM_NAMES, "sample_sd", "repeatability"]
-        return {n: np.reshape(output.sites[n], -1) for n in names if n in output.sites}
-
-    def interval(draws):
-        params = Params(*(jnp.asarray(draws[n]) for n in PARAM_NAMES))
-        values = np.asarray(tis(jnp.asarray(settings.theta_i_deg), params, fold, constants))
-        low, high = np.quantile(values, [0.025, 0.975])
-        return float(high - low), float(np.std(values)), bool(low <= true_tis <= high)
-
-    keys = [("initial", 0)] + [(s, k) for k in settings.budgets for s in STRATEGIES[1:]]
-    widths = {key: [] for key in keys}
-    sds = {key: [] for key in keys}
-    covered = {key: [] for key in keys}
-    chosen_settings = []
+    experiment = _Experiment(load_design_run(run_dir), settings)
+    outcomes, chosen = [], []
     for seed in range(settings.seeds):
-        rng = np.random.default_rng(1000 + seed)
-        model = build_posterior_model(scene, geometry)
-        parts = model.draw_parts(truth)
-        noise = np.asarray(parts.factor[0]) @ rng.standard_normal(parts.factor.shape[2])
-        noise += np.sqrt(np.asarray(parts.diagonal[0])) * rng.standard_normal(len(geometry))
-        initial = _augmented(
-            geometry.subset(np.zeros(len(geometry), bool)),
-            geometry,
-            np.asarray(parts.mean[0]) + noise,
-        )
-        sites = fit(initial, seed)
-        run = DesignRun(scene, initial, sites, base.path)
-        truth_run = DesignRun(scene, initial, truth, base.path)
-        picked = design(
-            run,
-            f"tis:{settings.theta_i_deg:g}",
-            grid,
-            DesignOptions(budget=largest, seed=seed),
-        ).chosen
-        chosen_settings.append([(c["theta_i_deg"], c["theta_s_deg"]) for c in picked])
-        rows_of = {
-            "design": _design_rows(picked),
-            "random": _subset(grid, rng.choice(len(grid), largest, replace=False)),
-            "article": _article(rng, largest, series),
-        }
-        normals = rng.standard_normal(largest)
-        for (name, budget), width_list in widths.items():
-            if name == "initial":
-                draws = sites
-            else:
-                candidates = _subset(rows_of[name], np.arange(budget))
-                values = _simulate(truth_run, candidates, truth, normals[:budget])
-                rows = candidate_measurements(candidates, initial)
-                draws = fit(_augmented(initial, rows, values), seed + 7)
-            width, sd, inside = interval(draws)
-            width_list.append(width)
-            sds[(name, budget)].append(sd)
-            covered[(name, budget)].append(inside)
+        outcome, picked = experiment.seed(seed)
+        outcomes.append(outcome)
+        chosen.append(picked)
         progress(f"  design pay-off seed {seed + 1}/{settings.seeds}")
-    label = {key: f"{key[0]}:{key[1]}" for key in keys}
+    labels = {key: f"{key[0]}:{key[1]}" for key in outcomes[0]}
+
+    def collect(index: int) -> dict[str, list]:
+        return {labels[k]: [outcome[k][index] for outcome in outcomes] for k in labels}
+
     return {
-        "true_tis": true_tis,
+        "true_tis": experiment.true_tis,
         "theta_i_deg": settings.theta_i_deg,
         "budgets": list(settings.budgets),
         "seeds": settings.seeds,
-        "initial_rows": len(geometry),
-        "series": series,
-        "widths": {label[k]: v for k, v in widths.items()},
-        "sds": {label[k]: v for k, v in sds.items()},
-        "covered": {label[k]: int(np.sum(v)) for k, v in covered.items()},
-        "chosen": chosen_settings,
+        "initial_rows": len(experiment.geometry),
+        "initial_series": settings.initial_series,
+        "series": experiment.series,
+        "widths": collect(0),
+        "sds": collect(1),
+        "covered": {k: int(np.sum(v)) for k, v in collect(2).items()},
+        "chosen": chosen,
         "seconds": time.perf_counter() - start,
     }
 
@@ -289,8 +307,6 @@ def _first_campaign_scene(scene, folder: Path):
     scene file of its own in ``folder`` (a design run is tied to its scene's rows)."""
     import csv
 
-    from brdf_infer.scene import load_scene
-
     folder.mkdir()
     source = scene.path.parent
     for name in ("lya_tis_reference.csv",):
@@ -305,58 +321,73 @@ def _first_campaign_scene(scene, folder: Path):
     return load_scene(folder / scene.path.name)
 
 
+def _reduced_run(scene: Scene, out: Path, quick: bool) -> int:
+    """A NUTS run of ``scene`` into ``out`` at the benchmark's reduced settings; its draws."""
+    chains, draws = (2, 500) if quick else (4, 1000)
+    measurements = scene.load_measurements()
+    warmup = 300 if quick else 500
+    run_posterior(
+        scene, measurements, chains=chains, warmup=warmup, draws=draws, out=out, progress=False
+    )
+    return chains * draws
+
+
+def _refits(run_dir: Path, series: str, quick: bool, progress) -> list[list[str]]:
+    """Estimate against refit rows, seeds in turn."""
+    rows = []
+    for seed in range(1 if quick else 2):
+        settings = RefitSettings(replicates=2 if quick else 8, seed=seed)
+        rows += refit_rows(refit_check(run_dir, "tis:70", series, settings, progress))
+    return rows
+
+
+def _payoff_lines(result: dict) -> list[str]:
+    if result["initial_series"] is not None:
+        first = (
+            f"series {result['series']}'s {result['initial_rows']} measured rows only "
+            "(the first campaign: specular geometry), new rows in the same series"
+        )
+    else:
+        first = (
+            f"the scene's {result['initial_rows']} measured rows, new rows in series "
+            f"{result['series']}"
+        )
+    return [
+        f"Pay-off from {first}: a known truth (the run's posterior medians, true "
+        f"TIS({result['theta_i_deg']:g}°) = {100 * result['true_tis']:.2f} %), the initial "
+        "data simulated from it, K rows added three ways and every data set refitted by "
+        f"NUTS; {result['seeds']} seeds with common random numbers "
+        f"({result['seconds']:.0f} s).",
+        "",
+        markdown_table(HEADERS, payoff_rows(result)),
+        "",
+    ]
+
+
 def design_section(quick: bool, progress=print) -> list[str]:
-    """The benchmark report's section: estimate against refit (several seeds) and the pay-off
-    experiment from two initial designs, on a reduced NUTS run of the bundled scene made here."""
-    import tempfile
-
-    from brdf_infer.bench._design import HEADERS as REFIT_HEADERS
-    from brdf_infer.bench._design import RefitSettings, refit_check, refit_rows
-    from brdf_infer.posterior import run_posterior
-    from brdf_infer.scene import load_scene
-
+    """The benchmark report's section: the command's time, estimate against refit (several
+    seeds, from the bundled scene and from its first campaign alone) and the pay-off experiment
+    from both, on reduced NUTS runs made here."""
     scene = load_scene("lya")
     seeds = 2 if quick else 8
     with tempfile.TemporaryDirectory() as folder:
-        chains, draws = (2, 500) if quick else (4, 1000)
-        run_posterior(
-            scene,
-            scene.load_measurements(),
-            chains=chains,
-            warmup=300 if quick else 500,
-            draws=draws,
-            out=Path(folder),
-            progress=False,
-        )
-        refits = []
-        for seed in range(1 if quick else 2):
-            settings = RefitSettings(replicates=2 if quick else 8, seed=seed)
-            refits += refit_check(folder, "tis:70", "II", settings, progress)
-        first = Path(folder) / "series-I"
-        first_scene = _first_campaign_scene(scene, Path(folder) / "scene-I")
-        run_posterior(
-            first_scene,
-            first_scene.load_measurements(),
-            chains=chains,
-            warmup=300 if quick else 500,
-            draws=draws,
-            out=first,
-            progress=False,
-        )
-        first_refits = []
-        for seed in range(1 if quick else 2):
-            settings = RefitSettings(replicates=2 if quick else 8, seed=seed)
-            first_refits += refit_check(first, "tis:70", "I", settings, progress)
+        base, first = Path(folder) / "lya", Path(folder) / "series-I"
+        draws = _reduced_run(scene, base, quick)
+        refits = _refits(base, "II", quick, progress)
+        _reduced_run(_first_campaign_scene(scene, Path(folder) / "scene-I"), first, quick)
+        first_refits = _refits(first, "I", quick, progress)
+        # from the scene's rows one row changes the width by a few per cent: three times the
+        # seeds there to resolve design against random
         results = [
-            payoff(folder, PayoffSettings(seeds=seeds, initial_series=initial), progress)
-            for initial in ("I", None)
+            payoff(base, PayoffSettings(seeds=count, initial_series=initial), progress)
+            for initial, count in (("I", seeds), (None, 3 * seeds))
         ]
         progress("  design command, cold and warm ...")
-        commands = command_rows(folder, Path(folder) / "scratch")
+        commands = command_rows(base, Path(folder) / "scratch")
     lines = [
         "## Experimental design (`brdf-infer design`)",
         "",
-        f"The command on this section's run ({chains * draws} draws of the bundled scene), "
+        f"The command on this section's run ({draws} draws of the bundled scene), "
         "fresh processes, wall time from start to exit:",
         "",
         markdown_table(COMMAND_HEADERS, commands),
@@ -371,29 +402,13 @@ def design_section(quick: bool, progress=print) -> list[str]:
         "",
         "The bundled scene (42 rows), a new series-II row:",
         "",
-        markdown_table(REFIT_HEADERS, refit_rows(refits)),
+        markdown_table(REFIT_HEADERS, refits),
         "",
         "Series I's 24 specular rows alone (the first campaign), a new series-I row:",
         "",
-        markdown_table(REFIT_HEADERS, refit_rows(first_refits)),
+        markdown_table(REFIT_HEADERS, first_refits),
         "",
     ]
     for result in results:
-        first = (
-            f"series {result['series']}'s {result['initial_rows']} measured rows only "
-            "(the first campaign: specular geometry), new rows in the same series"
-            if result["initial_rows"] < 42
-            else f"the scene's {result['initial_rows']} measured rows, new rows in series "
-            f"{result['series']}"
-        )
-        lines += [
-            f"Pay-off from {first}: a known truth (the run's posterior medians, true "
-            f"TIS({result['theta_i_deg']:g}°) = {100 * result['true_tis']:.2f} %), the initial "
-            "data simulated from it, K rows added three ways and every data set refitted by "
-            f"NUTS; {result['seeds']} seeds with common random numbers "
-            f"({result['seconds']:.0f} s).",
-            "",
-            markdown_table(HEADERS, payoff_rows(result)),
-            "",
-        ]
+        lines += _payoff_lines(result)
     return lines

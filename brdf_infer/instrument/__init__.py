@@ -16,8 +16,8 @@ from brdf_infer.instrument._geometry import (
 )
 from brdf_infer.instrument._kernel import (
     DEFAULT_CANDIDATES,
-    DEFAULT_NODES,
     INSTRUMENT_MODELS,
+    KERNEL_NODES,
     NODE_SHAPES,
     Kernel,
     clear_row_kernel_cache,
@@ -29,8 +29,8 @@ from brdf_infer.instrument._scene import beam_geometry, build_kernel
 
 __all__ = [
     "DEFAULT_CANDIDATES",
-    "DEFAULT_NODES",
     "INSTRUMENT_MODELS",
+    "KERNEL_NODES",
     "NODE_SHAPES",
     "BeamGeometry",
     "Kernel",
