@@ -37,6 +37,26 @@ SPLIT: dict[str, tuple[str, ...]] = {
             "_traces",
         )
     ),
+    "brdf_infer/raytrace/_series.py": tuple(
+        f"brdf_infer/raytrace/{name}.py"
+        for name in ("_images", "_payload", "_series", "_setup", "_tally")
+    ),
+    "brdf_infer/raytrace/_trace.py": ("brdf_infer/raytrace/_trace.py",),
+    "brdf_infer/bench/_loader_inputs.py": tuple(
+        f"brdf_infer/bench/{name}.py"
+        for name in (
+            "_inputs",
+            "_inputs_bsdf",
+            "_inputs_csv",
+            "_inputs_params",
+            "_inputs_scene",
+            "_loader_inputs",
+        )
+    ),
+    "brdf_infer/bench/_peers.py": tuple(
+        f"brdf_infer/bench/{name}.py"
+        for name in ("_peers", "_peers_check", "_peers_runs", "_peers_section")
+    ),
 }
 
 
