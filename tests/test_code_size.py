@@ -57,6 +57,15 @@ SPLIT: dict[str, tuple[str, ...]] = {
         f"brdf_infer/bench/{name}.py"
         for name in ("_peers", "_peers_check", "_peers_runs", "_peers_section")
     ),
+    "brdf_infer/bench/_report.py": ("brdf_infer/bench/_report.py", "brdf_infer/bench/_sections.py"),
+    "brdf_infer/bench/_instrument.py": ("brdf_infer/bench/_instrument.py",),
+    "brdf_infer/posterior/_model.py": tuple(
+        f"brdf_infer/posterior/{name}.py" for name in ("_likelihood", "_model", "_whitening")
+    ),
+    "brdf_infer/measurements.py": ("brdf_infer/measurements.py",),
+    "brdf_infer/export/_files.py": tuple(
+        f"brdf_infer/export/{name}.py" for name in ("_files", "_source", "_zemax")
+    ),
 }
 
 
