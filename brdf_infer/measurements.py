@@ -207,11 +207,7 @@ def load_measurements(
     """
     path = Path(path)
     header, rows = _read_rows(path)
-    for position, name in enumerate(header):
-        if not name:
-            raise BadInputError(f"header column {position + 1} has no name", file=path, line=1)
-        if header.count(name) > 1:
-            raise BadInputError("column appears twice in the header", file=path, field=name)
+    _check_header(header, path)
     quantity, table_columns = _table_columns(header, path)
     if not rows:
         raise BadInputError("no measurement rows after the header", file=path)
@@ -222,57 +218,16 @@ def load_measurements(
     parsed: dict[str, list] = {name: [] for name in (*columns, "phi_s_deg")}
     seen: dict[tuple, int] = {}
     for row_number, (line, cells) in enumerate(rows, start=1):
-        if len(cells) > len(header):
-            raise BadInputError(
-                f"{len(cells)} cells but the header names {len(header)} columns",
-                file=path,
-                row=row_number,
-                line=line,
-            )
-
-        record = {}
-        for name in columns:
-            where = {"file": path, "row": row_number, "line": line, "field": name}
-            text = _cell(cells, index[name])
-            if not text:
-                raise BadInputError("empty cell", **where)
-            record[name] = (
-                text if name in ("series", "sample") else _parse_number(text, name, where)
-            )
-        where = {"file": path, "row": row_number, "line": line, "field": "phi_s_deg"}
-        record["theta_s_deg"], record["phi_s_deg"] = _azimuth(
-            _cell(cells, index["phi_s_deg"]) if "phi_s_deg" in index else "",
-            record["theta_s_deg"],
-            where,
-        )
-        if known is not None and record["series"] not in known:
-            raise BadInputError(
-                f"series {record['series']!r} is not defined in the scene "
-                f"(defined: {', '.join(sorted(known))})",
-                file=path,
-                row=row_number,
-                line=line,
-                field="series",
-            )
-        expected = (series_quantity or {}).get(record["series"], quantity)
-        if expected != quantity:
-            raise BadInputError(
-                f"series {record['series']!r} measures {expected} but this table holds "
-                f"{quantity} values",
-                file=path,
-                row=row_number,
-                line=line,
-                field=value,
-            )
+        at = {"file": path, "row": row_number, "line": line}
+        record = _parse_row(cells, len(header), columns, index, at)
+        _check_series(record, known, series_quantity or {}, quantity, {**at, "field": value})
         key = (*(record[name] for name in COLUMNS[:4]), record["phi_s_deg"])
         key = tuple("in-plane" if isinstance(k, float) and math.isnan(k) else k for k in key)
         if key in seen:
             raise BadInputError(
                 f"duplicate of row {seen[key]} (same series, sample, theta_i_deg, theta_s_deg"
                 + (", phi_s_deg)" if "phi_s_deg" in index else ")"),
-                file=path,
-                row=row_number,
-                line=line,
+                **at,
             )
         seen[key] = row_number
         for name in (*columns, "phi_s_deg"):
@@ -290,6 +245,65 @@ def load_measurements(
         quantity=quantity,
         phi_s_deg=phi if np.any(np.isfinite(phi)) else None,
     )
+
+
+def _check_header(header: list[str], path: Path) -> None:
+    """Every header column named, and named once."""
+    for position, name in enumerate(header):
+        if not name:
+            raise BadInputError(f"header column {position + 1} has no name", file=path, line=1)
+        if header.count(name) > 1:
+            raise BadInputError("column appears twice in the header", file=path, field=name)
+
+
+def _parse_row(
+    cells: list[str], width: int, columns: list[str], index: dict[str, int], at: dict
+) -> dict:
+    """One row's values by column, θs signed and φs NaN for an in-plane row (:func:`_azimuth`).
+
+    Args:
+        cells: the row's cells.
+        width: the number of header columns.
+        columns: the table's columns present in the header, ``phi_s_deg`` aside.
+        index: each column's position in the header, ``phi_s_deg`` included if present.
+        at: the row's file, row and line for an error.
+    """
+    if len(cells) > width:
+        raise BadInputError(f"{len(cells)} cells but the header names {width} columns", **at)
+    record = {}
+    for name in columns:
+        where = {**at, "field": name}
+        text = _cell(cells, index[name])
+        if not text:
+            raise BadInputError("empty cell", **where)
+        record[name] = text if name in ("series", "sample") else _parse_number(text, name, where)
+    where = {**at, "field": "phi_s_deg"}
+    record["theta_s_deg"], record["phi_s_deg"] = _azimuth(
+        _cell(cells, index["phi_s_deg"]) if "phi_s_deg" in index else "",
+        record["theta_s_deg"],
+        where,
+    )
+    return record
+
+
+def _check_series(
+    record: dict, known: set[str] | None, series_quantity: dict[str, str], quantity: str, at: dict
+) -> None:
+    """A row's series is one the scene defines (``known``), measuring the table's quantity;
+    ``at`` names the row and the value column."""
+    if known is not None and record["series"] not in known:
+        raise BadInputError(
+            f"series {record['series']!r} is not defined in the scene "
+            f"(defined: {', '.join(sorted(known))})",
+            **{**at, "field": "series"},
+        )
+    expected = series_quantity.get(record["series"], quantity)
+    if expected != quantity:
+        raise BadInputError(
+            f"series {record['series']!r} measures {expected} but this table holds "
+            f"{quantity} values",
+            **at,
+        )
 
 
 def _delimiter_hint(header: list[str]) -> str:

@@ -234,7 +234,7 @@ def test_old_options_reproduce_the_old_likelihood_bit_for_bit(lya):
 def test_potential_gradients_are_finite_under_every_option(lya):
     """One compiled potential and gradient (the options are data): finite at spread-out
     points for every calibration, coupling and images-per-row value."""
-    from brdf_infer.posterior._model import build_model_data
+    from brdf_infer.posterior import build_model_data
     from brdf_infer.posterior._padding import pad_datasets
     from brdf_infer.posterior._potential import FlatPotential
 

@@ -18,6 +18,7 @@ import pytest
 from jax.test_util import check_grads
 from scipy import stats
 
+from brdf_infer.posterior import _likelihood as likelihood
 from brdf_infer.posterior import _model as posterior_model
 from brdf_infer.posterior._lowrank import (
     BlockCholesky,
@@ -27,7 +28,7 @@ from brdf_infer.posterior._lowrank import (
     solve_lower,
     solve_upper_transposed,
 )
-from brdf_infer.posterior._model import LikelihoodParts, build_posterior_model
+from brdf_infer.posterior._model import build_posterior_model
 from brdf_infer.posterior._potential import FlatPotential
 from brdf_infer.scene import load_scene
 
@@ -185,7 +186,7 @@ def test_potential_equals_the_earlier_lapack_implementation(lya_potentials, monk
     points = jnp.asarray(rng.uniform(-1.5, 1.5, (20, flat.dimension)))
     ours = jax.jit(jax.vmap(lambda z: flat.potential(z, model.data)))(points)
     monkeypatch.setattr(posterior_model, "whitened_coefficients", _lapack_whitened_coefficients)
-    monkeypatch.setattr(posterior_model, "LowRankNormal", _LapackLowRankNormal)
+    monkeypatch.setattr(likelihood, "LowRankNormal", _LapackLowRankNormal)
     reference = jax.jit(jax.vmap(lambda z: FlatPotential(model).potential(z, model.data)))(points)
     assert np.all(np.isfinite(ours))
     np.testing.assert_allclose(ours, reference, rtol=1e-10)
@@ -217,11 +218,13 @@ def test_masked_rows_leave_the_likelihood_exactly():
         jnp.asarray(factor[:9]),
         jnp.asarray(diagonal[:9]),
     )
-    parts = LikelihoodParts(jnp.asarray(mean), jnp.asarray(factor), jnp.asarray(diagonal))
-    masked_factor, masked_diagonal = posterior_model.mask_rows(
+    parts = likelihood.LikelihoodParts(
+        jnp.asarray(mean), jnp.asarray(factor), jnp.asarray(diagonal)
+    )
+    masked_factor, masked_diagonal = likelihood.mask_rows(
         jnp.asarray(keep), parts.factor, parts.diagonal
     )
-    padded = posterior_model.LowRankNormal(
+    padded = likelihood.LowRankNormal(
         jnp.where(keep, parts.mean, jnp.asarray(value)),
         masked_factor,
         masked_diagonal,

@@ -9,7 +9,7 @@ import pytest
 pytest.importorskip("pymc", reason="the peers extra is not installed")
 pytest.importorskip("nutpie", reason="the peers extra is not installed")
 
-from brdf_infer.bench._peers import POINTS, log_density_check, relative_spread
+from brdf_infer.bench._peers_check import POINTS, log_density_check, relative_spread
 from brdf_infer.scene import load_scene
 
 

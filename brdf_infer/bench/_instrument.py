@@ -132,71 +132,85 @@ def node_rows(scene: Scene, measurements, quick: bool, progress=print) -> list[N
         ("aperture", "simulated", "mc_se"),
         ("image", "image_ratio", "image_ratio_se"),
     ):
-        uniforms = sobol_uniforms(DEFAULT_CANDIDATES[instrument])
-        full = _full_cubature(scene, measurements, instrument, uniforms)
-        reference = {
-            params: np.array(
-                [
-                    np.sum(
-                        w
-                        * np.exp(
-                            log_brdf_hemisphere(
-                                n.theta_i_deg, n.theta_deg, n.phi_deg, params, False
-                            )
-                        )
-                    )
-                    for n, w in full
-                ]
-            )
-            for params in (UV_PAPER, OTHER)
-        }
+        reference = _full_reference(scene, measurements, instrument)
         for nodes in (16,) if quick else tuple(NODE_SHAPES):
             progress(f"  {instrument}: {nodes} nodes per row")
-            checked = check_instrument(scene, instrument)
-            variant = replace(checked, instrument=replace(checked.instrument, nodes=nodes))
-            clear_row_kernel_cache()  # time the build, not a cached kernel
-            started = time.perf_counter()
-            kernel = build_kernel(variant, measurements)
-            build_seconds = time.perf_counter() - started
-            cubature_error = 0.0
-            for params, values in reference.items():
-                predicted = np.exp(
-                    kernel_log_reflectance(
-                        lambda ti, t, p, q=params: log_brdf_hemisphere(ti, t, p, q, False),
-                        kernel,
+            ray_trace = (trace, value, error)
+            rows.append(_node_row(scene, measurements, instrument, nodes, reference, ray_trace))
+    return rows
+
+
+def _full_reference(scene: Scene, measurements, instrument: str) -> dict[Params, np.ndarray]:
+    """The raw reflectance of every row by the full cubature of ``instrument`` (all its
+    candidate points), at ``UV_PAPER`` and at ``OTHER``."""
+    uniforms = sobol_uniforms(DEFAULT_CANDIDATES[instrument])
+    full = _full_cubature(scene, measurements, instrument, uniforms)
+    return {
+        params: np.array(
+            [
+                np.sum(
+                    w
+                    * np.exp(
+                        log_brdf_hemisphere(n.theta_i_deg, n.theta_deg, n.phi_deg, params, False)
                     )
                 )
-                cubature_error = max(cubature_error, float(np.max(np.abs(predicted / values - 1))))
-            model = build_observation_model(variant, measurements)
-            predicted = np.exp(np.asarray(model.log_reflectance(UV_PAPER)))
-            by_row = {
-                (
-                    str(measurements.series[k]),
-                    measurements.theta_i_deg[k],
-                    measurements.theta_s_deg[k],
-                ): predicted[k]
-                for k in range(len(measurements))
-            }
-            traced = [
-                (
-                    r[value],
-                    r[error],
-                    by_row[(scene.raytrace.series, r["theta_i_deg"], r["theta_s_deg"])],
-                )
-                for r in trace.rows
+                for n, w in full
             ]
-            rows.append(
-                NodeRow(
-                    instrument,
-                    nodes,
-                    build_seconds,
-                    cubature_error,
-                    max(abs(k / v - 1) for v, _, k in traced),
-                    max(s / v for v, s, _ in traced),
-                    _gradient_microseconds(model),
-                )
+        )
+        for params in (UV_PAPER, OTHER)
+    }
+
+
+def _node_row(
+    scene: Scene, measurements, instrument: str, nodes: int, reference: dict, ray_trace: tuple
+) -> NodeRow:
+    """The kernel of ``instrument`` compressed to ``nodes`` per row: its build time, its error
+    against the full cubature (``reference``) and against the ray tracer (``ray_trace``: the
+    series' trace, the name of its value and of that value's MC error), the cost of ln R and its
+    gradient."""
+    trace, value, error = ray_trace
+    checked = check_instrument(scene, instrument)
+    variant = replace(checked, instrument=replace(checked.instrument, nodes=nodes))
+    clear_row_kernel_cache()  # time the build, not a cached kernel
+    started = time.perf_counter()
+    kernel = build_kernel(variant, measurements)
+    build_seconds = time.perf_counter() - started
+    cubature_error = 0.0
+    for params, values in reference.items():
+        predicted = np.exp(
+            kernel_log_reflectance(
+                lambda ti, t, p, q=params: log_brdf_hemisphere(ti, t, p, q, False),
+                kernel,
             )
-    return rows
+        )
+        cubature_error = max(cubature_error, float(np.max(np.abs(predicted / values - 1))))
+    model = build_observation_model(variant, measurements)
+    predicted = np.exp(np.asarray(model.log_reflectance(UV_PAPER)))
+    by_row = {
+        (
+            str(measurements.series[k]),
+            measurements.theta_i_deg[k],
+            measurements.theta_s_deg[k],
+        ): predicted[k]
+        for k in range(len(measurements))
+    }
+    traced = [
+        (
+            r[value],
+            r[error],
+            by_row[(scene.raytrace.series, r["theta_i_deg"], r["theta_s_deg"])],
+        )
+        for r in trace.rows
+    ]
+    return NodeRow(
+        instrument,
+        nodes,
+        build_seconds,
+        cubature_error,
+        max(abs(k / v - 1) for v, _, k in traced),
+        max(s / v for v, s, _ in traced),
+        _gradient_microseconds(model),
+    )
 
 
 @dataclass(frozen=True)

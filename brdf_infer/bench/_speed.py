@@ -119,7 +119,7 @@ def write_speed_report(out: Path, quick: bool, progress=print) -> Path:
     """``brdf-infer bench --speed``: the main job's cost, the peers on the same posterior,
     the concurrency stress test and a batch of unequal scenes, measured in one run."""
     from brdf_infer._atomic import atomic_write_bytes
-    from brdf_infer.bench._peers import peer_section
+    from brdf_infer.bench._peers_section import peer_section
     from brdf_infer.bench._timing import machine_description
     from brdf_infer.scene import load_scene
 

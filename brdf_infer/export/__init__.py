@@ -15,11 +15,7 @@ from brdf_infer.export._abg import AbgFit, fit_abg
 from brdf_infer.export._files import (
     ABG_COLUMNS,
     EXPORTS_FILE,
-    Source,
-    draw_indices,
     export_abg,
-    export_zemax,
-    planned_files,
     record_export,
     run_export,
 )
@@ -32,6 +28,8 @@ from brdf_infer.export._grid import (
     scatter_grid,
     table_integral,
 )
+from brdf_infer.export._source import Source, draw_indices, planned_files
+from brdf_infer.export._zemax import export_zemax
 
 __all__ = [
     "ABG_COLUMNS",

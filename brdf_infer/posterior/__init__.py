@@ -13,15 +13,9 @@ from brdf_infer.posterior._bands import (
     tis_band,
 )
 from brdf_infer.posterior._family_model import FamilyPosteriorModel, build_family_model
+from brdf_infer.posterior._likelihood import ModelData, build_model_data
 from brdf_infer.posterior._loo import pointwise_loo_terms
-from brdf_infer.posterior._model import (
-    LINEAR,
-    NOISE_SITES,
-    ModelData,
-    PosteriorModel,
-    build_model_data,
-    build_posterior_model,
-)
+from brdf_infer.posterior._model import LINEAR, NOISE_SITES, PosteriorModel, build_posterior_model
 from brdf_infer.posterior._nuts import (
     Cancelled,
     NutsProgram,

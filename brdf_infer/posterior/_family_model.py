@@ -20,16 +20,15 @@ from brdf_infer.errors import BadInputError
 from brdf_infer.measurements import Measurements
 from brdf_infer.model import ModelFamily
 from brdf_infer.observations import log_cos_theta_s, through_instrument
-from brdf_infer.posterior._model import (
+from brdf_infer.posterior._likelihood import (
     LikelihoodParts,
     ModelData,
     build_model_data,
     drawn_noise_scales,
     observe,
-    prior_distribution,
-    row_labels,
     sample_noise_scales,
 )
+from brdf_infer.posterior._model import prior_distribution, row_labels
 from brdf_infer.scene import Scene
 
 

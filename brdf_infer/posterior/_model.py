@@ -28,13 +28,14 @@ stays exactly the scene's posterior; but u is close to N(0, I) and nearly indepe
 (α, θs0) for *any* measurement geometry, where the earlier anchor reparametrisation depended
 on the data covering three incidence angles above every θs0 the prior allows. Coefficients
 the scene fixes stay fixed; ``reparametrise=False`` samples the c directly.
+
+The likelihood's pieces are in :mod:`._likelihood`, the whitening's in :mod:`._whitening`.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -43,29 +44,25 @@ import numpyro
 import numpyro.distributions as dist
 
 from brdf_infer.coordinates import ANGLE_SCALE_DEG, from_internal
-from brdf_infer.error_model import (
-    ErrorSettings,
-    NoiseLayout,
-    NoiseScales,
-    angle_slopes,
-    covariance_factors,
-    noise_layout,
-)
+from brdf_infer.error_model import NoiseScales, angle_slopes, covariance_factors
 from brdf_infer.measurements import Measurements
-from brdf_infer.model import log_fold, positive_power
-from brdf_infer.observations import (
-    Observations,
-    build_observation_model,
-    log_reflectance_at,
-    predicted_log_reflectance,
-)
+from brdf_infer.model import log_fold
+from brdf_infer.observations import log_reflectance_at, predicted_log_reflectance
 from brdf_infer.params import Params
-from brdf_infer.posterior._lowrank import (
-    Whitened,
-    cholesky,
-    low_rank_normal_log_density,
-    solve_lower,
-    solve_upper_transposed,
+from brdf_infer.posterior._likelihood import (
+    LikelihoodParts,
+    ModelData,
+    build_model_data,
+    disjoint_columns,
+    drawn_noise_scales,
+    mask_rows,
+    observe,
+    sample_noise_scales,
+)
+from brdf_infer.posterior._whitening import (
+    gaussian_moments,
+    linear_design,
+    whitened_coefficients,
 )
 from brdf_infer.priors import Prior
 from brdf_infer.scene import Scene
@@ -95,77 +92,6 @@ def prior_distribution(prior: Prior, scale: float = 1.0) -> dist.Distribution:
     if prior.kind == "uniform":
         return dist.Uniform(low, high)
     raise ValueError(f"no distribution for a {prior.kind} prior")
-
-
-def linear_design(rows: Observations, alpha, t_s0) -> jnp.ndarray:
-    """Columns [1, t x', t x'^α, t² x'^α] of c = (ln BRDF0, b1, b2, b3) in ln BRDF (Eq. 7),
-    t = θi/90°, x' = θs/90° − θs0/90° (zero below θs0)."""
-    t = rows.theta_i_deg / ANGLE_SCALE_DEG
-    x = rows.theta_s_deg / ANGLE_SCALE_DEG - t_s0
-    x_linear = jnp.where(x > 0, x, 0.0)
-    x_alpha = positive_power(x, alpha)
-    return jnp.stack([jnp.ones_like(t), t * x_linear, t * x_alpha, t * t * x_alpha], axis=1)
-
-
-def gaussian_moments(prior: Prior) -> tuple[float, float]:
-    """Mean and sd of a non-fixed prior, as a normal stand-in for the whitening regression."""
-    if prior.kind == "uniform":
-        return 0.5 * (prior.lower + prior.upper), (prior.upper - prior.lower) / np.sqrt(12.0)
-    return prior.loc, prior.scale  # normal; truncated normal: its untruncated moments suffice
-
-
-def whitened_coefficients(
-    design, target, factor, diagonal, prior_mean, prior_sd, standard, disjoint: int = 0
-):
-    """c = m + L⁻ᵀ u and ln|∂c/∂u| for the regression target = design·c + noise,
-    Cov(noise) = D + W Wᵀ (Woodbury: the capacitance's small Cholesky, :mod:`._lowrank`).
-
-    With the posterior precision P = L Lᵀ = diag(1/sd²) + Xᵀ Σ⁻¹ X and the right-hand side
-    r = mean/sd² + Xᵀ Σ⁻¹ y, m = P⁻¹ r, so c = L⁻ᵀ (L⁻¹ r + u) with one solve each way.
-
-    Args:
-        design: (rows, k) columns of the free coefficients.
-        target: (rows,) ln R minus everything that does not depend on c.
-        factor: (rows, q) W.
-        diagonal: (rows,) D.
-        prior_mean, prior_sd: (k,) normal stand-in of the coefficients' prior.
-        standard: (k,) the whitened coordinates u.
-        disjoint: leading columns of W with non-overlapping rows (the per-sample effects).
-    """
-    whitened = Whitened(factor, diagonal, disjoint)
-    columns = whitened.scale(jnp.concatenate([design, target[:, None]], axis=1))
-    projected = whitened.project(columns)  # L_C⁻¹ Bᵀ [X' | y']
-    gram = columns.T @ columns - projected.T @ projected  # [X | y]ᵀ Σ⁻¹ [X | y]
-    free = design.shape[1]
-    precision = jnp.diag(1.0 / prior_sd**2) + gram[:free, :free]
-    rhs = prior_mean / prior_sd**2 + gram[:free, free]
-    cholesky_factor = cholesky(precision)
-    values = solve_upper_transposed(cholesky_factor, solve_lower(cholesky_factor, rhs) + standard)
-    return values, -jnp.sum(jnp.log(jnp.diagonal(cholesky_factor)))
-
-
-class ModelData(NamedTuple):
-    """Everything data-dependent the model needs (a pytree: an argument of compiled code).
-
-    Attributes:
-        rows: geometry and measured ln R of each row.
-        noise: the rows' noise structure.
-        mask: (rows,) 1 for a measured row, 0 for a padding row (a batch of scenes of unequal
-            size pads them to one shape); padding rows leave the likelihood and the
-            whitening regression exactly.
-    """
-
-    rows: Observations
-    noise: NoiseLayout
-    mask: jnp.ndarray
-
-
-class LikelihoodParts(NamedTuple):
-    """Mean, low-rank factor W and diagonal D of the rows' ln R (Cov = D + W Wᵀ)."""
-
-    mean: jnp.ndarray
-    factor: jnp.ndarray
-    diagonal: jnp.ndarray
 
 
 @dataclass(frozen=True)
@@ -368,136 +294,6 @@ class PosteriorModel:
         # the data as an argument, not a constant: one compilation serves every data set
         parts = jax.jit(jax.vmap(lambda p, s, d: self.likelihood_parts(p, s, d), (0, 0, None)))
         return parts(params, scales, self.data)
-
-
-def observe(
-    parts: LikelihoodParts, data: ModelData, mode: str, sigma_scale: float, *, spread: bool
-) -> None:
-    """The ``obs`` site: the rows' ln R under mean and covariance ``parts`` (observed in
-    ``fit`` mode, drawn otherwise); σ scaled by ``sigma_scale`` except when simulating.
-    Padding rows (``data.mask`` 0) add nothing to the log density."""
-    observed = data.rows.log_reflectance if mode == "fit" else None
-    if mode != "simulate" and sigma_scale != 1.0:
-        parts = LikelihoodParts(
-            parts.mean, parts.factor * sigma_scale, parts.diagonal * sigma_scale**2
-        )
-    measured = data.mask > 0
-    if spread:
-        rows = numpyro.plate("rows", data.rows.log_reflectance.shape[0])
-        with rows, numpyro.handlers.mask(mask=measured):
-            numpyro.sample("obs", dist.Normal(parts.mean, parts.diagonal**0.5), obs=observed)
-    else:
-        factor, diagonal = mask_rows(measured, parts.factor, parts.diagonal)
-        mean = jnp.where(measured, parts.mean, data.rows.log_reflectance)
-        numpyro.sample(
-            "obs",
-            LowRankNormal(mean, factor, diagonal, measured, disjoint_columns(data)),
-            obs=observed,
-        )
-
-
-def disjoint_columns(data: ModelData) -> int:
-    """The leading columns of the rows' covariance factor W whose rows do not overlap: one per
-    physical sample (each row belongs to one sample), so the capacitance's leading block is
-    diagonal (:class:`brdf_infer.posterior._lowrank.BlockCholesky`)."""
-    return data.noise.sample_members.shape[-1]
-
-
-def mask_rows(keep: jnp.ndarray, factor: jnp.ndarray, diagonal: jnp.ndarray):
-    """(W, D) with the rows outside ``keep`` made independent unit-variance rows (W row 0,
-    D = 1): with a zero residual there they add nothing but the 2π constant."""
-    return jnp.where(keep[:, None], factor, 0.0), jnp.where(keep, diagonal, 1.0)
-
-
-class LowRankNormal(dist.Distribution):
-    """N(mean, D + W Wᵀ) over the rows, its log density in fused XLA ops (:mod:`._lowrank`).
-
-    Rows outside ``keep`` (masked: W row 0, D = 1, mean = the observed value) are left out of
-    the 2π normalisation, so they leave the log density exactly.
-    """
-
-    arg_constraints = {}  # noqa: RUF012 (NumPyro's class attribute)
-    support = dist.constraints.real_vector
-
-    def __init__(self, mean, factor, diagonal, keep=None, disjoint: int = 0):
-        self.loc, self.factor, self.diagonal = mean, factor, diagonal
-        self.disjoint = disjoint
-        self.keep = jnp.ones(mean.shape[-1], bool) if keep is None else keep
-        super().__init__(batch_shape=(), event_shape=mean.shape[-1:])
-
-    def sample(self, key, sample_shape=()):
-        rank_key, row_key = jax.random.split(key)
-        shared = jax.random.normal(rank_key, (*sample_shape, self.factor.shape[-1]))
-        own = jax.random.normal(row_key, (*sample_shape, self.loc.shape[-1]))
-        return self.loc + shared @ self.factor.T + own * jnp.sqrt(self.diagonal)
-
-    @property
-    def mean(self):
-        return self.loc
-
-    @property
-    def variance(self):
-        return self.diagonal + jnp.sum(self.factor**2, axis=-1)
-
-    def log_prob(self, value):
-        count = jnp.sum(self.keep)
-        return low_rank_normal_log_density(
-            value, self.loc, self.factor, self.diagonal, count, self.disjoint
-        )
-
-
-def sample_noise_scales(errors: ErrorSettings, noise: NoiseLayout) -> NoiseScales:
-    """The noise scales of the error model: NumPyro sites where they are learned; the
-    calibration's from the data (``noise``)."""
-    generative = errors.model == "generative"
-    if generative and errors.hierarchical:
-        sample_sd = numpyro.sample("sample_sd", dist.HalfNormal(errors.sample_sd_prior))
-    else:
-        sample_sd = jnp.zeros(())
-    if generative and errors.learns_repeatability:
-        repeatability = numpyro.sample(
-            "repeatability", dist.HalfNormal(errors.repeatability_sd_prior)
-        )
-    else:
-        repeatability = jnp.asarray(0.0 if not generative else float(errors.repeatability))
-    angles = errors.angles_on
-    return NoiseScales(
-        sample_sd=sample_sd,
-        repeatability=repeatability,
-        calibration=jnp.asarray(noise.calibration_sd),
-        rotation_deg=jnp.asarray(errors.rotation_deg if angles else 0.0),
-        camera_deg=jnp.asarray(errors.camera_deg if angles else 0.0),
-    )
-
-
-def drawn_noise_scales(
-    errors: ErrorSettings, noise: NoiseLayout, sites: dict, count: int
-) -> NoiseScales:
-    """The noise scales of ``count`` posterior draws (learned ones from ``sites``, the
-    calibration's from the data, ``noise``)."""
-    generative = errors.model == "generative"
-    angles = errors.angles_on
-    return NoiseScales(
-        sample_sd=jnp.asarray(sites.get("sample_sd", jnp.zeros(count))),
-        repeatability=jnp.asarray(
-            sites["repeatability"]
-            if "repeatability" in sites
-            else jnp.full(count, float(errors.repeatability) if generative else 0.0)
-        ),
-        calibration=jnp.full(count, noise.calibration_sd),
-        rotation_deg=jnp.full(count, errors.rotation_deg if angles else 0.0),
-        camera_deg=jnp.full(count, errors.camera_deg if angles else 0.0),
-    )
-
-
-def build_model_data(scene: Scene, measurements: Measurements) -> ModelData:
-    """The :class:`ModelData` of ``measurements`` under ``scene``."""
-    rows = build_observation_model(scene, measurements).data
-    return ModelData(
-        rows=rows,
-        noise=noise_layout(scene.errors, measurements),
-        mask=jnp.ones(len(measurements)),
-    )
 
 
 def build_posterior_model(

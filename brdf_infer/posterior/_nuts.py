@@ -31,7 +31,8 @@ from numpyro.infer.hmc import hmc
 
 from brdf_infer._compile_clock import compile_clock
 from brdf_infer._sharding import gather_batch, shard_batch
-from brdf_infer.posterior._model import ModelData, PosteriorModel
+from brdf_infer.posterior._likelihood import ModelData
+from brdf_infer.posterior._model import PosteriorModel
 from brdf_infer.posterior._padding import pad_datasets
 from brdf_infer.posterior._potential import FlatPotential
 

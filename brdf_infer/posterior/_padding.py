@@ -6,7 +6,7 @@ physical samples, calibration groups or rotation settings are padded to the larg
 group:
 
 * a padding row carries ``mask`` 0, which removes it from the likelihood and from the
-  whitening regression exactly (:mod:`brdf_infer.posterior._model`); its values are only
+  whitening regression exactly (:mod:`brdf_infer.posterior._likelihood`); its values are only
   kept finite and harmless: the first row's geometry (valid angles, the first row's
   instrument kernel and out-of-plane azimuth), σ 1, ln R 0, ln Ω 0, and no membership in
   any sample, calibration group or rotation setting;
@@ -30,7 +30,7 @@ import numpy as np
 
 from brdf_infer.error_model import NoiseLayout
 from brdf_infer.observations import Observations
-from brdf_infer.posterior._model import ModelData
+from brdf_infer.posterior._likelihood import ModelData
 
 # how a padding row is filled, per field of Observations: the first row's value, or a constant
 _ROW_FILL: dict[str, Any] = {

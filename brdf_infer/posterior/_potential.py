@@ -14,7 +14,8 @@ from numpyro import handlers
 from numpyro.infer import init_to_uniform
 from numpyro.infer.util import constrain_fn, potential_energy, unconstrain_fn
 
-from brdf_infer.posterior._model import ModelData, PosteriorModel
+from brdf_infer.posterior._likelihood import ModelData
+from brdf_infer.posterior._model import PosteriorModel
 
 INIT_RADIUS = 2.0  # NumPyro's init_to_uniform range on the unconstrained space
 

@@ -31,12 +31,12 @@ import numpyro.distributions as dist
 
 from brdf_infer._arviz import az
 from brdf_infer.coordinates import ANGLE_SCALE_DEG
+from brdf_infer.posterior._likelihood import disjoint_columns
 from brdf_infer.posterior._lowrank import low_rank_normal_log_density
 from brdf_infer.posterior._model import (
     LINEAR,
     LINEAR_SITES,
     PosteriorModel,
-    disjoint_columns,
     prior_distribution,
 )
 

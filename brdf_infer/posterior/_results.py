@@ -20,8 +20,9 @@ from brdf_infer._outlock import require_complete
 from brdf_infer.errors import BadInputError
 from brdf_infer.model import REFERENCE_FAMILY, ModelFamily, family
 from brdf_infer.params import PARAM_NAMES
+from brdf_infer.posterior._likelihood import disjoint_columns
 from brdf_infer.posterior._loo import pointwise_loo_terms
-from brdf_infer.posterior._model import NOISE_SITES, PosteriorModel, disjoint_columns
+from brdf_infer.posterior._model import NOISE_SITES, PosteriorModel
 from brdf_infer.posterior._samplers import Draws
 
 POSTERIOR_FILE, SUMMARY_FILE, BANDS_FILE = "posterior.nc", "summary.json", "bands.json"

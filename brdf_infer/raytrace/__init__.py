@@ -1,23 +1,21 @@
 """Ray-tracing validation of the series II measurement setup (Sec. 6, Figs. 12–14)."""
 
+from brdf_infer.raytrace._images import simulate_images
+from brdf_infer.raytrace._payload import raytrace_payload, raytrace_posterior_payload
 from brdf_infer.raytrace._series import (
-    CHUNK_RAYS,
-    Configuration,
-    Estimate,
     RaytraceResult,
+    raytrace_posterior,
+    raytrace_series,
+    thin_draws,
+)
+from brdf_infer.raytrace._setup import (
+    Configuration,
     build_setup,
-    compile_tallies,
     configurations,
     point_estimate,
-    raytrace_payload,
-    raytrace_posterior,
-    raytrace_posterior_payload,
-    raytrace_series,
-    simulate_images,
-    thin_draws,
-    trace_configuration,
     with_aperture,
 )
+from brdf_infer.raytrace._tally import CHUNK_RAYS, Estimate, compile_tallies, trace_configuration
 from brdf_infer.raytrace._trace import ESTIMATORS, TALLIES, Setup
 
 __all__ = [

@@ -168,53 +168,15 @@ def _trace(
     detector_dir = jnp.array([sin_s, 0.0, cos_s])
     in_plane = jnp.array([cos_s, 0.0, -sin_s])  # long side of the detector
     across = jnp.array([0.0, 1.0, 0.0])
-    aperture_centre = setup.aperture_distance * detector_dir
-
+    frame = (detector_dir, in_plane, across, setup.aperture_distance * detector_dir)
+    sample = (hit_point, direction, on_sample)
     if estimator == "nee":
-        a1, a2 = _uniform_disk(k_scatter, n, setup.aperture_radius)
-        aperture_point = aperture_centre + a1[:, None] * in_plane + a2[:, None] * across
-        path = aperture_point - hit_point
-        distance = jnp.linalg.norm(path, axis=1)
-        omega = path / distance[:, None]
-        cos_out, cos_aperture = omega[:, 2], omega @ detector_dir
-        valid = on_sample & (cos_out > 0) & (cos_aperture > 0)
-        theta_i, theta, phi = _scattering_angles(direction, omega)
-        log_brdf = log_brdf_hemisphere(theta_i, theta, phi, params, fold, constants)
-        area = jnp.pi * setup.aperture_radius**2
-        log_geometry = jnp.log(jnp.where(valid, cos_out * cos_aperture * area, 1.0)) - 2 * jnp.log(
-            distance
-        )
-        contribution = jnp.where(valid, jnp.exp(log_brdf + log_geometry), 0.0)
-        through = valid
+        scattering = _next_event(k_scatter, n, sample, frame, params, setup, constants, fold)
     elif estimator == "naive":
-        u1, u2 = jax.random.uniform(k_scatter, (2, n))
-        radial = jnp.sqrt(u1)
-        omega = jnp.stack(
-            [
-                radial * jnp.cos(2 * jnp.pi * u2),
-                radial * jnp.sin(2 * jnp.pi * u2),
-                jnp.sqrt(1 - u1),
-            ],
-            axis=1,
-        )
-        cos_aperture = omega @ detector_dir
-        facing = cos_aperture > 0
-        reach = ((aperture_centre - hit_point) @ detector_dir) / jnp.where(
-            facing, cos_aperture, 1.0
-        )
-        aperture_point = hit_point + reach[:, None] * omega
-        offset = aperture_point - aperture_centre
-        through = (
-            on_sample
-            & facing
-            & (reach > 0)
-            & (jnp.sum(offset**2, axis=1) <= setup.aperture_radius**2)
-        )
-        theta_i, theta, phi = _scattering_angles(direction, omega)
-        log_brdf = log_brdf_hemisphere(theta_i, theta, phi, params, fold, constants)
-        contribution = jnp.where(through, jnp.pi * jnp.exp(log_brdf), 0.0)
+        scattering = _forward(k_scatter, n, sample, frame, params, setup, constants, fold)
     else:
         raise ValueError(f"unknown estimator {estimator!r} (known: {', '.join(ESTIMATORS)})")
+    contribution, through, omega, cos_aperture, aperture_point = scattering
 
     safe_cos = jnp.where(through, cos_aperture, 1.0)
     landing = aperture_point + (setup.detector_behind / safe_cos)[:, None] * omega
@@ -236,6 +198,68 @@ def _trace(
         axis=1,
     )
     return tallies, (x, y), ref_xy
+
+
+def _next_event(key, n: int, sample, frame, params, setup: Setup, constants, fold: bool):
+    """The ``"nee"`` estimator: a point drawn uniformly on AD and the power of the path from
+    the hit point through it, BRDF·cos θ·cos θ_AD·A_AD/d².
+
+    Args:
+        sample: hit points on the sample plane [mm], incident directions, and whether the
+            hit point lies on the sample.
+        frame: the detector direction D, the detector's in-plane and across axes, and the
+            centre of AD [mm].
+
+    Returns:
+        Per ray: contribution (a fraction of its beam weight), whether it passes AD, the
+        outgoing unit direction ω, cos of ω to D, and the point on AD [mm].
+    """
+    hit_point, direction, on_sample = sample
+    detector_dir, in_plane, across, aperture_centre = frame
+    a1, a2 = _uniform_disk(key, n, setup.aperture_radius)
+    aperture_point = aperture_centre + a1[:, None] * in_plane + a2[:, None] * across
+    path = aperture_point - hit_point
+    distance = jnp.linalg.norm(path, axis=1)
+    omega = path / distance[:, None]
+    cos_out, cos_aperture = omega[:, 2], omega @ detector_dir
+    valid = on_sample & (cos_out > 0) & (cos_aperture > 0)
+    theta_i, theta, phi = _scattering_angles(direction, omega)
+    log_brdf = log_brdf_hemisphere(theta_i, theta, phi, params, fold, constants)
+    area = jnp.pi * setup.aperture_radius**2
+    log_geometry = jnp.log(jnp.where(valid, cos_out * cos_aperture * area, 1.0)) - 2 * jnp.log(
+        distance
+    )
+    contribution = jnp.where(valid, jnp.exp(log_brdf + log_geometry), 0.0)
+    return contribution, valid, omega, cos_aperture, aperture_point
+
+
+def _forward(key, n: int, sample, frame, params, setup: Setup, constants, fold: bool):
+    """The ``"naive"`` estimator: a direction drawn from the cosine-weighted hemisphere with
+    weight π·BRDF, counted when it passes AD. Arguments and returns as :func:`_next_event`."""
+    hit_point, direction, on_sample = sample
+    detector_dir, _, _, aperture_centre = frame
+    u1, u2 = jax.random.uniform(key, (2, n))
+    radial = jnp.sqrt(u1)
+    omega = jnp.stack(
+        [
+            radial * jnp.cos(2 * jnp.pi * u2),
+            radial * jnp.sin(2 * jnp.pi * u2),
+            jnp.sqrt(1 - u1),
+        ],
+        axis=1,
+    )
+    cos_aperture = omega @ detector_dir
+    facing = cos_aperture > 0
+    reach = ((aperture_centre - hit_point) @ detector_dir) / jnp.where(facing, cos_aperture, 1.0)
+    aperture_point = hit_point + reach[:, None] * omega
+    offset = aperture_point - aperture_centre
+    through = (
+        on_sample & facing & (reach > 0) & (jnp.sum(offset**2, axis=1) <= setup.aperture_radius**2)
+    )
+    theta_i, theta, phi = _scattering_angles(direction, omega)
+    log_brdf = log_brdf_hemisphere(theta_i, theta, phi, params, fold, constants)
+    contribution = jnp.where(through, jnp.pi * jnp.exp(log_brdf), 0.0)
+    return contribution, through, omega, cos_aperture, aperture_point
 
 
 @partial(jax.jit, static_argnames=("n", "estimator", "limiting", "fold"))

@@ -1,8 +1,9 @@
 """The HTML diagnostic report of a posterior run, and its figures (imports matplotlib); the
 figures and pages of the studies (SBC, comparison, sensitivity), written beside their results."""
 
-from brdf_infer.report._build import FIGURE_DIR, REPORT_FILE, write_example, write_report
+from brdf_infer.report._build import FIGURE_DIR, REPORT_FILE, write_report
 from brdf_infer.report._compare import compare_figure, compare_table_html, write_comparison
+from brdf_infer.report._example import write_example
 from brdf_infer.report._figures import brdf_bands as plot_brdf_bands
 from brdf_infer.report._figures import hemisphere_maps as plot_hemisphere_maps
 from brdf_infer.report._figures import posterior_predictive as plot_posterior_predictive

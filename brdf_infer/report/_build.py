@@ -5,14 +5,12 @@ from __future__ import annotations
 import json
 import time
 import warnings
+from collections.abc import Callable
 from pathlib import Path
-
-import numpy as np
 
 from brdf_infer._arviz import az
 from brdf_infer._atomic import atomic_write_bytes
 from brdf_infer._outlock import require_complete, writing
-from brdf_infer.compare import COMPARE_FILE
 from brdf_infer.errors import BadInputError
 from brdf_infer.model import REFERENCE_FAMILY, fold_statement
 from brdf_infer.posterior import (
@@ -25,18 +23,26 @@ from brdf_infer.posterior import (
     run_fold,
 )
 from brdf_infer.report import _figures, _html, _noise
-from brdf_infer.report._compare import compare_figure, compare_table_html
+from brdf_infer.report._compare import compare_section
 from brdf_infer.report._design import design_section
-from brdf_infer.report._export import abg_table, load_exports, plot_export
-from brdf_infer.report._instruments import MEANINGS, instruments_section
+from brdf_infer.report._error_model import (
+    error_model_table,
+    loo_pits,
+    loo_table,
+    variants_comparison,
+)
+from brdf_infer.report._export import export_section, load_exports, plot_export
+from brdf_infer.report._instruments import instruments_section
 from brdf_infer.report._raytrace import figure_png, plot_detector_images, plot_raytrace
+from brdf_infer.report._results import fold_note, result_box, tis_fold, tis_table
+from brdf_infer.report._run_tables import run_section, summary_table
 from brdf_infer.report._sensitivity import sensitivity_section
+from brdf_infer.report._traces import detector_images, load_traces, raytrace_table
 from brdf_infer.scene import load_scene
 from brdf_infer.sensitivity import tis_angles
 from brdf_infer.verdict import PARETO_K_LIMIT, Verdict
 
 REPORT_FILE = "report.html"
-RAYTRACE_FILE = "raytrace.json"
 FIGURE_DIR = "figures"
 
 
@@ -76,6 +82,10 @@ def write_report(run: Path, progress=print) -> tuple[Path, Verdict]:
         return _write_report(run, loaded, started, progress)
 
 
+Figure = tuple[str, str, bytes]  # name, caption, PNG
+AddFigure = Callable[[str, str, Callable[[], object]], None]  # name, caption, make the figure
+
+
 def _write_report(run: Path, loaded, started: float, progress) -> tuple[Path, Verdict]:
     idata, summary, bands = loaded
     attrs = idata.posterior.attrs
@@ -87,12 +97,38 @@ def _write_report(run: Path, loaded, started: float, progress) -> tuple[Path, Ve
         warnings.simplefilter("ignore", UserWarning)
         loo = az.loo(idata, pointwise=True)
     verdict = Verdict.from_json(summary["verdict"])  # recorded when the run completed
-    figures: list[tuple[str, str, object]] = []
+    figures: list[Figure] = []
 
     def add(name: str, caption: str, make) -> None:
         progress(f"  figure: {name}")
         figures.append((name, caption, figure_png(make())))
 
+    _fit_figures(add, run, idata, summary, bands, scene, rows, loo)
+    _product_figures(add, idata, bands, scene, member, physical)
+    exports = load_exports(run)
+    _export_figure(add, exports, idata, scene, reference_model)
+    traces = load_traces(run)
+    _raytrace_figures(add, traces, scene, rows)
+    for name, _, png in figures:
+        atomic_write_bytes(run / FIGURE_DIR / f"{name}.png", png)
+
+    sections = [
+        *_answer(run, verdict, summary, bands, scene, rows, member, figures),
+        *run_section(scene, rows, idata, summary, member),
+        "<h2>ArviZ summary (physical units)</h2>",
+        summary_table(idata, summary, member),
+        *_diagnostics(run, idata, summary, loo, figures),
+        *_products(run, bands, exports, traces, figures),
+    ]
+    title = f"brdf_infer report: {scene.name}, {member.name} ({attrs['sampler']})"
+    document = _html.page(title, sections)
+    path = atomic_write_bytes(run / REPORT_FILE, document.encode())
+    progress(f"report written in {time.perf_counter() - started:.1f} s")
+    return path, verdict
+
+
+def _fit_figures(add: AddFigure, run: Path, idata, summary, bands, scene, rows, loo) -> None:
+    """The BRDF bands against the data, the sampler's diagnostics and the fit to the data."""
     reference = scene.outputs.reference_params
     add(
         "brdf_bands",
@@ -117,7 +153,7 @@ def _write_report(run: Path, loaded, started: float, progress) -> tuple[Path, Ve
         "Posterior predictive against the measured raw reflectance, per series (cf. Figs. 4, 6).",
         lambda: _figures.posterior_predictive(idata, rows.series),
     )
-    pits = _loo_pits(run, summary)
+    pits = loo_pits(run, summary)
     if pits:
         add(
             "loo_pit",
@@ -136,12 +172,17 @@ def _write_report(run: Path, loaded, started: float, progress) -> tuple[Path, Ve
             lambda: spread,
         )
     add("pareto_k", "PSIS-LOO Pareto k per measurement.", lambda: _figures.pareto_k(loo))
+
+
+def _product_figures(add: AddFigure, idata, bands, scene, member, physical) -> None:
+    """The TIS band and the hemisphere maps, where the run has them."""
+    reference_model = member.name == REFERENCE_FAMILY
     if "tis" in bands:
         add(
             "tis_band",
             "TIS(θi): posterior median, 68 % and 95 % bands"
             + (", with the scene's reference points" if scene.outputs.tis_reference else "")
-            + f"; {fold_statement(_tis_fold(bands))}.",
+            + f"; {fold_statement(tis_fold(bands))}.",
             lambda: _figures.tis_band(bands, scene.load_tis_reference()),
         )
     if scene.outputs.maps and (scene.model.out_of_plane or not reference_model):
@@ -152,7 +193,10 @@ def _write_report(run: Path, loaded, started: float, progress) -> tuple[Path, Ve
             f"{fold_statement(reference_model and run_fold(idata.posterior))}.",
             lambda: _figures.hemisphere_maps(member, physical),
         )
-    exports = load_exports(run)
+
+
+def _export_figure(add: AddFigure, exports: list[dict], idata, scene, reference_model) -> None:
+    """The last .BSDF export of the run read back, against the model (reference family only)."""
     shown = next((e for e in reversed(exports) if e["format"] == "zemax-bsdf"), None)
     if shown is not None and reference_model:
         tables = {f["kind"]: Path(f["path"]) for f in shown["files"] if f["kind"] != "draw"}
@@ -164,7 +208,10 @@ def _write_report(run: Path, loaded, started: float, progress) -> tuple[Path, Ve
             f"posterior median and 95 % band evaluated directly (blue); {fold_statement(fold)}.",
             lambda: plot_export(tables, draws_params(idata.posterior), fold, scene.model.constants),
         )
-    traces = _load_traces(run)
+
+
+def _raytrace_figures(add: AddFigure, traces: list[dict], scene, rows) -> None:
+    """The ray traces against the measurements (Fig. 14) and the detector images (Fig. 13)."""
     if traces:
         add(
             "raytrace",
@@ -178,19 +225,18 @@ def _write_report(run: Path, loaded, started: float, progress) -> tuple[Path, Ve
             "detector_images",
             f"Simulated detector images for {traces[0]['params_source']} (cf. Fig. 13); the "
             "cyan square is the signal region of the image ratio.",
-            lambda: plot_detector_images(_images(scene, rows, traces[0])),
+            lambda: plot_detector_images(detector_images(scene, rows, traces[0])),
         )
-    for name, _, png in figures:
-        atomic_write_bytes(run / FIGURE_DIR / f"{name}.png", png)
 
-    table = az.summary(
-        idata,
-        var_names=[
-            n for n in member.parameters if n not in summary["diagnostics"].get("fixed", [])
-        ],
-        round_to="none",
-    )
-    sections = [
+
+def _shown(figures: list[Figure], *names: str) -> list[str]:
+    """The HTML of the figures named, in the order they were drawn."""
+    return [_html.figure(png, caption) for name, caption, png in figures if name in names]
+
+
+def _answer(run: Path, verdict, summary, bands, scene, rows, member, figures) -> list[str]:
+    """The verdict and the answer first, with the BRDF bands and the studies left out."""
+    return [
         _html.verdict_box(verdict),
         "<p>Thresholds: "
         + _html.escape(
@@ -199,122 +245,49 @@ def _write_report(run: Path, loaded, started: float, progress) -> tuple[Path, Ve
             f"emcee ≥ {THRESHOLDS['tau_multiple']} autocorrelation times."
         )
         + "</p>",
-        _result_box(summary, bands, tis_angles(scene, rows), member.name),
-        _fold_note(bands) if "tis" in bands else "",
-        *(_html.figure(png, caption) for name, caption, png in figures if name == "brdf_bands"),
+        result_box(summary, bands, tis_angles(scene, rows), member.name),
+        fold_note(bands) if "tis" in bands else "",
+        *_shown(figures, "brdf_bands"),
         _studies_line(run),
-        "<h2>The run</h2>",
-        _html.table(
-            ["item", "value"],
-            [
-                ["scene", f"{scene.name}: {scene.description}"],
-                ["scene file", attrs["scene_file"]],
-                ["model", member.name + ("" if reference_model else f" ({_units(member)})")],
-                [
-                    "instrument",
-                    f"{attrs.get('instrument', 'point')}: "
-                    + MEANINGS.get(attrs.get("instrument", "point"), ""),
-                ],
-                ["measurements", f"{scene.measurements_path} ({len(rows)} rows)"],
-                ["sampler", f"{attrs['sampler']} {attrs['settings']}"],
-                ["seed", attrs["seed"]],
-                ["options", json.dumps(summary.get("options", {}))],
-                [
-                    "Eq. (10) folding (the scene's [model] fold)",
-                    fold_statement(reference_model and run_fold(idata.posterior)),
-                ],
-                ["versions", attrs["versions"]],
-                [
-                    "wall time",
-                    f"{summary['seconds']['total']:.1f} s "
-                    f"(sampling {summary['seconds']['sampling']:.1f} s)",
-                ],
-                ["created", attrs.get("created", "")],
-            ],
-        ),
-        "<h3>Priors</h3>",
-        "<p>Each prior is on the coordinate named (the sampler's well-conditioned one).</p>",
-        _priors_table(scene) if reference_model else _family_priors_table(member),
-        "<h3>Data</h3>",
-        _html.table(
-            ["series", "sample", "θi [deg]", "θs [deg]", "R [-]", "σ_R [-]"],
-            [
-                [s, m, f"{i:g}", f"{t:g}", f"{r:.3e}", "–" if e is None else f"{e:.2e}"]
-                for s, m, i, t, r, e in zip(
-                    rows.series,
-                    rows.sample,
-                    rows.theta_i_deg,
-                    rows.theta_s_deg,
-                    rows.reflectance,
-                    [None] * len(rows) if rows.reflectance_err is None else rows.reflectance_err,
-                    strict=True,
-                )
-            ],
-        ),
-        "<h2>ArviZ summary (physical units)</h2>",
-        _html.table(
-            ["parameter", *table.columns],
-            [[name, *(f"{v:.4g}" for v in table.loc[name])] for name in table.index],
-        ),
+    ]
+
+
+def _diagnostics(run: Path, idata, summary, loo, figures) -> list[str]:
+    """The sampler's diagnostics, the fit against the data and the error model."""
+    return [
         "<h2>Diagnostics</h2>",
-        *(
-            _html.figure(png, caption)
-            for name, caption, png in figures
-            if name in ("trace", "rank", "pair", "energy")
-        ),
+        *_shown(figures, "trace", "rank", "pair", "energy"),
         "<h2>Fit against the data</h2>",
-        *(
-            _html.figure(png, caption)
-            for name, caption, png in figures
-            if name in ("predictive", "pareto_k")
-        ),
+        *_shown(figures, "predictive", "pareto_k"),
         "<h2>Error model</h2>",
-        _error_model_table(summary),
-        *(
-            _html.figure(png, caption)
-            for name, caption, png in figures
-            if name in ("loo_pit", "spread_check")
-        ),
-        _html.table(
-            ["PSIS-LOO", "value"],
-            [
-                ["elpd_loo", f"{loo.elpd_loo:.2f} ± {loo.se:.2f}"],
-                ["p_loo", f"{loo.p_loo:.2f}"],
-                [
-                    f"points with k > {PARETO_K_LIMIT}",
-                    int(np.sum(np.asarray(loo.pareto_k) > PARETO_K_LIMIT)),
-                ],
-            ],
-        ),
-        _comparison(run, idata),
+        error_model_table(summary),
+        *_shown(figures, "loo_pit", "spread_check"),
+        loo_table(loo),
+        variants_comparison(run, idata),
+    ]
+
+
+def _products(run: Path, bands, exports, traces, figures) -> list[str]:
+    """The products (TIS, maps, exports) and the studies written beside the run."""
+    return [
         "<h2>Products</h2>",
-        *(
-            _html.figure(png, caption)
-            for name, caption, png in figures
-            if name in ("tis_band", "hemisphere")
-        ),
-        _tis_table(bands) if "tis" in bands else "",
-        *_export_section(exports, figures),
-        *_compare_section(run),
+        *_shown(figures, "tis_band", "hemisphere"),
+        tis_table(bands) if "tis" in bands else "",
+        *export_section(exports, figures),
+        *compare_section(run),
         *sensitivity_section(run),
         *design_section(run),
         *instruments_section(run),
         *(
-            ["<h2>Ray-tracing validation (Sec. 6)</h2>", _raytrace_table(traces)]
-            + [
-                _html.figure(png, caption)
-                for name, caption, png in figures
-                if name in ("raytrace", "detector_images")
+            [
+                "<h2>Ray-tracing validation (Sec. 6)</h2>",
+                raytrace_table(traces),
+                *_shown(figures, "raytrace", "detector_images"),
             ]
             if traces
             else []
         ),
     ]
-    title = f"brdf_infer report: {scene.name}, {member.name} ({attrs['sampler']})"
-    document = _html.page(title, sections)
-    path = atomic_write_bytes(run / REPORT_FILE, document.encode())
-    progress(f"report written in {time.perf_counter() - started:.1f} s")
-    return path, verdict
 
 
 def _studies_line(run: Path) -> str:
@@ -332,379 +305,3 @@ def _studies_line(run: Path) -> str:
         + ". Add them with a <code>[studies]</code> table in the scene, or all at once with "
         "<code>brdf-infer run --full</code>.</p>"
     )
-
-
-def _compare_section(run: Path) -> list[str]:
-    """The model comparison (``compare.json`` of ``brdf-infer compare --out RUN`` or ``run``)."""
-    path = run / COMPARE_FILE
-    if not path.is_file():
-        return []
-    payload = json.loads(path.read_text())
-    best = payload["models"][0]["name"]
-    return [
-        "<h2>Model comparison (PSIS-LOO)</h2>",
-        f"<p>Every family sampled by NUTS on the same rows and error model; ranked by the "
-        f"leave-one-out log predictive density (higher is better). Best: <b>{best}</b>. A "
-        f"difference is clear when Δelpd is several times its se. A family whose sampler "
-        f"diagnostics fail (R-hat > {THRESHOLDS['r_hat']}, bulk ESS < {THRESHOLDS['ess']}, "
-        f"divergences) is marked: its draws may not represent its posterior, so its rank is "
-        f"not to be trusted.</p>",
-        compare_table_html(payload),
-        _html.figure(
-            compare_figure(payload),
-            "PSIS-LOO of each family (elpd_loo ± se, best on top) and its TIS(70°) band.",
-        ),
-    ]
-
-
-def _export_section(exports: list[dict], figures) -> list[str]:
-    """The Export section: where the files are, the table plot and the ABg table."""
-    if not exports:
-        return []
-    parts = ["<h2>Export</h2>"]
-    for entry in exports:
-        names = ", ".join(Path(f["path"]).name for f in entry["files"][:6])
-        more = len(entry["files"]) - 6
-        folding = f"; {fold_statement(entry['fold'])}" if "fold" in entry else ""
-        parts.append(
-            f"<p>{_html.escape(entry['format'])} in <code>{_html.escape(entry['folder'])}</code>: "
-            f"{_html.escape(names)}{f' and {more} more' if more > 0 else ''}"
-            f"{_html.escape(folding)}</p>"
-        )
-        if entry["format"] == "abg" and entry.get("rows"):
-            parts.append(abg_table(entry["rows"]))
-    parts += [_html.figure(png, caption) for name, caption, png in figures if name == "export"]
-    return parts
-
-
-SPREAD_VARIANT = "spread"
-PRIOR_COORDINATES = {
-    "brdf0": "ln BRDF0 [ln sr⁻¹]",
-    "a1": "b1 = a1·90² [-]",
-    "a2": "b2 = a2·90^(1+α) [-]",
-    "a3": "b3 = a3·90^(2+α) [-]",
-    "alpha": "α [-]",
-    "theta_s0": "θs0 [deg]",
-}
-
-
-def _priors_table(scene) -> str:
-    rows = [
-        [name, PRIOR_COORDINATES[name], _prior_text(prior)] for name, prior in scene.priors.items()
-    ]
-    return _html.table(["parameter", "prior on the coordinate", "prior"], rows)
-
-
-def _units(member) -> str:
-    return ", ".join(f"{name} [{member.units[name]}]" for name in member.parameters)
-
-
-def _prior_text(prior) -> str:
-    if prior.fixed:
-        return f"fixed at {prior.value:g}"
-    if prior.kind == "normal":
-        return f"N({prior.loc:g}, {prior.scale:g})"
-    if prior.kind == "uniform":
-        return f"U[{prior.lower:g}, {prior.upper:g}]"
-    bounds = (
-        f"{'-inf' if prior.lower is None else f'{prior.lower:g}'}, "
-        f"{'inf' if prior.upper is None else f'{prior.upper:g}'}"
-    )
-    return f"N({prior.loc:g}, {prior.scale:g}) on [{bounds}]"
-
-
-def _family_priors_table(member) -> str:
-    return _html.table(
-        ["coordinate", "meaning", "prior"],
-        [[c.site, c.description, _prior_text(c.prior)] for c in member.coordinates],
-    )
-
-
-def _result_box(summary: dict, bands: dict, angles, model: str = REFERENCE_FAMILY) -> str:
-    """The answer first: TIS at ``angles`` (the scene's incidence angles and the article's 70°)
-    and π·BRDF0 (``strumik2024``), 95 % intervals."""
-    rows = []
-    if "tis" in bands:
-        grid = np.asarray(bands["tis"]["theta_i_deg"])
-        for angle in angles:
-            values = [np.interp(angle, grid, bands["tis"][k]) for k in ("median", "lo95", "hi95")]
-            rows.append(
-                [
-                    f"TIS(θi = {angle:g}°)",
-                    f"{100 * values[0]:.2f} %",
-                    f"{100 * values[1]:.2f} – {100 * values[2]:.2f} %",
-                ]
-            )
-    brdf0 = summary.get("pi_brdf0")
-    if brdf0 is not None:
-        rows.append(
-            [
-                "π·BRDF0 (near-normal TIS, Sec. 7)",
-                f"{100 * brdf0['median']:.2f} %",
-                f"{100 * brdf0['lo95']:.2f} – {100 * brdf0['hi95']:.2f} %",
-            ]
-        )
-    return (
-        '<div class="result"><h2>Result'
-        + ("" if model == REFERENCE_FAMILY else f" ({_html.escape(model)})")
-        + "</h2>"
-        + _html.table(["quantity", "posterior median", "95 % credible interval"], rows)
-        + "</div>"
-    )
-
-
-def _loo_pits(run: Path, summary: dict) -> dict[str, tuple[list, float]]:
-    """Error model name → (LOO-PIT values, KS p) of this run and of its spread variant."""
-    pits = {}
-    if "predictive" in summary:
-        name = summary.get("error_model", {}).get("model", "this run")
-        pits[f"{name} (this run)"] = (
-            summary["predictive"]["loo_pit"],
-            summary["predictive"]["loo_pit_ks_p"],
-        )
-    variant = run / "variants" / SPREAD_VARIANT / SUMMARY_FILE
-    if variant.is_file():
-        other = json.loads(variant.read_text())
-        pits["spread (earlier model)"] = (
-            other["predictive"]["loo_pit"],
-            other["predictive"]["loo_pit_ks_p"],
-        )
-    return pits
-
-
-def _error_model_table(summary: dict) -> str:
-    """The noise sources of the run's error model with their sizes."""
-    errors = summary.get("error_model")
-    if not errors:
-        return ""
-    if errors["model"] == "spread":
-        return (
-            "<p>The earlier spread model: independent rows with σ² = "
-            f"{errors['reflectance_rel']:g}² + s(θi)², s the inter-sample spread of ln R.</p>"
-        )
-    noise = summary.get("noise", {})
-
-    def learned(name: str) -> str:
-        if name not in noise:
-            return "off"
-        value = noise[name]
-        return f"{value['median']:.3f} (95 %: {value['lo95']:.3f}–{value['hi95']:.3f}), learned"
-
-    repeatability = (
-        learned("repeatability")
-        if errors["repeatability"] == "learned"
-        else f"{errors['repeatability']:g}, fixed"
-    )
-    calibration = errors.get("calibration", "none")
-    calibration = (
-        f"{errors['calibration_rel']:g} {calibration.replace('_', ' ')}, fixed"
-        if calibration != "none"
-        else "off"
-    )
-    angles = errors["propagate_angles"]
-    images = errors["images_per_row"]
-    if isinstance(images, dict):
-        images = ", ".join(f"{n} ({name})" for name, n in images.items()) + ", else 1"
-    coupling = {"camera_follows": "θs + ε", "camera_fixed": "θs − ε"}.get(
-        errors.get("rotation_coupling", ""), ""
-    )
-    rows = [
-        [
-            "value noise e_i",
-            f"σ of each row ÷ √n, n = {images} images (row's reflectance_err, else "
-            f"reflectance_rel {errors['reflectance_rel']:g})",
-        ],
-        ["repeatability ν_i (per row)", repeatability],
-        [
-            "sample-to-sample u_j (per sample)",
-            learned("sample_sd") if errors["hierarchical"] else "off",
-        ],
-        ["calibration κ (per reference measurement)", calibration],
-        [
-            "sample rotation ε (per series, sample, θi)",
-            f"{errors['rotation_deg']:g}° through ln R ({errors['angle_method']}): θi + ε, "
-            f"{coupling} ({errors.get('rotation_coupling', '')})"
-            if angles
-            else "off",
-        ],
-        [
-            "camera position η (per row)",
-            f"{errors['camera_deg']:g}° through ln R ({errors['angle_method']})"
-            if angles
-            else "off",
-        ],
-    ]
-    return "<p>Every noise source enters once (sizes in ln R):</p>" + _html.table(
-        ["source", "size"], rows
-    )
-
-
-def _load_traces(run: Path) -> list[dict]:
-    """The ray traces a run wrote (``raytrace.json``), possibly none."""
-    path = run / RAYTRACE_FILE
-    if not path.is_file():
-        return []
-    try:
-        return json.loads(path.read_text())["traces"]
-    except (OSError, ValueError, KeyError) as error:
-        raise BadInputError(f"cannot read the ray traces: {error}", file=path) from None
-
-
-def _images(scene, rows, trace: dict) -> dict:
-    from brdf_infer.params import Params
-    from brdf_infer.raytrace import simulate_images
-
-    return simulate_images(scene, rows, Params(**trace["params"]), seed=trace["seed"])
-
-
-def _raytrace_table(traces: list[dict]) -> str:
-    header = ["θi [deg]", "δ [deg]", "measured [-]"]
-    for trace in traces:
-        header += [f"simulated, {trace['params_source']} [-]", "simulated / measured"]
-    header += ["point estimate Eq. (6) [-]", "image ratio [-]"]
-    table = []
-    for k, row in enumerate(traces[0]["rows"]):
-        cells = [f"{row['theta_i_deg']:g}", f"{row['delta_deg']:+g}", f"{row['measured']:.3e}"]
-        for trace in traces:
-            other = trace["rows"][k]
-            text = f"{other['simulated']:.3e} ± {other['mc_se']:.1e}"
-            if "band" in other:
-                text += f" (95 %: {other['band']['lo95']:.2e}–{other['band']['hi95']:.2e})"
-            cells += [text, f"{other['simulated'] / row['measured']:.3f}"]
-        cells += [f"{row['point_estimate']:.3e}", f"{row['image_ratio']:.3e}"]
-        table.append(cells)
-    note = (
-        f"<p>{traces[0]['rays']} rays per configuration ({traces[0]['estimator']} estimator). "
-        "Simulated = power scattered through the detector aperture over the incident power, "
-        "the quantity Eq. (6) converts; image ratio = scattered over reference image summed "
-        "over the signal square, as the paper's Eq. (2) processes the CCD images.</p>"
-    )
-    return note + _html.table(header, table)
-
-
-def _indices_of(grid: list[float], angles: tuple[float, ...]) -> list[int]:
-    """Positions in a band's θi grid of those ``angles`` it holds."""
-    return [list(grid).index(angle) for angle in angles if angle in grid]
-
-
-def _tis_fold(bands: dict) -> bool:
-    """Eq. (10) in the run's TIS band: its ``"fold"`` (the scene's switch); a run written
-    before that key had its TIS folded always."""
-    return bands.get("fold", True)
-
-
-def _fold_note(bands: dict) -> str:
-    """One line under the result: whether its TIS includes Eq. (10), and how to change it."""
-    fold = _tis_fold(bands)
-    change = (
-        "leave out [model] fold (or set it false) in the scene for the physical BRDF"
-        if fold
-        else "the article's Table 3 includes it: set [model] fold = true in the scene, or "
-        "pass --fold to tis and export"
-    )
-    return f"<p class='fold'>{_html.escape(fold_statement(fold))}; {_html.escape(change)}.</p>"
-
-
-def _tis_table(bands: dict) -> str:
-    band = bands["tis"]
-    chosen = _indices_of(band["theta_i_deg"], (0.0, 5.0, 30.0, 50.0, 70.0, 80.0))
-    rows = [
-        [
-            f"{band['theta_i_deg'][i]:g}",
-            *(f"{100 * band[k][i]:.3f}" for k in ("median", "lo68", "hi68", "lo95", "hi95")),
-        ]
-        for i in chosen
-    ]
-    return (
-        "<h3>TIS [%]</h3>"
-        + f"<p>{_html.escape(fold_statement(_tis_fold(bands)))}.</p>"
-        + _html.table(["θi [deg]", "median", "16 %", "84 %", "2.5 %", "97.5 %"], rows)
-    )
-
-
-def _comparison(run: Path, idata) -> str:
-    """LOO comparison with model variants stored under ``run/variants/NAME``."""
-    variants = {"this run": idata}
-    for folder in sorted((run / "variants").glob("*/")) if (run / "variants").is_dir() else []:
-        if (folder / POSTERIOR_FILE).is_file():
-            variants[folder.name] = az.from_netcdf(folder / POSTERIOR_FILE)
-    if len(variants) < 2:
-        return "<p>No model variants in this run to compare (variants/NAME/posterior.nc).</p>"
-    compared = az.compare(variants)
-    return "<h3>Model variants (PSIS-LOO)</h3>" + _html.table(
-        ["variant", "rank", "elpd_loo", "p_loo", "elpd_diff", "weight", "se", "dse"],
-        [
-            [
-                name,
-                int(r["rank"]),
-                f"{r['elpd_loo']:.2f}",
-                f"{r['p_loo']:.2f}",
-                f"{r['elpd_diff']:.2f}",
-                f"{r['weight']:.2f}",
-                f"{r['se']:.2f}",
-                f"{r['dse']:.2f}",
-            ]
-            for name, r in compared.iterrows()
-        ],
-    )
-
-
-EXAMPLE_FIGURES = ("brdf_bands", "tis_band", "hemisphere", "predictive", "raytrace", "instrument")
-STUDY_FIGURES = (
-    "compare",
-    "sensitivity",
-    "design",
-)  # written by the studies into the run folder itself
-
-
-def write_example(run: Path, example: Path) -> Path:
-    """A small committed example: the key PNGs of ``run`` and a README with its verdict."""
-    summary = json.loads((run / SUMMARY_FILE).read_text())
-    verdict = Verdict.from_json(summary["verdict"])
-    bands = json.loads((run / BANDS_FILE).read_text())
-    sources = [run / FIGURE_DIR / f"{name}.png" for name in EXAMPLE_FIGURES]
-    sources += [run / f"{name}.png" for name in STUDY_FIGURES]
-    names = [source.stem for source in sources if source.is_file()]
-    for source in sources:
-        if source.is_file():
-            atomic_write_bytes(example / source.name, source.read_bytes())
-    diagnostics = summary["diagnostics"]
-    band = bands.get("tis")
-    studies_file = run / "studies.json"
-    studies = json.loads(studies_file.read_text()).get("run", []) if studies_file.exists() else []
-    lines = [
-        f"# Example report: scene `{summary['scene']}` ({summary['sampler']})",
-        "",
-        "Regenerate with `./dev run --full --example reports/example` (every study the scene can",
-        "run; the full HTML report is written to `reports/lya/report.html`, which is not",
-        "committed).",
-        "",
-        "**Studies run beside the posterior:** "
-        + ("; ".join(studies) if studies else "none (the scene's one posterior)")
-        + ".",
-        "",
-        f"**Verdict:** {verdict.text} (max R-hat {diagnostics['r_hat_max']:.3f}, min "
-        f"bulk/tail ESS {diagnostics['ess_bulk_min']:.0f}/{diagnostics['ess_tail_min']:.0f}, "
-        f"{diagnostics.get('divergences', 0)} divergences).",
-        "",
-        *(
-            [
-                "| θi [deg] | TIS median [%] | 68 % [%] | 95 % [%] |",
-                "|---|---|---|---|",
-                *(
-                    f"| {band['theta_i_deg'][i]:g} | {100 * band['median'][i]:.2f} | "
-                    f"{100 * band['lo68'][i]:.2f}–{100 * band['hi68'][i]:.2f} | "
-                    f"{100 * band['lo95'][i]:.2f}–{100 * band['hi95'][i]:.2f} |"
-                    for i in _indices_of(band["theta_i_deg"], (0.0, 30.0, 50.0, 70.0, 80.0))
-                ),
-                "",
-                f"TIS: {fold_statement(_tis_fold(bands))}.",
-            ]
-            if band
-            else []
-        ),
-        "",
-        *(f"![{name}]({name}.png)" for name in names),
-        "",
-    ]
-    return atomic_write_bytes(example / "README.md", "\n".join(lines).encode())

@@ -1,9 +1,10 @@
-"""Figures and HTML of a PSIS-LOO model comparison (``compare.json``), and the folder the
-figure is written to with the result."""
+"""Figures and HTML of a PSIS-LOO model comparison (``compare.json``): the folder the figure is
+written to with the result, and the report's Model comparison section."""
 
 from __future__ import annotations
 
 import io
+import json
 import warnings
 from pathlib import Path
 from typing import Any
@@ -15,7 +16,9 @@ from matplotlib.figure import Figure
 from brdf_infer._arviz import az
 from brdf_infer._atomic import atomic_write_bytes, atomic_write_json
 from brdf_infer.compare import COMPARE_FILE, ComparisonResult
+from brdf_infer.posterior import THRESHOLDS
 from brdf_infer.report._html import escape
+from brdf_infer.report._html import figure as html_figure
 
 UNTRUSTED = "sampler diagnostics fail"
 
@@ -106,4 +109,27 @@ def write_comparison(out: Path, result: ComparisonResult) -> list[Path]:
     return [
         atomic_write_json(out / COMPARE_FILE, result.as_json()),
         atomic_write_bytes(out / "compare.png", compare_figure(result.as_json())),
+    ]
+
+
+def compare_section(run: Path) -> list[str]:
+    """The model comparison (``compare.json`` of ``brdf-infer compare --out RUN`` or ``run``)."""
+    path = run / COMPARE_FILE
+    if not path.is_file():
+        return []
+    payload = json.loads(path.read_text())
+    best = payload["models"][0]["name"]
+    return [
+        "<h2>Model comparison (PSIS-LOO)</h2>",
+        f"<p>Every family sampled by NUTS on the same rows and error model; ranked by the "
+        f"leave-one-out log predictive density (higher is better). Best: <b>{best}</b>. A "
+        f"difference is clear when Δelpd is several times its se. A family whose sampler "
+        f"diagnostics fail (R-hat > {THRESHOLDS['r_hat']}, bulk ESS < {THRESHOLDS['ess']}, "
+        f"divergences) is marked: its draws may not represent its posterior, so its rank is "
+        f"not to be trusted.</p>",
+        compare_table_html(payload),
+        html_figure(
+            compare_figure(payload),
+            "PSIS-LOO of each family (elpd_loo ± se, best on top) and its TIS(70°) band.",
+        ),
     ]

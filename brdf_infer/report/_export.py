@@ -10,7 +10,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from brdf_infer.export import EXPORTS_FILE, read_bsdf
-from brdf_infer.model import brdf_hemisphere
+from brdf_infer.model import brdf_hemisphere, fold_statement
 from brdf_infer.params import HemisphereConstants, Params
 from brdf_infer.report import _html
 
@@ -127,3 +127,23 @@ def abg_table(rows: list[dict]) -> str:
             for row in rows
         ],
     )
+
+
+def export_section(exports: list[dict], figures) -> list[str]:
+    """The Export section: where the files are, the table plot and the ABg table."""
+    if not exports:
+        return []
+    parts = ["<h2>Export</h2>"]
+    for entry in exports:
+        names = ", ".join(Path(f["path"]).name for f in entry["files"][:6])
+        more = len(entry["files"]) - 6
+        folding = f"; {fold_statement(entry['fold'])}" if "fold" in entry else ""
+        parts.append(
+            f"<p>{_html.escape(entry['format'])} in <code>{_html.escape(entry['folder'])}</code>: "
+            f"{_html.escape(names)}{f' and {more} more' if more > 0 else ''}"
+            f"{_html.escape(folding)}</p>"
+        )
+        if entry["format"] == "abg" and entry.get("rows"):
+            parts.append(abg_table(entry["rows"]))
+    parts += [_html.figure(png, caption) for name, caption, png in figures if name == "export"]
+    return parts

@@ -1,0 +1,173 @@
+"""The likelihood of the rows' ln R: the model's data (:class:`ModelData`), the mean and
+covariance D + W Wᵀ of one draw (:class:`LikelihoodParts`), the ``obs`` site under them
+(:func:`observe`, :class:`LowRankNormal`) and the error model's noise scales, sampled or drawn
+(:mod:`brdf_infer.error_model`)."""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpyro
+import numpyro.distributions as dist
+
+from brdf_infer.error_model import ErrorSettings, NoiseLayout, NoiseScales, noise_layout
+from brdf_infer.measurements import Measurements
+from brdf_infer.observations import Observations, build_observation_model
+from brdf_infer.posterior._lowrank import low_rank_normal_log_density
+from brdf_infer.scene import Scene
+
+
+class ModelData(NamedTuple):
+    """Everything data-dependent the model needs (a pytree: an argument of compiled code).
+
+    Attributes:
+        rows: geometry and measured ln R of each row.
+        noise: the rows' noise structure.
+        mask: (rows,) 1 for a measured row, 0 for a padding row (a batch of scenes of unequal
+            size pads them to one shape); padding rows leave the likelihood and the
+            whitening regression exactly.
+    """
+
+    rows: Observations
+    noise: NoiseLayout
+    mask: jnp.ndarray
+
+
+class LikelihoodParts(NamedTuple):
+    """Mean, low-rank factor W and diagonal D of the rows' ln R (Cov = D + W Wᵀ)."""
+
+    mean: jnp.ndarray
+    factor: jnp.ndarray
+    diagonal: jnp.ndarray
+
+
+def observe(
+    parts: LikelihoodParts, data: ModelData, mode: str, sigma_scale: float, *, spread: bool
+) -> None:
+    """The ``obs`` site: the rows' ln R under mean and covariance ``parts`` (observed in
+    ``fit`` mode, drawn otherwise); σ scaled by ``sigma_scale`` except when simulating.
+    Padding rows (``data.mask`` 0) add nothing to the log density."""
+    observed = data.rows.log_reflectance if mode == "fit" else None
+    if mode != "simulate" and sigma_scale != 1.0:
+        parts = LikelihoodParts(
+            parts.mean, parts.factor * sigma_scale, parts.diagonal * sigma_scale**2
+        )
+    measured = data.mask > 0
+    if spread:
+        rows = numpyro.plate("rows", data.rows.log_reflectance.shape[0])
+        with rows, numpyro.handlers.mask(mask=measured):
+            numpyro.sample("obs", dist.Normal(parts.mean, parts.diagonal**0.5), obs=observed)
+    else:
+        factor, diagonal = mask_rows(measured, parts.factor, parts.diagonal)
+        mean = jnp.where(measured, parts.mean, data.rows.log_reflectance)
+        numpyro.sample(
+            "obs",
+            LowRankNormal(mean, factor, diagonal, measured, disjoint_columns(data)),
+            obs=observed,
+        )
+
+
+def disjoint_columns(data: ModelData) -> int:
+    """The leading columns of the rows' covariance factor W whose rows do not overlap: one per
+    physical sample (each row belongs to one sample), so the capacitance's leading block is
+    diagonal (:class:`brdf_infer.posterior._lowrank.BlockCholesky`)."""
+    return data.noise.sample_members.shape[-1]
+
+
+def mask_rows(keep: jnp.ndarray, factor: jnp.ndarray, diagonal: jnp.ndarray):
+    """(W, D) with the rows outside ``keep`` made independent unit-variance rows (W row 0,
+    D = 1): with a zero residual there they add nothing but the 2π constant."""
+    return jnp.where(keep[:, None], factor, 0.0), jnp.where(keep, diagonal, 1.0)
+
+
+class LowRankNormal(dist.Distribution):
+    """N(mean, D + W Wᵀ) over the rows, its log density in fused XLA ops (:mod:`._lowrank`).
+
+    Rows outside ``keep`` (masked: W row 0, D = 1, mean = the observed value) are left out of
+    the 2π normalisation, so they leave the log density exactly.
+    """
+
+    arg_constraints = {}  # noqa: RUF012 (NumPyro's class attribute)
+    support = dist.constraints.real_vector
+
+    def __init__(self, mean, factor, diagonal, keep=None, disjoint: int = 0):
+        self.loc, self.factor, self.diagonal = mean, factor, diagonal
+        self.disjoint = disjoint
+        self.keep = jnp.ones(mean.shape[-1], bool) if keep is None else keep
+        super().__init__(batch_shape=(), event_shape=mean.shape[-1:])
+
+    def sample(self, key, sample_shape=()):
+        rank_key, row_key = jax.random.split(key)
+        shared = jax.random.normal(rank_key, (*sample_shape, self.factor.shape[-1]))
+        own = jax.random.normal(row_key, (*sample_shape, self.loc.shape[-1]))
+        return self.loc + shared @ self.factor.T + own * jnp.sqrt(self.diagonal)
+
+    @property
+    def mean(self):
+        return self.loc
+
+    @property
+    def variance(self):
+        return self.diagonal + jnp.sum(self.factor**2, axis=-1)
+
+    def log_prob(self, value):
+        count = jnp.sum(self.keep)
+        return low_rank_normal_log_density(
+            value, self.loc, self.factor, self.diagonal, count, self.disjoint
+        )
+
+
+def sample_noise_scales(errors: ErrorSettings, noise: NoiseLayout) -> NoiseScales:
+    """The noise scales of the error model: NumPyro sites where they are learned; the
+    calibration's from the data (``noise``)."""
+    generative = errors.model == "generative"
+    if generative and errors.hierarchical:
+        sample_sd = numpyro.sample("sample_sd", dist.HalfNormal(errors.sample_sd_prior))
+    else:
+        sample_sd = jnp.zeros(())
+    if generative and errors.learns_repeatability:
+        repeatability = numpyro.sample(
+            "repeatability", dist.HalfNormal(errors.repeatability_sd_prior)
+        )
+    else:
+        repeatability = jnp.asarray(0.0 if not generative else float(errors.repeatability))
+    angles = errors.angles_on
+    return NoiseScales(
+        sample_sd=sample_sd,
+        repeatability=repeatability,
+        calibration=jnp.asarray(noise.calibration_sd),
+        rotation_deg=jnp.asarray(errors.rotation_deg if angles else 0.0),
+        camera_deg=jnp.asarray(errors.camera_deg if angles else 0.0),
+    )
+
+
+def drawn_noise_scales(
+    errors: ErrorSettings, noise: NoiseLayout, sites: dict, count: int
+) -> NoiseScales:
+    """The noise scales of ``count`` posterior draws (learned ones from ``sites``, the
+    calibration's from the data, ``noise``)."""
+    generative = errors.model == "generative"
+    angles = errors.angles_on
+    return NoiseScales(
+        sample_sd=jnp.asarray(sites.get("sample_sd", jnp.zeros(count))),
+        repeatability=jnp.asarray(
+            sites["repeatability"]
+            if "repeatability" in sites
+            else jnp.full(count, float(errors.repeatability) if generative else 0.0)
+        ),
+        calibration=jnp.full(count, noise.calibration_sd),
+        rotation_deg=jnp.full(count, errors.rotation_deg if angles else 0.0),
+        camera_deg=jnp.full(count, errors.camera_deg if angles else 0.0),
+    )
+
+
+def build_model_data(scene: Scene, measurements: Measurements) -> ModelData:
+    """The :class:`ModelData` of ``measurements`` under ``scene``."""
+    rows = build_observation_model(scene, measurements).data
+    return ModelData(
+        rows=rows,
+        noise=noise_layout(scene.errors, measurements),
+        mask=jnp.ones(len(measurements)),
+    )

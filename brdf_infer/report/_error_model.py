@@ -1,0 +1,144 @@
+"""The report's Error model section: the run's noise sources with their sizes, the LOO-PIT of
+this run and of its spread variant, PSIS-LOO and the comparison with the run's model variants."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from brdf_infer._arviz import az
+from brdf_infer.posterior import POSTERIOR_FILE, SUMMARY_FILE
+from brdf_infer.report import _html
+from brdf_infer.verdict import PARETO_K_LIMIT
+
+SPREAD_VARIANT = "spread"
+
+
+def loo_pits(run: Path, summary: dict) -> dict[str, tuple[list, float]]:
+    """Error model name → (LOO-PIT values, KS p) of this run and of its spread variant."""
+    pits = {}
+    if "predictive" in summary:
+        name = summary.get("error_model", {}).get("model", "this run")
+        pits[f"{name} (this run)"] = (
+            summary["predictive"]["loo_pit"],
+            summary["predictive"]["loo_pit_ks_p"],
+        )
+    variant = run / "variants" / SPREAD_VARIANT / SUMMARY_FILE
+    if variant.is_file():
+        other = json.loads(variant.read_text())
+        pits["spread (earlier model)"] = (
+            other["predictive"]["loo_pit"],
+            other["predictive"]["loo_pit_ks_p"],
+        )
+    return pits
+
+
+def error_model_table(summary: dict) -> str:
+    """The noise sources of the run's error model with their sizes."""
+    errors = summary.get("error_model")
+    if not errors:
+        return ""
+    if errors["model"] == "spread":
+        return (
+            "<p>The earlier spread model: independent rows with σ² = "
+            f"{errors['reflectance_rel']:g}² + s(θi)², s the inter-sample spread of ln R.</p>"
+        )
+    noise = summary.get("noise", {})
+
+    def learned(name: str) -> str:
+        if name not in noise:
+            return "off"
+        value = noise[name]
+        return f"{value['median']:.3f} (95 %: {value['lo95']:.3f}–{value['hi95']:.3f}), learned"
+
+    repeatability = (
+        learned("repeatability")
+        if errors["repeatability"] == "learned"
+        else f"{errors['repeatability']:g}, fixed"
+    )
+    calibration = errors.get("calibration", "none")
+    calibration = (
+        f"{errors['calibration_rel']:g} {calibration.replace('_', ' ')}, fixed"
+        if calibration != "none"
+        else "off"
+    )
+    angles = errors["propagate_angles"]
+    images = errors["images_per_row"]
+    if isinstance(images, dict):
+        images = ", ".join(f"{n} ({name})" for name, n in images.items()) + ", else 1"
+    coupling = {"camera_follows": "θs + ε", "camera_fixed": "θs − ε"}.get(
+        errors.get("rotation_coupling", ""), ""
+    )
+    rows = [
+        [
+            "value noise e_i",
+            f"σ of each row ÷ √n, n = {images} images (row's reflectance_err, else "
+            f"reflectance_rel {errors['reflectance_rel']:g})",
+        ],
+        ["repeatability ν_i (per row)", repeatability],
+        [
+            "sample-to-sample u_j (per sample)",
+            learned("sample_sd") if errors["hierarchical"] else "off",
+        ],
+        ["calibration κ (per reference measurement)", calibration],
+        [
+            "sample rotation ε (per series, sample, θi)",
+            f"{errors['rotation_deg']:g}° through ln R ({errors['angle_method']}): θi + ε, "
+            f"{coupling} ({errors.get('rotation_coupling', '')})"
+            if angles
+            else "off",
+        ],
+        [
+            "camera position η (per row)",
+            f"{errors['camera_deg']:g}° through ln R ({errors['angle_method']})"
+            if angles
+            else "off",
+        ],
+    ]
+    return "<p>Every noise source enters once (sizes in ln R):</p>" + _html.table(
+        ["source", "size"], rows
+    )
+
+
+def variants_comparison(run: Path, idata) -> str:
+    """LOO comparison with model variants stored under ``run/variants/NAME``."""
+    variants = {"this run": idata}
+    for folder in sorted((run / "variants").glob("*/")) if (run / "variants").is_dir() else []:
+        if (folder / POSTERIOR_FILE).is_file():
+            variants[folder.name] = az.from_netcdf(folder / POSTERIOR_FILE)
+    if len(variants) < 2:
+        return "<p>No model variants in this run to compare (variants/NAME/posterior.nc).</p>"
+    compared = az.compare(variants)
+    return "<h3>Model variants (PSIS-LOO)</h3>" + _html.table(
+        ["variant", "rank", "elpd_loo", "p_loo", "elpd_diff", "weight", "se", "dse"],
+        [
+            [
+                name,
+                int(r["rank"]),
+                f"{r['elpd_loo']:.2f}",
+                f"{r['p_loo']:.2f}",
+                f"{r['elpd_diff']:.2f}",
+                f"{r['weight']:.2f}",
+                f"{r['se']:.2f}",
+                f"{r['dse']:.2f}",
+            ]
+            for name, r in compared.iterrows()
+        ],
+    )
+
+
+def loo_table(loo) -> str:
+    """PSIS-LOO of the run: elpd_loo ± se, p_loo and the points with a high Pareto k."""
+    return _html.table(
+        ["PSIS-LOO", "value"],
+        [
+            ["elpd_loo", f"{loo.elpd_loo:.2f} ± {loo.se:.2f}"],
+            ["p_loo", f"{loo.p_loo:.2f}"],
+            [
+                f"points with k > {PARETO_K_LIMIT}",
+                int(np.sum(np.asarray(loo.pareto_k) > PARETO_K_LIMIT)),
+            ],
+        ],
+    )

@@ -1,0 +1,82 @@
+"""The report's answer: TIS and π·BRDF0 with their 95 % intervals, the TIS table, and whether
+the TIS includes the Eq. (10) folding."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from brdf_infer.model import REFERENCE_FAMILY, fold_statement
+from brdf_infer.report import _html
+
+
+def result_box(summary: dict, bands: dict, angles, model: str = REFERENCE_FAMILY) -> str:
+    """The answer first: TIS at ``angles`` (the scene's incidence angles and the article's 70°)
+    and π·BRDF0 (``strumik2024``), 95 % intervals."""
+    rows = []
+    if "tis" in bands:
+        grid = np.asarray(bands["tis"]["theta_i_deg"])
+        for angle in angles:
+            values = [np.interp(angle, grid, bands["tis"][k]) for k in ("median", "lo95", "hi95")]
+            rows.append(
+                [
+                    f"TIS(θi = {angle:g}°)",
+                    f"{100 * values[0]:.2f} %",
+                    f"{100 * values[1]:.2f} – {100 * values[2]:.2f} %",
+                ]
+            )
+    brdf0 = summary.get("pi_brdf0")
+    if brdf0 is not None:
+        rows.append(
+            [
+                "π·BRDF0 (near-normal TIS, Sec. 7)",
+                f"{100 * brdf0['median']:.2f} %",
+                f"{100 * brdf0['lo95']:.2f} – {100 * brdf0['hi95']:.2f} %",
+            ]
+        )
+    return (
+        '<div class="result"><h2>Result'
+        + ("" if model == REFERENCE_FAMILY else f" ({_html.escape(model)})")
+        + "</h2>"
+        + _html.table(["quantity", "posterior median", "95 % credible interval"], rows)
+        + "</div>"
+    )
+
+
+def indices_of(grid: list[float], angles: tuple[float, ...]) -> list[int]:
+    """Positions in a band's θi grid of those ``angles`` it holds."""
+    return [list(grid).index(angle) for angle in angles if angle in grid]
+
+
+def tis_fold(bands: dict) -> bool:
+    """Eq. (10) in the run's TIS band: its ``"fold"`` (the scene's switch); a run written
+    before that key had its TIS folded always."""
+    return bands.get("fold", True)
+
+
+def fold_note(bands: dict) -> str:
+    """One line under the result: whether its TIS includes Eq. (10), and how to change it."""
+    fold = tis_fold(bands)
+    change = (
+        "leave out [model] fold (or set it false) in the scene for the physical BRDF"
+        if fold
+        else "the article's Table 3 includes it: set [model] fold = true in the scene, or "
+        "pass --fold to tis and export"
+    )
+    return f"<p class='fold'>{_html.escape(fold_statement(fold))}; {_html.escape(change)}.</p>"
+
+
+def tis_table(bands: dict) -> str:
+    band = bands["tis"]
+    chosen = indices_of(band["theta_i_deg"], (0.0, 5.0, 30.0, 50.0, 70.0, 80.0))
+    rows = [
+        [
+            f"{band['theta_i_deg'][i]:g}",
+            *(f"{100 * band[k][i]:.3f}" for k in ("median", "lo68", "hi68", "lo95", "hi95")),
+        ]
+        for i in chosen
+    ]
+    return (
+        "<h3>TIS [%]</h3>"
+        + f"<p>{_html.escape(fold_statement(tis_fold(bands)))}.</p>"
+        + _html.table(["θi [deg]", "median", "16 %", "84 %", "2.5 %", "97.5 %"], rows)
+    )

@@ -1,0 +1,135 @@
+"""The report's section on the run itself: its settings, its priors (on the sampler's
+coordinates), its data rows and the ArviZ summary of its parameters."""
+
+from __future__ import annotations
+
+import json
+
+from brdf_infer._arviz import az
+from brdf_infer.model import REFERENCE_FAMILY, fold_statement
+from brdf_infer.posterior import run_fold
+from brdf_infer.report import _html
+from brdf_infer.report._instruments import MEANINGS
+
+PRIOR_COORDINATES = {
+    "brdf0": "ln BRDF0 [ln sr⁻¹]",
+    "a1": "b1 = a1·90² [-]",
+    "a2": "b2 = a2·90^(1+α) [-]",
+    "a3": "b3 = a3·90^(2+α) [-]",
+    "alpha": "α [-]",
+    "theta_s0": "θs0 [deg]",
+}
+
+
+def priors_table(scene) -> str:
+    rows = [
+        [name, PRIOR_COORDINATES[name], prior_text(prior)] for name, prior in scene.priors.items()
+    ]
+    return _html.table(["parameter", "prior on the coordinate", "prior"], rows)
+
+
+def units(member) -> str:
+    return ", ".join(f"{name} [{member.units[name]}]" for name in member.parameters)
+
+
+def prior_text(prior) -> str:
+    if prior.fixed:
+        return f"fixed at {prior.value:g}"
+    if prior.kind == "normal":
+        return f"N({prior.loc:g}, {prior.scale:g})"
+    if prior.kind == "uniform":
+        return f"U[{prior.lower:g}, {prior.upper:g}]"
+    bounds = (
+        f"{'-inf' if prior.lower is None else f'{prior.lower:g}'}, "
+        f"{'inf' if prior.upper is None else f'{prior.upper:g}'}"
+    )
+    return f"N({prior.loc:g}, {prior.scale:g}) on [{bounds}]"
+
+
+def family_priors_table(member) -> str:
+    return _html.table(
+        ["coordinate", "meaning", "prior"],
+        [[c.site, c.description, prior_text(c.prior)] for c in member.coordinates],
+    )
+
+
+def run_table(scene, rows, idata, summary: dict, member) -> str:
+    """The run's settings: scene, model, instrument, measurements, sampler, seed, options, the
+    Eq. (10) folding, versions and wall time [s]."""
+    attrs = idata.posterior.attrs
+    reference_model = member.name == REFERENCE_FAMILY
+    return _html.table(
+        ["item", "value"],
+        [
+            ["scene", f"{scene.name}: {scene.description}"],
+            ["scene file", attrs["scene_file"]],
+            ["model", member.name + ("" if reference_model else f" ({units(member)})")],
+            [
+                "instrument",
+                f"{attrs.get('instrument', 'point')}: "
+                + MEANINGS.get(attrs.get("instrument", "point"), ""),
+            ],
+            ["measurements", f"{scene.measurements_path} ({len(rows)} rows)"],
+            ["sampler", f"{attrs['sampler']} {attrs['settings']}"],
+            ["seed", attrs["seed"]],
+            ["options", json.dumps(summary.get("options", {}))],
+            [
+                "Eq. (10) folding (the scene's [model] fold)",
+                fold_statement(reference_model and run_fold(idata.posterior)),
+            ],
+            ["versions", attrs["versions"]],
+            [
+                "wall time",
+                f"{summary['seconds']['total']:.1f} s "
+                f"(sampling {summary['seconds']['sampling']:.1f} s)",
+            ],
+            ["created", attrs.get("created", "")],
+        ],
+    )
+
+
+def data_table(rows) -> str:
+    """The measured rows: series, sample, θi and θs [deg], raw reflectance R and its σ [-]."""
+    return _html.table(
+        ["series", "sample", "θi [deg]", "θs [deg]", "R [-]", "σ_R [-]"],
+        [
+            [s, m, f"{i:g}", f"{t:g}", f"{r:.3e}", "–" if e is None else f"{e:.2e}"]
+            for s, m, i, t, r, e in zip(
+                rows.series,
+                rows.sample,
+                rows.theta_i_deg,
+                rows.theta_s_deg,
+                rows.reflectance,
+                [None] * len(rows) if rows.reflectance_err is None else rows.reflectance_err,
+                strict=True,
+            )
+        ],
+    )
+
+
+def summary_table(idata, summary: dict, member) -> str:
+    """ArviZ's summary of the family's free parameters in physical units."""
+    table = az.summary(
+        idata,
+        var_names=[
+            n for n in member.parameters if n not in summary["diagnostics"].get("fixed", [])
+        ],
+        round_to="none",
+    )
+    return _html.table(
+        ["parameter", *table.columns],
+        [[name, *(f"{v:.4g}" for v in table.loc[name])] for name in table.index],
+    )
+
+
+def run_section(scene, rows, idata, summary: dict, member) -> list[str]:
+    """The run: its settings, its priors and its data."""
+    return [
+        "<h2>The run</h2>",
+        run_table(scene, rows, idata, summary, member),
+        "<h3>Priors</h3>",
+        "<p>Each prior is on the coordinate named (the sampler's well-conditioned one).</p>",
+        priors_table(scene) if member.name == REFERENCE_FAMILY else family_priors_table(member),
+        "<h3>Data</h3>",
+        data_table(rows),
+    ]
