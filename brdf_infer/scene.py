@@ -120,6 +120,7 @@ from brdf_infer.errors import BadInputError
 from brdf_infer.measurements import QUANTITIES, Measurements, load_measurements
 from brdf_infer.params import PAPER_CONSTANTS, PARAM_NAMES, PARAMETER_SETS, HemisphereConstants
 from brdf_infer.priors import DEFAULT_PRIORS, Prior, parse_prior
+from brdf_infer.settings import DesignOptions
 
 BUILTIN_SCENES: tuple[str, ...] = ("lya", "lya-fixed", "vis-532")
 MAX_DEFAULT_BAND_ANGLES = 6
@@ -304,7 +305,7 @@ class DesignSettings:
     step_deg: float = 5.0
     source_clearance_deg: float = 10.0
     series: str | None = None
-    budget: int = 3
+    budget: int = DesignOptions.budget
 
 
 @dataclass(frozen=True)
@@ -482,15 +483,10 @@ def _boolean(table: dict, key: str, path: Path, prefix: str, default: bool) -> b
 
 def _model_family(model: dict, path: Path) -> str:
     """``[model] family``, one of the model families (default ``strumik2024``)."""
-    from brdf_infer.model import FAMILY_NAMES
+    from brdf_infer.model import check_family_name
 
     name = model.get("family", "strumik2024")
-    if name not in FAMILY_NAMES:
-        raise BadInputError(
-            f"unknown model family {name!r} (known: {', '.join(FAMILY_NAMES)})",
-            file=path,
-            field="model.family",
-        )
+    check_family_name(name, file=path, field="model.family")
     return name
 
 

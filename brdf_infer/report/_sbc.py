@@ -12,11 +12,11 @@ from brdf_infer.report import _html
 from brdf_infer.sbc import (
     COVERAGE_LEVELS,
     HISTOGRAM_BINS,
-    PLANTED_FAULTS,
     SbcResult,
     ecdf_band,
     uniform_rank_band,
 )
+from brdf_infer.settings import PLANTED_FAULTS
 from brdf_infer.verdict import ALL_PASS, Verdict
 
 LABELS = {
