@@ -61,13 +61,25 @@ from brdf_infer._atomic import atomic_write_json
 from brdf_infer._outlock import note_written, require_complete, writing
 from brdf_infer.errors import BadInputError
 from brdf_infer.plausibility import measurement_checks, require_plausible
-from brdf_infer.posterior import NutsProgram, build_model, chain_keys, model_name
-from brdf_infer.posterior._nuts import Cancelled, stack_data
-from brdf_infer.posterior._padding import pad_datasets, paddable, padded_signature, row_count
-from brdf_infer.posterior._potential import FlatPotential
-from brdf_infer.posterior._results import BANDS_FILE, POSTERIOR_FILE, SUMMARY_FILE
-from brdf_infer.posterior._run import complete_run, run_fingerprint
-from brdf_infer.posterior._samplers import nuts_draws
+from brdf_infer.posterior import (
+    BANDS_FILE,
+    POSTERIOR_FILE,
+    SUMMARY_FILE,
+    Cancelled,
+    FlatPotential,
+    NutsProgram,
+    build_model,
+    chain_keys,
+    complete_run,
+    model_name,
+    nuts_draws,
+    pad_datasets,
+    paddable,
+    padded_signature,
+    row_count,
+    run_fingerprint,
+    stack_data,
+)
 from brdf_infer.scene import Scene, load_scene
 from brdf_infer.settings import BatchSettings
 

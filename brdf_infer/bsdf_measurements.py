@@ -2,7 +2,7 @@
 sphere's BRDF table, read as BRDF rows of one series ``bsdf`` and one sample ``bsdf``.
 
 Each table value at (AOI, azimuth, radial) of the file's specular frame becomes a row at the
-model's (θi, θ, φ) (:func:`brdf_infer.export.specular_frame_to_model`); directions below the
+model's (θi, θ, φ) (:func:`brdf_infer.bsdf_file.specular_frame_to_model`); directions below the
 horizon and zero values are left out. Rows in the plane of incidence (φ = 180° or 0° to 1e-9°)
 get a signed θs like CSV rows; the others keep their azimuth. A direction the table lists more
 than once (radial 0, the specular ray, in every azimuth row; a negative radial that mirrors
@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from brdf_infer.bsdf_file import read_bsdf, specular_frame_to_model
 from brdf_infer.errors import BadInputError
 from brdf_infer.measurements import Measurements
 
@@ -39,8 +40,6 @@ def measurements_from_bsdf(
         BadInputError: the file is malformed (the reader's message: file and line), holds a
             BTDF, or no positive value above the horizon.
     """
-    from brdf_infer.export import read_bsdf, specular_frame_to_model
-
     path = Path(path)
     table = read_bsdf(path)
     if table.scatter_type != "BRDF":

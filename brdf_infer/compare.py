@@ -26,7 +26,6 @@ from __future__ import annotations
 import time
 import warnings
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import jax
@@ -286,15 +285,3 @@ def compare_families(
     }
     table, notes = rank_families(fits)
     return ComparisonResult(fits, table, notes, time.perf_counter() - started)
-
-
-def write_comparison(out: Path, result: ComparisonResult) -> list[Path]:
-    """compare.json and ArviZ's compare plot (compare.png) into ``out``, atomically."""
-    from brdf_infer._atomic import atomic_write_bytes, atomic_write_json
-    from brdf_infer.report import compare_figure
-
-    out.mkdir(parents=True, exist_ok=True)
-    return [
-        atomic_write_json(out / COMPARE_FILE, result.as_json()),
-        atomic_write_bytes(out / "compare.png", compare_figure(result.as_json())),
-    ]

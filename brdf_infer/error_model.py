@@ -1,7 +1,7 @@
 """The error model: how a measured ln R scatters about the model's prediction.
 
 ``generative`` (the default) is a generative model in which every source of noise enters
-once (README, "Error model"). For a row i of physical sample j, series c, measured at a
+once (docs/error-model.md). For a row i of physical sample j, series c, measured at a
 sample-rotation setting k,
 
     ln R_i = ln R_pred(θi + ε_k, θs + s ε_k + η_i) + u_j + κ_g + e_i + ν_i,
@@ -93,7 +93,7 @@ DATA_OPTIONS = (
 class ErrorSettings:
     """The scene's ``[errors]`` table (see the module docstring for the model).
 
-    The defaults are argued from the article in the README ("Error model"): the 6.5 % of
+    The defaults are argued from the article in docs/error-model.md: the 6.5 % of
     Sec. 5.3 as a calibration per series, the camera following the specular beam (Sec. 2),
     one image per row where the number averaged is not stated.
 

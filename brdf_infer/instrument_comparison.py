@@ -1,4 +1,4 @@
-"""The bundled data under each instrument model, side by side (README, "Instrument models").
+"""The bundled data under each instrument model, side by side (docs/instruments.md).
 
 For every instrument model the scene's geometry supports (``point``, Eq. 6 as in the article;
 ``aperture``; ``image``), one NUTS posterior on the same rows and error model: BRDF0, α,

@@ -123,7 +123,7 @@ class LsqResult:
     warnings: list[str] = field(default_factory=list)
 
 
-def _bounds(scene: Scene, name: str) -> tuple[float, float] | None:
+def internal_bounds(scene: Scene, name: str) -> tuple[float, float] | None:
     """Internal-coordinate bounds of a bounded parameter (α, θs0), else None."""
     if name not in DEFAULT_BOUNDS:
         return None
@@ -136,7 +136,7 @@ def _bounds(scene: Scene, name: str) -> tuple[float, float] | None:
     return lower / scale, upper / scale
 
 
-class _Transform(NamedTuple):
+class FreeTransform(NamedTuple):
     """Free unconstrained vector u ↔ full internal vector z (fixed entries filled in).
 
     A pytree of arrays, so that one compiled solver serves every dataset of the same shape.
@@ -160,12 +160,14 @@ class _Transform(NamedTuple):
         return np.where(np.asarray(self.bounded), np.log(fraction) - np.log1p(-fraction), z_free)
 
 
-def _transform(scene: Scene) -> _Transform:
+def free_transform(scene: Scene) -> FreeTransform:
+    """The scene's map between the solver's free vector and the internal vector z: its fixed
+    parameters filled in, α and θs0 squashed into their bounds (:func:`internal_bounds`)."""
     fixed_params = Params(
         *(scene.priors[name].value if scene.priors[name].fixed else 1.0 for name in PARAM_NAMES)
     )
-    bounds = [_bounds(scene, name) for name in scene.free_parameters]
-    return _Transform(
+    bounds = [internal_bounds(scene, name) for name in scene.free_parameters]
+    return FreeTransform(
         base=to_internal(fixed_params),
         lower=jnp.array([b[0] if b else 0.0 for b in bounds]),
         upper=jnp.array([b[1] if b else 1.0 for b in bounds]),
@@ -173,7 +175,8 @@ def _transform(scene: Scene) -> _Transform:
     )
 
 
-def _free_index(scene: Scene) -> tuple[int, ...]:
+def free_indices(scene: Scene) -> tuple[int, ...]:
+    """Positions of the scene's free parameters in the internal vector z."""
     return tuple(PARAM_NAMES.index(name) for name in scene.free_parameters)
 
 
@@ -201,7 +204,9 @@ def _batched_solver(solver: str, rtol: float, atol: float, max_steps: int, free_
     return jax.jit(jax.vmap(solve_one, in_axes=(0, None, None, None)))
 
 
-def _start_points(scene: Scene, transform: _Transform, starts: int, seed: int, init) -> np.ndarray:
+def start_points(
+    scene: Scene, transform: FreeTransform, starts: int, seed: int, init
+) -> np.ndarray:
     """Starting internal free vectors drawn uniformly from the priors' start ranges."""
     rng = np.random.default_rng(seed)
     columns = []
@@ -217,7 +222,7 @@ def _start_points(scene: Scene, transform: _Transform, starts: int, seed: int, i
         columns.append(rng.uniform(low, high, starts))
     points = np.stack(columns, 1)
     if init is not None:
-        points[0] = np.asarray(to_internal(init))[list(_free_index(scene))]
+        points[0] = np.asarray(to_internal(init))[list(free_indices(scene))]
     return points
 
 
@@ -265,9 +270,9 @@ def fit_lsq(
             "(fix some in the scene's [priors])",
             file=measurements.path,
         )
-    transform = _transform(scene)
-    free_index = _free_index(scene)
-    z0 = _start_points(scene, transform, starts, seed, init)
+    transform = free_transform(scene)
+    free_index = free_indices(scene)
+    z0 = start_points(scene, transform, starts, seed, init)
     u0 = jnp.asarray(np.stack([transform.from_free(z) for z in z0]))
     solve = _batched_solver(solver, rtol, atol, max_steps, free_index, model.fold)
     reweight = _Reweighting(scene, model, len(free))

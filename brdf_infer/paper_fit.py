@@ -3,8 +3,9 @@ search over (α, θs0).
 
 For fixed α and θs0, Eq. (7) is linear in (ln BRDF0, a1, a2, a3) on the basis
 [1, θi x, θi x^α, θi² x^α], x = θs − θs0 (x^α := 0 below θs0). Measured BRDFs come from raw
-reflectance through Eq. (6). Which rows enter changes the answer; :data:`SELECTIONS` names the
-choices, and ``paper`` is the one that reproduces Sec. 5.3.
+reflectance through Eq. (6). Which rows enter changes the answer;
+:data:`brdf_infer.selections.SELECTIONS` names the choices, and ``paper`` is the one that
+reproduces Sec. 5.3.
 """
 
 from __future__ import annotations
@@ -18,38 +19,7 @@ from brdf_infer.measurements import Measurements
 from brdf_infer.model import log_brdf_inplane
 from brdf_infer.params import Params
 from brdf_infer.scene import Scene
-
-
-@dataclass(frozen=True)
-class Selection:
-    """Which measurement rows enter the regression.
-
-    Attributes:
-        average_samples: replace rows of several samples at one (series, θi, θs) by one row
-            holding their mean reflectance (Table 1's "mean reflectance" row).
-        drop_repeated_geometry: drop rows whose (θi, θs) an earlier series (in scene order)
-            already measured (Table 2's δ = 0 rows repeat Table 1's specular geometry).
-        description: what this selection means for the bundled Lyman-α data.
-    """
-
-    average_samples: bool
-    drop_repeated_geometry: bool
-    description: str
-
-
-SELECTIONS: dict[str, Selection] = {
-    "paper": Selection(
-        True,
-        True,
-        "Table 1 as per-angle sample means + Table 2 without its δ = 0 rows (19 points); "
-        "reproduces the paper's UV coefficients",
-    ),
-    "means": Selection(True, False, "Table 1 as per-angle sample means + all of Table 2 (22)"),
-    "samples": Selection(False, False, "every sample of Table 1 + all of Table 2 (42 points)"),
-    "samples-no-repeats": Selection(
-        False, True, "every sample of Table 1 + Table 2 without its δ = 0 rows (39 points)"
-    ),
-}
+from brdf_infer.selections import SELECTIONS
 
 
 @dataclass(frozen=True)

@@ -37,7 +37,6 @@ from __future__ import annotations
 import dataclasses
 import time
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import jax
@@ -202,12 +201,6 @@ def ranks_of(truth: dict[str, np.ndarray], posterior: dict[str, np.ndarray]) -> 
         for name in truth
         if not _deterministic(truth[name], posterior[name])
     }
-
-
-def uniform_rank_band(replicates: int, bins: int, level: float = 0.99) -> tuple[float, float]:
-    """Central ``level`` range of one bin's count under uniform ranks: Binomial(N, 1/bins)."""
-    low, high = stats.binom.interval(level, replicates, 1.0 / bins)
-    return float(low), float(high)
 
 
 def run_sbc(
@@ -377,39 +370,3 @@ def assess_ranks(settings: SbcSettings, ranks: dict[str, np.ndarray]) -> SbcResu
         seconds=0.0,
         compile_seconds=0.0,
     )
-
-
-def ecdf_band(
-    replicates: int, points: np.ndarray, level: float = 0.95, seed: int = 0, simulations: int = 2000
-) -> tuple[np.ndarray, np.ndarray]:
-    """Simultaneous ``level`` band for the ECDF of N uniform values at ``points``.
-
-    The simulation method of Säilynoja, Bürkner & Vehtari (2022, Stat. Comput. 32, 32): find
-    the pointwise level γ such that a fraction ``level`` of simulated uniform ECDFs stays inside
-    every pointwise Binomial(N, z) central-(1 − γ) interval, and return those intervals (as
-    fractions).
-    """
-    rng = np.random.default_rng(seed)
-    samples = rng.uniform(size=(simulations, replicates))
-    counts = np.stack([np.sum(samples <= z, axis=1) for z in points], axis=1)
-    cdf = stats.binom.cdf(counts, replicates, points)
-    below = stats.binom.cdf(counts - 1, replicates, points)
-    tail = np.minimum(cdf, 1 - below)  # two-sided tail probability of each count
-    gamma = 2 * np.quantile(np.min(tail, axis=1), 1 - level)
-    low = stats.binom.ppf(gamma / 2, replicates, points) / replicates
-    high = stats.binom.ppf(1 - gamma / 2, replicates, points) / replicates
-    return low, high
-
-
-def write_sbc(out: Path, result: SbcResult) -> list[Path]:
-    """sbc.json, the figures (PNG) and sbc.html into ``out``, atomically."""
-    from brdf_infer._atomic import atomic_write_bytes, atomic_write_json
-    from brdf_infer.report import sbc_figures, sbc_page
-
-    out.mkdir(parents=True, exist_ok=True)
-    paths = [atomic_write_json(out / SBC_FILE, result.as_json())]
-    figures = sbc_figures(result)
-    for name, png in figures.items():
-        paths.append(atomic_write_bytes(out / f"{name}.png", png))
-    paths.append(atomic_write_bytes(out / "sbc.html", sbc_page(result, figures).encode()))
-    return paths

@@ -35,7 +35,6 @@ import time
 import tomllib
 import warnings
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -403,16 +402,3 @@ def sensitivity(
             if index == 0:
                 scaling = _power_scaling(scene, model, output.sites)
     return SensitivityResult(results[0], results[1:], scaling, time.perf_counter() - started)
-
-
-def write_sensitivity(out: Path, result: SensitivityResult) -> list[Path]:
-    """sensitivity.json and its figure (TIS(70°) and Δelpd per variant) into ``out``,
-    atomically."""
-    from brdf_infer._atomic import atomic_write_bytes, atomic_write_json
-    from brdf_infer.report import sensitivity_figure
-
-    payload = result.as_json()
-    return [
-        atomic_write_json(out / SENSITIVITY_FILE, payload),
-        atomic_write_bytes(out / SENSITIVITY_FIGURE, sensitivity_figure(payload)),
-    ]

@@ -382,7 +382,8 @@ def _run(
         )
     comparison = None
     if studies.compare:
-        from brdf_infer.compare import compare_families, write_comparison
+        from brdf_infer.compare import compare_families
+        from brdf_infer.report import write_comparison
 
         progress(
             f"[{next(step)}/{steps}] model comparison by PSIS-LOO: {', '.join(studies.compare)}"
@@ -391,7 +392,8 @@ def _run(
         write_comparison(out, result)
         comparison = result.as_json()
     if sensitive:
-        from brdf_infer.sensitivity import SensitivitySettings, sensitivity, write_sensitivity
+        from brdf_infer.report import write_sensitivity
+        from brdf_infer.sensitivity import SensitivitySettings, sensitivity
 
         progress(f"[{next(step)}/{steps}] sensitivity to the error-model assumptions")
         write_sensitivity(

@@ -1,4 +1,4 @@
-"""The command line's JSON contracts (README, "Command line") and human output."""
+"""The command line's JSON contracts (docs/cli.md) and human output."""
 
 import html
 import json

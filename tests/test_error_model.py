@@ -306,7 +306,7 @@ def test_one_degree_at_80_85_gives_the_measured_quantity_sigma():
     by_theta_s = by_theta_s_brdf - np.tan(np.radians(ts)) * np.pi / 180
     assert d_i == pytest.approx(by_theta_i, rel=1e-9)
     assert d_s == pytest.approx(by_theta_s, rel=1e-9)
-    assert np.hypot(d_i, d_s) == pytest.approx(0.171, abs=5e-4)  # the figure the README quotes
+    assert np.hypot(d_i, d_s) == pytest.approx(0.171, abs=5e-4)  # docs/error-model.md quotes it
     brdf_i, brdf_s = jax.grad(lambda a, b: log_brdf_inplane(a, b, UV_PAPER), (0, 1))(80.0, 85.0)
     assert float(brdf_i) == pytest.approx(by_theta_i, rel=1e-9)
     assert float(brdf_s) == pytest.approx(by_theta_s_brdf, rel=1e-9)

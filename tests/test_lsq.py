@@ -134,7 +134,7 @@ def test_noisy_synthetic_scenes_covered_by_two_sigma(lya, truth):
     a third, 82 % coverage, passes them with probability 0.26: 20 seeds cannot see that.)
     Checked in the internal coordinates, where the linearised covariance is a fair
     description: in paper units a2 = b2·90^−(1+α), whose delta-method σ ignores that a 0.7
-    change in α rescales a2 by 23 (see README).
+    change in α rescales a2 by 23 (see docs/least-squares.md).
     """
     scene, measurements = lya
     # the data carry 6.5 % independent noise per row and nothing else: the error model says so

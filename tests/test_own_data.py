@@ -16,7 +16,7 @@ from tests.helpers import REPO, run_cli
     "geometry",
     [
         # each geometry compiles its own sampler and runs the default 4 × 1000 draws: the slow
-        # set and the benchmark (seeds 0-2 of each); the README's single-series scene is loaded
+        # set and the benchmark (seeds 0-2 of each); the documented single-series scene is loaded
         # and predicted in the suite and runs to a report in the slow set
         pytest.param("single-series", marks=pytest.mark.slow),
         pytest.param("grazing", marks=pytest.mark.slow),
@@ -40,28 +40,28 @@ def test_other_geometries_sample_cleanly_with_default_settings(tmp_path, geometr
     assert min(diagnostics["ess_bulk_min"], diagnostics["ess_tail_min"]) >= 400
 
 
-def readme_scene_example() -> str:
-    """The TOML block of the README's "Your own data" section, verbatim."""
-    text = (REPO / "README.md").read_text()
-    section = text[text.index("## Your own data") :]
+def documented_scene_example() -> str:
+    """The full scene of docs/scenes.md ("Your own data", "A scene"), verbatim."""
+    text = (REPO / "docs" / "scenes.md").read_text()
+    section = text[text.index("**A scene**") :]
     return section.split("```toml\n", 1)[1].split("```", 1)[0]
 
 
-def readme_scene_folder(tmp_path):
-    """The README's scene copied verbatim, with a CSV of the documented columns (series I of
+def documented_scene_folder(tmp_path):
+    """The documented scene copied verbatim, with a CSV of the documented columns (series I of
     the bundled data)."""
-    (tmp_path / "scene.toml").write_text(readme_scene_example())
+    (tmp_path / "scene.toml").write_text(documented_scene_example())
     bundled = (REPO / "data" / "lya_measurements.csv").read_text().splitlines()
     rows = [bundled[0]] + [line for line in bundled[1:] if line.startswith("I,")]
     (tmp_path / "my_measurements.csv").write_text("\n".join(rows) + "\n")
     return tmp_path / "scene.toml"
 
 
-def test_readme_scene_example_loads_and_predicts_its_rows(tmp_path, capsys):
-    """The README's scene is valid as printed and its model predicts every row (`predict`
+def test_documented_scene_example_loads_and_predicts_its_rows(tmp_path, capsys):
+    """The documented scene is valid as printed and its model predicts every row (`predict`
     with the article's parameters); the run to a report, which compiles a sampler and a fit of
     its own, is the slow test below."""
-    scene = readme_scene_folder(tmp_path)
+    scene = documented_scene_folder(tmp_path)
     code, stdout, err = run_cli(
         "predict", str(scene), "--params", "uv-paper", "--json", capsys=capsys
     )
@@ -72,8 +72,8 @@ def test_readme_scene_example_loads_and_predicts_its_rows(tmp_path, capsys):
 
 
 @pytest.mark.slow  # its own sampler (one series): ≈ 50 s of compiling and sampling
-def test_readme_scene_example_runs_to_a_report(tmp_path, capsys):
-    scene = readme_scene_folder(tmp_path)
+def test_documented_scene_example_runs_to_a_report(tmp_path, capsys):
+    scene = documented_scene_folder(tmp_path)
     out = tmp_path / "out"
     code, stdout, err = run_cli(
         "run",
@@ -104,7 +104,7 @@ def test_a_scene_naming_a_missing_file_fails_before_any_work(
 ):
     """The scene is refused before the job starts: the main job (workflow.run), which builds
     the model first, must not be entered, and no folder is created."""
-    text = readme_scene_example()
+    text = documented_scene_example()
     if key == "measurements":
         text = text.replace('measurements = "my_measurements.csv"', line)
     else:

@@ -6,8 +6,9 @@ import pytest
 
 from brdf_infer.errors import BadInputError
 from brdf_infer.model import reflectance_to_brdf, tis
-from brdf_infer.paper_fit import SELECTIONS, paper_fit, paper_grid_search, select_points
+from brdf_infer.paper_fit import paper_fit, paper_grid_search, select_points
 from brdf_infer.params import UV_PAPER, Params
+from brdf_infer.selections import SELECTIONS
 
 # Half a unit of the last printed digit of what the article prints (Secs. 3, 5.3).
 PRINTED_UV_HALF_UNIT = Params(0.005e-2, 0.005e-4, 0.05e-11, 0.005e-12, 0.0, 0.0)  # α, θs0 fixed
@@ -70,7 +71,7 @@ def test_paper_selection_reproduces_published_uv_coefficients(lya):
 
 def test_sigma_e_is_reported_as_reproduced_not_as_published(lya):
     """σE (Sec. 5.1: mean |ln BRDF_fitted − ln BRDF_measured| over the fitted points) of the
-    reproduced fit, against plain numpy; 6.94 % where the paper reports 6.4 % (README)."""
+    reproduced fit, against plain numpy; 6.94 % where the paper reports 6.4 % (docs/paper.md)."""
     scene, measurements = lya
     design, y = paper_regression(select_points(scene, measurements, "paper"))
     scale = np.abs(design).max(axis=0)  # the power columns reach 1e15: equilibrate first

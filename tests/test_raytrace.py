@@ -166,9 +166,9 @@ def test_uv_paper_image_ratio_follows_table_2_as_figure_14_shows(lya):
       a1 10 % lower or 20 % higher than the article's gives 0.14 and 0.12; uv-paper 0.079.
     - Level: only loosely, within a factor 1.5. The article does not describe its simulated
       reference image beyond "the same rectangle", and the level of an image ratio depends on
-      it (AD passes only part of the reference beam, README "Ray tracing"); our image ratio
-      lies ≈ 25 % above Table 2, an offset the article's figure does not show (README,
-      "Instrument models"). A loose bound is all the text supports.
+      it (AD passes only part of the reference beam, docs/raytrace.md); our image ratio
+      lies ≈ 25 % above Table 2, an offset the article's figure does not show
+      (docs/instruments.md). A loose bound is all the text supports.
     - The Eq. (6) curve of the same BRDF (``point_estimate``) scatters about Table 2 like the
       fit: rms ln below σE·√(π/2) + 3·that/√(2·18) = 0.080 + 0.040 = 0.12.
     - dPs/Pi (``simulated``) lies below the point estimate everywhere: the sample clips the

@@ -15,11 +15,11 @@ from brdf_infer.sbc import (
     QUANTITIES,
     SbcSettings,
     assess_ranks,
-    ecdf_band,
     planted_inference,
     run_sbc,
 )
 from brdf_infer.scene import load_scene
+from brdf_infer.uniformity import ecdf_band
 from tests.helpers import run_cli
 
 N, L = 200, 100

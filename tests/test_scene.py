@@ -1,4 +1,4 @@
-"""Scene loading: the minimal form of the README, defaults and the bundled scene."""
+"""Scene loading: the minimal form of docs/scenes.md, defaults and the bundled scene."""
 
 from brdf_infer.scene import load_scene
 from tests.test_bad_input import GOOD_ROWS, HEADER, SCENE, write_scene

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from brdf_infer.errors import BadInputError
-from brdf_infer.report import write_report
+from brdf_infer.report import write_report, write_sensitivity
 from brdf_infer.scene import load_scene
 from brdf_infer.sensitivity import (
     SENSITIVITY_FIGURE,
@@ -19,7 +19,6 @@ from brdf_infer.sensitivity import (
     sensitivity,
     tis_angles,
     variant,
-    write_sensitivity,
 )
 from tests.helpers import run_cli
 from tests.test_bad_input import GOOD_ROWS, HEADER, SCENE, expect_bad_input, write_scene

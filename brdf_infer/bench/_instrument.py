@@ -17,11 +17,11 @@ from brdf_infer.instrument import (
     NODE_SHAPES,
     beam_geometry,
     build_kernel,
+    clear_row_kernel_cache,
     kernel_log_reflectance,
     measurement_nodes,
     sobol_uniforms,
 )
-from brdf_infer.instrument._kernel import _row_kernel
 from brdf_infer.model import log_brdf_hemisphere
 from brdf_infer.observations import build_observation_model
 from brdf_infer.params import PARAM_NAMES, UV_PAPER, Params
@@ -154,7 +154,7 @@ def node_rows(scene: Scene, measurements, quick: bool, progress=print) -> list[N
             progress(f"  {instrument}: {nodes} nodes per row")
             checked = check_instrument(scene, instrument)
             variant = replace(checked, instrument=replace(checked.instrument, nodes=nodes))
-            _row_kernel.cache_clear()  # time the build, not a cached kernel
+            clear_row_kernel_cache()  # time the build, not a cached kernel
             started = time.perf_counter()
             kernel = build_kernel(variant, measurements)
             build_seconds = time.perf_counter() - started

@@ -612,7 +612,7 @@ def peer_rows(
     return rows, check
 
 
-def _markdown_table(headers: list[str], rows: list[list[str]]) -> str:
+def markdown_table(headers: list[str], rows: list[list[str]]) -> str:
     lines = ["| " + " | ".join(headers) + " |", "|" + "---|" * len(headers)]
     lines += ["| " + " | ".join(row) + " |" for row in rows]
     return "\n".join(lines)
@@ -621,6 +621,9 @@ def _markdown_table(headers: list[str], rows: list[list[str]]) -> str:
 def peer_section(quick: bool, progress=print, *, repeat: int = 1) -> str:
     """The report's section (Markdown, ending in a blank line): one line when the ``peers``
     extra is missing."""
+    # here, not at the top: the peers' processes load this file and must not import JAX
+    from brdf_infer.bench._tables import markdown_table
+
     heading = "## Peers: nutpie and PyMC NUTS on the same posterior\n\n"
     missing = missing_peers()
     if missing:
@@ -667,6 +670,6 @@ def peer_section(quick: bool, progress=print, *, repeat: int = 1) -> str:
         "by the cold time. PyMC NUTS with pip's default BLAS threading is not rerun here: "
         "measured earlier on this 2-core machine with the same model it took 2066 s against "
         "324 s pinned to one thread.\n\n"
-        + _markdown_table(HEADERS, [row.cells for row in rows])
+        + markdown_table(HEADERS, [row.cells for row in rows])
         + "\n"
     )

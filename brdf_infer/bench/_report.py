@@ -31,17 +31,12 @@ from brdf_infer.bench._robustness import LOADER_HEADERS, loader_rows, robustness
 from brdf_infer.bench._samplers import sampler_rows
 from brdf_infer.bench._sbc import HEADERS as SBC_HEADERS
 from brdf_infer.bench._sbc import sbc_rows
+from brdf_infer.bench._tables import markdown_table
 from brdf_infer.bench._timing import machine_description
 from brdf_infer.bench._tis import batched_throughput, tis_rows
 from brdf_infer.raytrace import CHUNK_RAYS
 from brdf_infer.report import ecdf_differences, figure_png, png
 from brdf_infer.scene import load_scene
-
-
-def _markdown_table(headers: list[str], rows: list[list[str]]) -> str:
-    lines = ["| " + " | ".join(headers) + " |", "|" + "---|" * len(headers)]
-    lines += ["| " + " | ".join(row) + " |" for row in rows]
-    return "\n".join(lines)
 
 
 def _tis_plot(rows, path: Path) -> None:
@@ -152,7 +147,7 @@ def write_report(out: Path, quick: bool, progress=print) -> Path:
         "1-D reduction at 256 nodes per panel (itself checked against 2-D adaptive quadrature of "
         "Eq. (9) to 1e-10 in `tests/test_tis.py`).",
         "",
-        _markdown_table(
+        markdown_table(
             [
                 "method",
                 "grid",
@@ -192,7 +187,7 @@ def write_report(out: Path, quick: bool, progress=print) -> Path:
         "methods run the same starts; optimistix solves them in one vmapped call, SciPy one "
         "after another.",
         "",
-        _markdown_table(
+        markdown_table(
             ["scene", "method", "final χ²", "starts at best", "time [s]", "compile [s]"],
             [
                 [
@@ -216,7 +211,7 @@ def write_report(out: Path, quick: bool, progress=print) -> Path:
         "burn-in and steps); setup is the emcee MAP search; JAX compile time (summed from "
         "JAX's compile events) is excluded from both and listed apart.",
         "",
-        _markdown_table(
+        markdown_table(
             [
                 "sampler",
                 "run",
@@ -253,7 +248,7 @@ def write_report(out: Path, quick: bool, progress=print) -> Path:
         "(nee) connects every sample hit to a point on AD). Efficiency = 1/(rel. error² × "
         "time): how much more accuracy a second buys.",
         "",
-        _markdown_table(
+        markdown_table(
             [
                 "configuration",
                 "estimator",
@@ -292,7 +287,7 @@ def write_report(out: Path, quick: bool, progress=print) -> Path:
         "specular rows only (θs = θi, 4 samples). Every scene uses the default priors and "
         "error model of its file.",
         "",
-        _markdown_table(ROBUSTNESS_HEADERS, [row.cells for row in robustness]),
+        markdown_table(ROBUSTNESS_HEADERS, [row.cells for row in robustness]),
         "",
         "## Bad input",
         "",
@@ -307,7 +302,7 @@ def write_report(out: Path, quick: bool, progress=print) -> Path:
         "or option (exit 2), with no file written; the last column counts every other outcome "
         "(`tests/test_loader_inputs.py` runs the same in its `slow` set).",
         "",
-        _markdown_table(LOADER_HEADERS, [row.cells for row in loaders]),
+        markdown_table(LOADER_HEADERS, [row.cells for row in loaders]),
         *[f"- {row.loader}: {failure}" for row in loaders for failure in row.failures],
         "",
         "## Simulation-based calibration",
@@ -328,7 +323,7 @@ def write_report(out: Path, quick: bool, progress=print) -> Path:
         "core). The `abg` rows run the same check on the ABg family (`sbc --model abg`): its "
         "three parameters, TIS(70°) and the noise scales.",
         "",
-        _markdown_table(SBC_HEADERS, [row.cells for row in calibrations]),
+        markdown_table(SBC_HEADERS, [row.cells for row in calibrations]),
         "",
         *(
             f"![SBC ECDF differences, {row.case}]({path.name})"
@@ -339,7 +334,7 @@ def write_report(out: Path, quick: bool, progress=print) -> Path:
         "",
         misspec_before,
         "",
-        _markdown_table(MISSPEC_HEADERS, [row.cells for row in misspecified]),
+        markdown_table(MISSPEC_HEADERS, [row.cells for row in misspecified]),
         "",
         misspec_after,
         "",
@@ -350,13 +345,13 @@ def write_report(out: Path, quick: bool, progress=print) -> Path:
         "that its TIS line carries, the worst over θi = 0, 5, …, 85°, per grid step; time to "
         "evaluate the tables (after compiling). Default: 5° / 1°.",
         "",
-        _markdown_table(GRID_HEADERS, [row.cells for row in grids]),
+        markdown_table(GRID_HEADERS, [row.cells for row in grids]),
         "",
         "ABg fits (`export --format abg`): A·I(B, g) recomputed with a finer quadrature than "
         "the one that set A, against the model's TIS; the range over θi of the cos θ sin θ-"
         "weighted rms ln-BSDF error; time for all angles of incidence.",
         "",
-        _markdown_table(ABG_HEADERS, [row.cells for row in abgs]),
+        markdown_table(ABG_HEADERS, [row.cells for row in abgs]),
         "",
         "## Model families",
         "",
@@ -368,7 +363,7 @@ def write_report(out: Path, quick: bool, progress=print) -> Path:
         "A, `check` to verify. "
         "`lambertian`'s TIS is exact.",
         "",
-        _markdown_table(
+        markdown_table(
             ["family", "quadrature", "max abs(rel. error)", "time [µs]"],
             [row.cells for row in quadratures],
         ),
@@ -377,7 +372,7 @@ def write_report(out: Path, quick: bool, progress=print) -> Path:
         f"{'300' if quick else '4 × 1000'} draws; PSIS-LOO on the leave-one-out conditionals):"
         f" {comparison['seconds']:.0f} s.",
         "",
-        _markdown_table(
+        markdown_table(
             ["family", "elpd_loo ± se", "Δelpd ± dse", "weight", "max Pareto k", "TIS(70°) [%]"],
             [
                 [
@@ -405,7 +400,7 @@ def write_report(out: Path, quick: bool, progress=print) -> Path:
         "scene at two threads); the 64-scene row and device-count scaling are not run here "
         "(no accelerator; see the README).",
         "",
-        _markdown_table(BATCH_HEADERS, [row.cells for row in batches]),
+        markdown_table(BATCH_HEADERS, [row.cells for row in batches]),
         "",
         "## Compilation cache",
         "",
@@ -417,7 +412,7 @@ def write_report(out: Path, quick: bool, progress=print) -> Path:
         "and the number of XLA programs compiled and loaded from the cache (from "
         "`JAX_LOG_COMPILES`).",
         "",
-        _markdown_table(CACHE_HEADERS, [row.cells for row in caches]),
+        markdown_table(CACHE_HEADERS, [row.cells for row in caches]),
         "",
         "## Instrument kernels",
         "",
@@ -429,13 +424,13 @@ def write_report(out: Path, quick: bool, progress=print) -> Path:
         "`uv-paper`; its own MC σ beside it); cost of ln R and its gradient for all rows "
         "(jitted, one call).",
         "",
-        _markdown_table(NODE_HEADERS, [row.cells for row in kernel_nodes]),
+        markdown_table(NODE_HEADERS, [row.cells for row in kernel_nodes]),
         "",
         "NUTS on the bundled data under each instrument model (same settings and seed; min "
         "bulk ESS over the six parameters per second of sampling; the issue asks for at least "
         "0.25 of `point`):",
         "",
-        _markdown_table(ESS_HEADERS, [row.cells for row in kernel_ess]),
+        markdown_table(ESS_HEADERS, [row.cells for row in kernel_ess]),
         "",
         "Synthetic experiment (`brdf_infer.instrument_bias`): the ray tracer's dPs/Pi "
         "(`aperture`) or Eq. (2) image ratio (`image`) at `uv-paper` for all 42 rows, times "
@@ -443,7 +438,7 @@ def write_report(out: Path, quick: bool, progress=print) -> Path:
         "generating kernel (NUTS 2 × (500 + 500) per data set); fraction of seeds whose 95 % "
         "interval covers the truth, and the mean posterior median over the truth.",
         "",
-        _markdown_table(BIAS_HEADERS, biases),
+        markdown_table(BIAS_HEADERS, biases),
         "",
         *design_lines,
     ]

@@ -4,10 +4,6 @@ value-and-gradient inside a compiled loop, and the steps after sampling."""
 
 from __future__ import annotations
 
-import json
-import os
-import subprocess
-import sys
 import tempfile
 import time
 from dataclasses import dataclass
@@ -17,10 +13,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from brdf_infer.bench._report import _markdown_table
-from brdf_infer.posterior import build_model
-from brdf_infer.posterior._model import build_posterior_model
-from brdf_infer.posterior._potential import FlatPotential
+from brdf_infer.bench._tables import markdown_table, timed_command
+from brdf_infer.posterior import FlatPotential, build_model, build_posterior_model
 from brdf_infer.scene import Scene
 
 PROCESS_HEADERS = [
@@ -63,20 +57,6 @@ class ProcessRow:
         ]
 
 
-def _timed_command(argv: list[str], cache: Path, out: Path) -> tuple[float, dict]:
-    """Wall time of ``brdf-infer ARGV --out OUT --json`` in a fresh process, and its JSON."""
-    environment = {**os.environ, "BRDF_INFER_CACHE": str(cache)}
-    started = time.perf_counter()
-    result = subprocess.run(
-        [sys.executable, "-m", "brdf_infer", *argv, "--out", str(out), "--json"],
-        capture_output=True,
-        text=True,
-        env=environment,
-        check=True,
-    )
-    return time.perf_counter() - started, json.loads(result.stdout)
-
-
 def process_rows(scene_name: str = "lya", progress=print) -> list[ProcessRow]:
     """``posterior`` and ``run`` of the scene, each cold (its own empty cache) then warm."""
     rows = []
@@ -87,7 +67,7 @@ def process_rows(scene_name: str = "lya", progress=print) -> list[ProcessRow]:
             for state in ("cold", "warm"):
                 progress(f"  {command} {scene_name}, {state} cache ...")
                 out = base / f"{command}-{state}"
-                wall, payload = _timed_command([command, scene_name], cache, out)
+                wall, payload = timed_command([command, scene_name], cache, out)
                 summary = payload if command == "posterior" else payload["posterior"]
                 rows.append(ProcessRow(f"{command} {scene_name}", state, wall, summary))
     return rows
@@ -169,11 +149,11 @@ def write_speed_report(out: Path, quick: bool, progress=print) -> Path:
         "(no `[studies]` in the bundled scene). ESS per wall second divides the smallest bulk "
         "ESS by the whole wall time.",
         "",
-        _markdown_table(PROCESS_HEADERS, [row.cells() for row in processes]),
+        markdown_table(PROCESS_HEADERS, [row.cells() for row in processes]),
         "",
         "## After sampling (warm `posterior`)",
         "",
-        _markdown_table(STEP_HEADERS, after_sampling_rows(processes)),
+        markdown_table(STEP_HEADERS, after_sampling_rows(processes)),
         "",
         "## The posterior's value and gradient",
         "",
@@ -182,7 +162,7 @@ def write_speed_report(out: Path, quick: bool, progress=print) -> Path:
         "excluded. The whitened model solves its linear regression at every evaluation "
         "(brdf_infer.posterior._lowrank: no LAPACK calls).",
         "",
-        _markdown_table(GRADIENT_HEADERS, gradients),
+        markdown_table(GRADIENT_HEADERS, gradients),
         "",
         peers,
     ]
@@ -223,7 +203,7 @@ def write_stress_report(out: Path, quick: bool, progress=print) -> Path:
         "(jaxlib 0.10.2's LAPACK handlers wait on the intra-op pool from a pool thread); "
         "the posterior, then sequential, did not.",
         "",
-        _markdown_table(STRESS_HEADERS, [row.cells for row in stress]),
+        markdown_table(STRESS_HEADERS, [row.cells for row in stress]),
         "",
     ]
     atomic_write_bytes(out, "\n".join(sections).encode())

@@ -66,8 +66,8 @@ def main(args: argparse.Namespace) -> int:
         COMPARE_FILE,
         check_family_names,
         compare_families,
-        write_comparison,
     )
+    from brdf_infer.report import write_comparison
 
     names = check_family_names(args.models)
     settings = CompareSettings(

@@ -76,7 +76,8 @@ def add_parser(commands) -> argparse.ArgumentParser:
 def main(args: argparse.Namespace) -> int:
     """Run SBC (every setting checked before any work), write it and print its verdict."""
     headless()
-    from brdf_infer.sbc import COVERAGE_LEVELS, check_planted_fault, run_sbc, write_sbc
+    from brdf_infer.report import write_sbc
+    from brdf_infer.sbc import COVERAGE_LEVELS, check_planted_fault, run_sbc
 
     check_family_name(args.model)
     settings = SbcSettings(

@@ -55,10 +55,11 @@ def add_parser(commands) -> argparse.ArgumentParser:
 def main(args: argparse.Namespace) -> int:
     """Run the study (every option and variant checked before sampling) and print it."""
     headless()
-    from brdf_infer.report._sensitivity import (
+    from brdf_infer.report import (
         SENSITIVITY_HEADERS,
         power_scaling_rows,
         sensitivity_rows,
+        write_sensitivity,
     )
     from brdf_infer.sensitivity import (
         SENSITIVITY_FIGURE,
@@ -67,7 +68,6 @@ def main(args: argparse.Namespace) -> int:
         default_variants,
         parse_variant,
         sensitivity,
-        write_sensitivity,
     )
 
     settings = SensitivitySettings(

@@ -131,7 +131,7 @@ def target_values(target: DesignTarget, params: Params, scene: Scene) -> np.ndar
     return np.asarray(values, float).reshape(-1, 1)
 
 
-def _candidate_measurements(candidates: Candidates, measurements: Measurements) -> Measurements:
+def candidate_measurements(candidates: Candidates, measurements: Measurements) -> Measurements:
     """The candidates as rows whose σ is the median relative σ of their series' rows."""
     rows = candidates.as_measurements(measurements)
     if measurements.reflectance_err is None:
@@ -156,7 +156,7 @@ def predictive(run: DesignRun, candidates: Candidates, draws: dict) -> RowPredic
     model = build_posterior_model(scene, measurements)
     parts = model.draw_parts(draws)
     residual = model.data.rows.log_reflectance[None, :] - parts.mean
-    new = _candidate_measurements(candidates, measurements)
+    new = candidate_measurements(candidates, measurements)
     rows = build_observation_model(scene, new).data
     layout = noise_layout(scene.errors, new)
     errors = scene.errors

@@ -1,19 +1,20 @@
 """Exports to ray tracers: Zemax tabular .BSDF files and TIS-preserving ABg fits, of one
-parameter set or of a posterior (median, 95 % bounds and single draws), and a reader of
-.BSDF files."""
+parameter set or of a posterior (median, 95 % bounds and single draws). The .BSDF format
+itself, its reader and writer and its specular frame, is :mod:`brdf_infer.bsdf_file`
+(re-exported here)."""
 
-from brdf_infer.export._abg import (
-    AbgFit,
-    abg_bsdf,
-    abg_integral,
-    abg_log_bsdf,
-    beta_distance,
-    fit_abg,
+from brdf_infer.bsdf_file import (
+    BsdfFile,
+    format_bsdf,
+    read_bsdf,
+    scattered_direction,
+    specular_frame_to_model,
+    write_bsdf,
 )
+from brdf_infer.export._abg import AbgFit, fit_abg
 from brdf_infer.export._files import (
     ABG_COLUMNS,
     EXPORTS_FILE,
-    FORMATS,
     Source,
     draw_indices,
     export_abg,
@@ -29,11 +30,8 @@ from brdf_infer.export._grid import (
     ScatterGrid,
     brdf_table,
     scatter_grid,
-    scattered_direction,
-    specular_frame_to_model,
     table_integral,
 )
-from brdf_infer.export._zemax import BsdfFile, format_bsdf, read_bsdf, write_bsdf
 
 __all__ = [
     "ABG_COLUMNS",
@@ -41,15 +39,10 @@ __all__ = [
     "DEFAULT_RADIAL_STEP_DEG",
     "DEFAULT_THETA_I_DEG",
     "EXPORTS_FILE",
-    "FORMATS",
     "AbgFit",
     "BsdfFile",
     "ScatterGrid",
     "Source",
-    "abg_bsdf",
-    "abg_integral",
-    "abg_log_bsdf",
-    "beta_distance",
     "brdf_table",
     "draw_indices",
     "export_abg",

@@ -39,16 +39,6 @@ from brdf_infer.model import (
 )
 from brdf_infer.params import HemisphereConstants, Params
 
-
-def abg_bsdf(a, b, g, theta_i_deg, theta_deg, phi_deg):
-    """ABg BSDF [sr⁻¹] at (θ, φ) of the model's frame (forward plane at φ = 180°)."""
-    return jnp.exp(
-        abg_log_bsdf(jnp.log(a), jnp.log(b), g, beta_distance(theta_i_deg, theta_deg, phi_deg))
-    )
-
-
-# ---------------------------------------------------------------------------- fit
-
 LOG_KNEE_RANGE = (np.log(1e-4), np.log(100.0))  # ρ_k = B^(1/g), where the power law bends
 G_RANGE = (0.02, 6.0)
 _GRID = np.stack(

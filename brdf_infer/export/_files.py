@@ -42,21 +42,14 @@ import numpy as np
 
 from brdf_infer._atomic import atomic_write_bytes, atomic_write_json
 from brdf_infer._outlock import writing
+from brdf_infer.bsdf_file import BSDF_SOURCE, BsdfFile, specular_frame_to_model, write_bsdf
 from brdf_infer.errors import BadInputError
 from brdf_infer.export._abg import AbgFit, fit_abg
-from brdf_infer.export._grid import (
-    ScatterGrid,
-    brdf_table,
-    specular_frame_to_model,
-    table_integral,
-)
-from brdf_infer.export._zemax import BSDF_SOURCE, BsdfFile, write_bsdf
+from brdf_infer.export._grid import ScatterGrid, brdf_table, table_integral
 from brdf_infer.model import ModelFamily, fold_statement, tis
 from brdf_infer.params import HemisphereConstants, Params, params_to_dict
-from brdf_infer.posterior import family_tis_band, tis_band
-from brdf_infer.posterior._bands import FAMILY_TIS_DRAWS
+from brdf_infer.posterior import FAMILY_TIS_DRAWS, family_tis_band, tis_band
 
-FORMATS = ("zemax-bsdf", "abg")
 EXPORTS_FILE = "exports.json"  # in a run folder: the exports made from it, for the report
 ABG_COLUMNS = ("theta_i_deg", "A", "B", "g", "tis_model", "tis_abg", "rms_log_error")
 _MEANING = {

@@ -1,19 +1,8 @@
 """The scatter grid of a tabular BSDF: directions in the specular frame, tables and their
 hemisphere integral.
 
-Frame of the BSDF Data Interchange format: the radial angle r is the angle between the
-scattered and the specular direction (r = 0 is specular), the azimuth ψ turns about the
-specular direction with ψ = 0 pointing from the specular direction toward the surface
-normal. The model's frame (Eq. 8): z is the normal, the forward-scattering half-plane is
-φ = 180°, so the specular ray of incidence θi is s = (−sin θi, 0, cos θi). With
-u = (cos θi, 0, sin θi) (unit, ⟂ s, toward the normal; at θi = 0 its limit, the backward
-direction) and v = (0, 1, 0):
-
-    d(ψ, r) = cos r · s + sin r · (cos ψ · u + sin ψ · v).
-
-ψ = 0, r = θi is the normal; ψ = 180°, r = 90° − θi the forward horizon; ψ = 0,
-r = 90° + θi the backward horizon. The model is symmetric about the plane of incidence, so
-ψ ∈ [0°, 180°] describes the whole hemisphere (``PlaneSymmetrical``).
+Directions in the format's specular frame (ψ, r) map to the model's (θ, φ) as
+:mod:`brdf_infer.bsdf_file` describes.
 """
 
 from __future__ import annotations
@@ -25,6 +14,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from brdf_infer.bsdf_file import scattered_direction, specular_frame_to_model
 from brdf_infer.model import log_brdf_hemisphere
 from brdf_infer.params import HemisphereConstants, Params
 
@@ -72,33 +62,6 @@ def scatter_grid(
         azimuth_deg=_steps_to(180.0, azimuth_step_deg),
         radial_deg=_steps_to(radial_stop, radial_step_deg),
     )
-
-
-def scattered_direction(theta_i_deg, azimuth_deg, radial_deg):
-    """Unit vector d(ψ, r) of the specular frame in the model's frame (module docstring).
-
-    Returns:
-        (x, y, z) arrays broadcast over the three arguments.
-    """
-    theta_i = jnp.radians(jnp.asarray(theta_i_deg, float))
-    psi = jnp.radians(jnp.asarray(azimuth_deg, float))
-    r = jnp.radians(jnp.asarray(radial_deg, float))
-    sin_i, cos_i = jnp.sin(theta_i), jnp.cos(theta_i)
-    x = jnp.cos(r) * -sin_i + jnp.sin(r) * jnp.cos(psi) * cos_i
-    y = jnp.sin(r) * jnp.sin(psi)
-    z = jnp.cos(r) * cos_i + jnp.sin(r) * jnp.cos(psi) * sin_i
-    return x, y, z
-
-
-def specular_frame_to_model(theta_i_deg, azimuth_deg, radial_deg):
-    """(θ, φ) [deg] of the model (Eq. 8) for a specular-frame direction, and z = cos θ.
-
-    θ is clipped to 90° below the horizon (where z < 0 and the BSDF is 0).
-    """
-    x, y, z = scattered_direction(theta_i_deg, azimuth_deg, radial_deg)
-    theta = jnp.degrees(jnp.arccos(jnp.clip(z, 0.0, 1.0)))
-    phi = jnp.mod(jnp.degrees(jnp.arctan2(y, x)), 360.0)
-    return theta, phi, z
 
 
 @partial(jax.jit, static_argnames=("fold",))

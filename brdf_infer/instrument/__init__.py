@@ -16,10 +16,11 @@ from brdf_infer.instrument._geometry import (
 )
 from brdf_infer.instrument._kernel import (
     DEFAULT_CANDIDATES,
-    DEFAULT_NODES,
     INSTRUMENT_MODELS,
+    KERNEL_NODES,
     NODE_SHAPES,
     Kernel,
+    clear_row_kernel_cache,
     compress_nodes,
     kernel_log_reflectance,
     row_kernels,
@@ -28,14 +29,15 @@ from brdf_infer.instrument._scene import beam_geometry, build_kernel
 
 __all__ = [
     "DEFAULT_CANDIDATES",
-    "DEFAULT_NODES",
     "INSTRUMENT_MODELS",
+    "KERNEL_NODES",
     "NODE_SHAPES",
     "BeamGeometry",
     "Kernel",
     "Nodes",
     "beam_geometry",
     "build_kernel",
+    "clear_row_kernel_cache",
     "compress_nodes",
     "kernel_log_reflectance",
     "measurement_nodes",

@@ -36,7 +36,7 @@ NODE_SHAPES: dict[int, tuple[int, int, int]] = {
     64: (2, 8, 4),
     128: (2, 16, 4),
 }
-DEFAULT_NODES = 16
+KERNEL_NODES = 16
 # Sobol points of the full cubature: the image ratio counts only the ≈ 9 % of them that land in
 # the signal square (and divides by the reference beam's part in it), so it needs more to
 # reach the same accuracy (0.5-0.8 % at 2^16, ≲ 0.1 % at 2^18; benchmark).
@@ -120,6 +120,11 @@ def _row_kernel(
     )
 
 
+def clear_row_kernel_cache() -> None:
+    """Forget the row kernels built so far (a benchmark times the build, not the cache)."""
+    _row_kernel.cache_clear()
+
+
 @functools.lru_cache(maxsize=4)
 def _uniforms(candidates: int) -> np.ndarray:
     return sobol_uniforms(candidates)
@@ -130,7 +135,7 @@ def row_kernels(
     theta_s_deg: np.ndarray,
     geometries: list[BeamGeometry | None],
     instrument: str,
-    nodes: int = DEFAULT_NODES,
+    nodes: int = KERNEL_NODES,
     candidates: int | None = None,
 ) -> Kernel:
     """The kernel of rows at nominal (θi, θs) [deg]; a row whose geometry is None keeps its

@@ -48,16 +48,16 @@ from brdf_infer.model._lobes import (
     harvey_shack_integral,
     harvey_shack_log_bsdf,
 )
-from brdf_infer.model._tis import DEFAULT_NODES, log_tis, tis, tis_with_error
+from brdf_infer.model._tis import TIS_NODES, log_tis, tis, tis_with_error
 
 __all__ = [
     "CHECK_QUADRATURE",
-    "DEFAULT_NODES",
     "FAMILIES",
     "FAMILY_NAMES",
     "FIT_QUADRATURE",
     "PRECISE_QUADRATURE",
     "REFERENCE_FAMILY",
+    "TIS_NODES",
     "Coordinate",
     "ModelFamily",
     "Quadrature",

@@ -64,7 +64,7 @@ def log_brdf_hemisphere(
 
     Args:
         theta_i_deg: incidence angle θi [deg].
-        theta_deg: polar scattering angle θ ∈ [0, 90] [deg].
+        theta_deg: polar scattering angle θ [deg], 0 ≤ θ ≤ 90.
         phi_deg: azimuth φ [deg], forward-scattering plane at 180°.
         params: ``Params`` in paper units.
         fold: include the folding term of Eq. (10) in BRDF⁺ (default: the physical BRDF).

@@ -28,7 +28,7 @@ from brdf_infer.model._hemisphere import azimuthal_weight_integral
 from brdf_infer.model._inplane import log_brdf_inplane
 from brdf_infer.params import PAPER_CONSTANTS, HemisphereConstants, Params
 
-DEFAULT_NODES = 64  # Gauss–Legendre nodes per panel; see tests/test_tis.py for the error
+TIS_NODES = 64  # Gauss–Legendre nodes per panel; see tests/test_tis.py for the error
 # Panels narrower than this are dropped: their contribution is below 1e-11 of the TIS, while
 # nodes within ~1e-300° of θ = 0 make d ln(sin θ)/dθ overflow and the gradient NaN.
 MIN_PANEL_WIDTH_DEG = 1e-9
@@ -95,7 +95,7 @@ def log_tis(
     params: Params,
     fold: bool = False,
     constants: HemisphereConstants = PAPER_CONSTANTS,
-    nodes: int = DEFAULT_NODES,
+    nodes: int = TIS_NODES,
 ) -> jnp.ndarray:
     """ln TIS(θi): finite (with finite gradients) also where TIS overflows float64.
 
@@ -110,7 +110,7 @@ def tis(
     params: Params,
     fold: bool = False,
     constants: HemisphereConstants = PAPER_CONSTANTS,
-    nodes: int = DEFAULT_NODES,
+    nodes: int = TIS_NODES,
 ) -> jnp.ndarray:
     """Total integrated scatter TIS(θi) of Eq. (9) for the BRDF of Eqs. (7), (8) (and (10)).
 
@@ -138,7 +138,7 @@ def tis_with_error(
     params: Params,
     fold: bool = False,
     constants: HemisphereConstants = PAPER_CONSTANTS,
-    nodes: int = DEFAULT_NODES,
+    nodes: int = TIS_NODES,
 ) -> tuple[jnp.ndarray, jnp.ndarray]:
     """TIS and a conservative estimate of its absolute quadrature error.
 

@@ -2,6 +2,7 @@
 emcee from one model, with ArviZ diagnostics and credible bands for the BRDF and the TIS."""
 
 from brdf_infer.posterior._bands import (
+    FAMILY_TIS_DRAWS,
     QUANTILES,
     compute_bands,
     draws_params,
@@ -18,9 +19,18 @@ from brdf_infer.posterior._model import (
     NOISE_SITES,
     ModelData,
     PosteriorModel,
+    build_model_data,
     build_posterior_model,
 )
-from brdf_infer.posterior._nuts import NutsProgram, chain_keys, programs_by_structure
+from brdf_infer.posterior._nuts import (
+    Cancelled,
+    NutsProgram,
+    chain_keys,
+    programs_by_structure,
+    stack_data,
+)
+from brdf_infer.posterior._padding import pad_datasets, paddable, padded_signature, row_count
+from brdf_infer.posterior._potential import FlatPotential
 from brdf_infer.posterior._power_scaling import power_scaling
 from brdf_infer.posterior._results import (
     BANDS_FILE,
@@ -40,30 +50,37 @@ from brdf_infer.posterior._run import (
     CHECKPOINT_FILE,
     PosteriorRun,
     build_model,
+    complete_run,
     model_name,
+    run_fingerprint,
     run_posterior,
 )
-from brdf_infer.posterior._samplers import Draws, run_emcee, run_nuts
+from brdf_infer.posterior._samplers import Draws, nuts_draws, run_emcee, run_nuts
 
 __all__ = [
     "BANDS_FILE",
     "CHECKPOINT_FILE",
+    "FAMILY_TIS_DRAWS",
     "LINEAR",
     "NOISE_SITES",
     "POSTERIOR_FILE",
     "QUANTILES",
     "SUMMARY_FILE",
     "THRESHOLDS",
+    "Cancelled",
     "Draws",
     "FamilyPosteriorModel",
+    "FlatPotential",
     "ModelData",
     "NutsProgram",
     "PosteriorModel",
     "PosteriorRun",
     "build_family_model",
     "build_model",
+    "build_model_data",
     "build_posterior_model",
     "chain_keys",
+    "complete_run",
     "compute_bands",
     "diagnostics",
     "draws_params",
@@ -78,12 +95,19 @@ __all__ = [
     "load_run_family",
     "loo_terms",
     "model_name",
+    "nuts_draws",
+    "pad_datasets",
+    "paddable",
+    "padded_signature",
     "pointwise_loo_terms",
     "power_scaling",
     "programs_by_structure",
+    "row_count",
     "run_emcee",
+    "run_fingerprint",
     "run_fold",
     "run_nuts",
     "run_posterior",
+    "stack_data",
     "tis_band",
 ]

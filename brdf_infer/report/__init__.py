@@ -1,18 +1,26 @@
-"""The HTML diagnostic report of a posterior run, and its figures (imports matplotlib)."""
+"""The HTML diagnostic report of a posterior run, and its figures (imports matplotlib); the
+figures and pages of the studies (SBC, comparison, sensitivity), written beside their results."""
 
 from brdf_infer.report._build import FIGURE_DIR, REPORT_FILE, write_example, write_report
-from brdf_infer.report._compare import compare_figure, compare_table_html
+from brdf_infer.report._compare import compare_figure, compare_table_html, write_comparison
 from brdf_infer.report._figures import brdf_bands as plot_brdf_bands
 from brdf_infer.report._figures import hemisphere_maps as plot_hemisphere_maps
 from brdf_infer.report._figures import posterior_predictive as plot_posterior_predictive
 from brdf_infer.report._figures import tis_band as plot_tis_band
 from brdf_infer.report._raytrace import figure_png, plot_detector_images, plot_raytrace
-from brdf_infer.report._sbc import ecdf_differences, png, sbc_figures, sbc_page
-from brdf_infer.report._sensitivity import sensitivity_figure
+from brdf_infer.report._sbc import ecdf_differences, png, sbc_figures, sbc_page, write_sbc
+from brdf_infer.report._sensitivity import (
+    SENSITIVITY_HEADERS,
+    power_scaling_rows,
+    sensitivity_figure,
+    sensitivity_rows,
+    write_sensitivity,
+)
 
 __all__ = [
     "FIGURE_DIR",
     "REPORT_FILE",
+    "SENSITIVITY_HEADERS",
     "compare_figure",
     "compare_table_html",
     "ecdf_differences",
@@ -24,9 +32,14 @@ __all__ = [
     "plot_raytrace",
     "plot_tis_band",
     "png",
+    "power_scaling_rows",
     "sbc_figures",
     "sbc_page",
     "sensitivity_figure",
+    "sensitivity_rows",
+    "write_comparison",
     "write_example",
     "write_report",
+    "write_sbc",
+    "write_sensitivity",
 ]

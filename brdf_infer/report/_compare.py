@@ -1,9 +1,11 @@
-"""Figures and HTML of a PSIS-LOO model comparison (``compare.json``)."""
+"""Figures and HTML of a PSIS-LOO model comparison (``compare.json``), and the folder the
+figure is written to with the result."""
 
 from __future__ import annotations
 
 import io
 import warnings
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -11,6 +13,8 @@ import pandas as pd
 from matplotlib.figure import Figure
 
 from brdf_infer._arviz import az
+from brdf_infer._atomic import atomic_write_bytes, atomic_write_json
+from brdf_infer.compare import COMPARE_FILE, ComparisonResult
 from brdf_infer.report._html import escape
 
 UNTRUSTED = "sampler diagnostics fail"
@@ -94,3 +98,12 @@ def compare_table_html(payload: dict[str, Any]) -> str:
         for row in payload["models"]
     )
     return f"<table>{head}{body}</table>"
+
+
+def write_comparison(out: Path, result: ComparisonResult) -> list[Path]:
+    """compare.json and ArviZ's compare plot (compare.png) into ``out``, atomically."""
+    out.mkdir(parents=True, exist_ok=True)
+    return [
+        atomic_write_json(out / COMPARE_FILE, result.as_json()),
+        atomic_write_bytes(out / "compare.png", compare_figure(result.as_json())),
+    ]

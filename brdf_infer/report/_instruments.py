@@ -30,7 +30,7 @@ def _cell(interval: dict | None, scale: float = 1.0, digits: str = ".3g") -> str
 
 
 def instrument_table_rows(payload: dict[str, Any]) -> list[list[str]]:
-    """Rows of the side-by-side table (also the README's): one per instrument model."""
+    """Rows of the side-by-side table (also in docs/instruments.md): one per instrument model."""
     rows = []
     for entry in payload["models"]:
         traced = entry.get("raytrace")

@@ -1,22 +1,20 @@
-"""Figures and HTML page of simulation-based calibration (``brdf-infer sbc``)."""
+"""Figures and HTML page of simulation-based calibration (``brdf-infer sbc``), and the folder
+they are written to with the result."""
 
 from __future__ import annotations
 
 import io
+from pathlib import Path
 
 import numpy as np
 from matplotlib.figure import Figure
 
+from brdf_infer._atomic import atomic_write_bytes, atomic_write_json
 from brdf_infer.model import FAMILIES
 from brdf_infer.report import _html
-from brdf_infer.sbc import (
-    COVERAGE_LEVELS,
-    HISTOGRAM_BINS,
-    SbcResult,
-    ecdf_band,
-    uniform_rank_band,
-)
+from brdf_infer.sbc import COVERAGE_LEVELS, HISTOGRAM_BINS, SBC_FILE, SbcResult
 from brdf_infer.settings import PLANTED_FAULTS
+from brdf_infer.uniformity import ecdf_band, uniform_rank_band
 from brdf_infer.verdict import ALL_PASS, Verdict
 
 LABELS = {
@@ -172,3 +170,14 @@ def sbc_page(result: SbcResult, figures: dict[str, bytes]) -> str:
         _html.figure(figures["sbc_ecdf"], "ECDF differences."),
     ]
     return _html.page("Simulation-based calibration", sections)
+
+
+def write_sbc(out: Path, result: SbcResult) -> list[Path]:
+    """sbc.json, the figures (PNG) and sbc.html into ``out``, atomically."""
+    out.mkdir(parents=True, exist_ok=True)
+    paths = [atomic_write_json(out / SBC_FILE, result.as_json())]
+    figures = sbc_figures(result)
+    for name, png in figures.items():
+        paths.append(atomic_write_bytes(out / f"{name}.png", png))
+    paths.append(atomic_write_bytes(out / "sbc.html", sbc_page(result, figures).encode()))
+    return paths

@@ -1,4 +1,5 @@
-"""Figure and report section of the error-model sensitivity study (``sensitivity.json``)."""
+"""Figure and report section of the error-model sensitivity study (``sensitivity.json``), and
+the folder the figure is written to with the result."""
 
 from __future__ import annotations
 
@@ -10,8 +11,14 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 
+from brdf_infer._atomic import atomic_write_bytes, atomic_write_json
 from brdf_infer.report import _html
-from brdf_infer.sensitivity import SENSITIVITY_FILE, TIS_ANGLE_DEG
+from brdf_infer.sensitivity import (
+    SENSITIVITY_FIGURE,
+    SENSITIVITY_FILE,
+    TIS_ANGLE_DEG,
+    SensitivityResult,
+)
 
 PRIOR_SENSITIVITY_LIMIT = 0.05  # power-scaling sensitivity above which a component matters
 
@@ -145,3 +152,13 @@ def sensitivity_section(run: Path) -> list[str]:
             _html.table(["quantity", "prior", "likelihood", "diagnosis"], rows),
         ]
     return parts
+
+
+def write_sensitivity(out: Path, result: SensitivityResult) -> list[Path]:
+    """sensitivity.json and its figure (TIS(70°) and Δelpd per variant) into ``out``,
+    atomically."""
+    payload = result.as_json()
+    return [
+        atomic_write_json(out / SENSITIVITY_FILE, payload),
+        atomic_write_bytes(out / SENSITIVITY_FIGURE, sensitivity_figure(payload)),
+    ]

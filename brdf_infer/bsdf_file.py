@@ -1,4 +1,6 @@
-"""Zemax / Radiant "BSDF Data Interchange" tabular files (.BSDF): writer and reader.
+"""Zemax / Radiant "BSDF Data Interchange" tabular files (.BSDF): their reader and writer, and
+their specular frame. Read as measurements (:mod:`brdf_infer.bsdf_measurements`) and written
+as exports (:mod:`brdf_infer.export`).
 
 Layout (one keyword per line; ``#`` starts a comment line)::
 
@@ -23,7 +25,21 @@ Layout (one keyword per line; ``#`` starts a comment line)::
 
 Values are tab-separated with no trailing whitespace (strict readers refuse anything else);
 BSDF values carry 7 significant digits, TIS values 11. Angles in degrees; the scatter
-angles are in the specular frame (``brdf_infer.export._grid``).
+angles are in the specular frame (below).
+
+Frame of the BSDF Data Interchange format: the radial angle r is the angle between the
+scattered and the specular direction (r = 0 is specular), the azimuth ψ turns about the
+specular direction with ψ = 0 pointing from the specular direction toward the surface
+normal. The model's frame (Eq. 8): z is the normal, the forward-scattering half-plane is
+φ = 180°, so the specular ray of incidence θi is s = (−sin θi, 0, cos θi). With
+u = (cos θi, 0, sin θi) (unit, ⟂ s, toward the normal; at θi = 0 its limit, the backward
+direction) and v = (0, 1, 0):
+
+    d(ψ, r) = cos r · s + sin r · (cos ψ · u + sin ψ · v).
+
+ψ = 0, r = θi is the normal; ψ = 180°, r = 90° − θi the forward horizon; ψ = 0,
+r = 90° + θi the backward horizon. The model is symmetric about the plane of incidence, so
+ψ ∈ [0°, 180°] describes the whole hemisphere (``PlaneSymmetrical``).
 
 ``Source``: the format's specification (Radiant Imaging / Zemax, "BSDF Data Interchange File
 Format Specification") defines one value, ``Measured``; no value for model-derived tables
@@ -38,6 +54,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import jax.numpy as jnp
 import numpy as np
 
 from brdf_infer._atomic import atomic_write_bytes
@@ -76,6 +93,39 @@ class BsdfFile:
     source: str = BSDF_SOURCE
     sample_rotation_deg: np.ndarray = field(default_factory=lambda: np.zeros(1))
     comments: list[str] = field(default_factory=list)
+
+
+# ---------------------------------------------------------------------------- frame
+
+
+def scattered_direction(theta_i_deg, azimuth_deg, radial_deg):
+    """Unit vector d(ψ, r) of the specular frame in the model's frame (module docstring).
+
+    Returns:
+        (x, y, z) arrays broadcast over the three arguments.
+    """
+    theta_i = jnp.radians(jnp.asarray(theta_i_deg, float))
+    psi = jnp.radians(jnp.asarray(azimuth_deg, float))
+    r = jnp.radians(jnp.asarray(radial_deg, float))
+    sin_i, cos_i = jnp.sin(theta_i), jnp.cos(theta_i)
+    x = jnp.cos(r) * -sin_i + jnp.sin(r) * jnp.cos(psi) * cos_i
+    y = jnp.sin(r) * jnp.sin(psi)
+    z = jnp.cos(r) * cos_i + jnp.sin(r) * jnp.cos(psi) * sin_i
+    return x, y, z
+
+
+def specular_frame_to_model(theta_i_deg, azimuth_deg, radial_deg):
+    """(θ, φ) [deg] of the model (Eq. 8) for a specular-frame direction, and z = cos θ.
+
+    θ is clipped to 90° below the horizon (where z < 0 and the BSDF is 0).
+    """
+    x, y, z = scattered_direction(theta_i_deg, azimuth_deg, radial_deg)
+    theta = jnp.degrees(jnp.arccos(jnp.clip(z, 0.0, 1.0)))
+    phi = jnp.mod(jnp.degrees(jnp.arctan2(y, x)), 360.0)
+    return theta, phi, z
+
+
+# ---------------------------------------------------------------------------- writer
 
 
 def _angles(values: np.ndarray) -> str:
