@@ -67,7 +67,7 @@ def _angle(text: str, low: float, high: float, field: str, file) -> float:
     return value
 
 
-def parse_target(text: str, *, field: str = "--target", file=None) -> DesignTarget:
+def parse_target(text: str, *, field: str = "target", file=None) -> DesignTarget:
     """The target named by ``text`` (module docstring).
 
     Raises:

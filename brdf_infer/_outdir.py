@@ -12,7 +12,7 @@ from brdf_infer._outlock import writing
 from brdf_infer.errors import BadInputError
 
 
-def check_output_dir(path: str | Path, option: str = "--out") -> Path:
+def check_output_dir(path: str | Path, option: str = "out") -> Path:
     """``path`` if a results folder can be written there; nothing is created.
 
     Raises:
@@ -33,7 +33,7 @@ def check_output_dir(path: str | Path, option: str = "--out") -> Path:
 
 
 def claim_output_dir(
-    path: str | Path, command: str, claims: contextlib.ExitStack, option: str = "--out"
+    path: str | Path, command: str, claims: contextlib.ExitStack, option: str = "out"
 ) -> Path:
     """:func:`check_output_dir`, then hold ``path`` for ``command`` until ``claims`` closes
     (the folder is created for the lock; one writer per folder, :mod:`brdf_infer._outlock`).

@@ -306,7 +306,7 @@ def _release(claim: Claim, error: BaseException | None) -> None:
 
 @contextlib.contextmanager
 def writing(
-    folder: str | Path, command: str, *, option: str = "--out", adds: bool = False
+    folder: str | Path, command: str, *, option: str = "out", adds: bool = False
 ) -> Iterator[Claim]:
     """Hold ``folder`` (created with its parents if missing) for writing (module docstring).
 

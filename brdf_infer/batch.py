@@ -58,7 +58,6 @@ import jax
 import numpy as np
 
 from brdf_infer._atomic import atomic_write_json
-from brdf_infer._nuts_settings import check_nuts_settings
 from brdf_infer._outlock import note_written, require_complete, writing
 from brdf_infer.errors import BadInputError
 from brdf_infer.plausibility import measurement_checks, require_plausible
@@ -82,6 +81,7 @@ from brdf_infer.posterior import (
     stack_data,
 )
 from brdf_infer.scene import Scene, load_scene
+from brdf_infer.settings import BatchSettings
 
 BATCH_FILE = "batch.json"
 PARTIAL_MARK = ".partial-"  # out/.<scene>.partial-<pid>: a run folder being written
@@ -92,27 +92,6 @@ INTERRUPTED = "interrupted before its run was complete"
 
 def _silent(message: str) -> None:
     del message
-
-
-@dataclass(frozen=True)
-class BatchSettings:
-    """NUTS settings shared by every scene of a batch (``seed``: each scene's chains get the
-    keys ``posterior --seed`` gives them; ``force``: run scenes that fail a plausibility
-    check)."""
-
-    chains: int = 4
-    draws: int = 1000
-    warmup: int = 1000
-    seed: int = 0
-    target_accept: float = 0.8
-    mode: str = "auto"
-    force: bool = False
-
-    def check(self) -> None:
-        """Raises BadInputError naming the option that is out of range."""
-        check_nuts_settings(self)
-        if self.mode not in ("auto", "threads", "vmap"):
-            raise BadInputError(f"unknown mode {self.mode!r} (auto, threads, vmap)", field="--mode")
 
 
 @dataclass
@@ -303,7 +282,6 @@ class Batch:
         cancel: threading.Event | None = None,
         resume: bool = False,
     ):
-        settings.check()
         self.sources, self.out, self.settings = sources, Path(out), settings
         self.resume = resume
         self.family, self.progress = model, progress
@@ -434,7 +412,7 @@ class Batch:
                 f"holds a complete run of another batch (differs in: {', '.join(differences)}); "
                 "run the batch without --resume to replace it, or into another --out",
                 file=folder,
-                field="--resume",
+                field="resume",
             )
         entry.summary = summary
         entry.tis = _tis_entry(bands)

@@ -36,7 +36,7 @@ from scipy.special import logsumexp
 from brdf_infer._arviz import az
 from brdf_infer.errors import BadInputError
 from brdf_infer.measurements import Measurements
-from brdf_infer.model import FAMILY_NAMES, family
+from brdf_infer.model import check_family_name, family
 from brdf_infer.posterior import (
     THRESHOLDS,
     NutsProgram,
@@ -47,24 +47,13 @@ from brdf_infer.posterior import (
     loo_terms,
 )
 from brdf_infer.scene import Scene
+from brdf_infer.settings import CompareSettings
 
 PARETO_K_LIMIT = 0.7
 LEFT_OUT_SIGMA = 1e6  # σ of ln R that removes a row's information (exact LOO by refit)
 TIS_DRAWS = 400  # posterior draws the TIS band is computed from
 TIS_ANGLE_DEG = 70.0
 COMPARE_FILE = "compare.json"
-
-
-@dataclass(frozen=True)
-class CompareSettings:
-    """How each family is sampled (NUTS)."""
-
-    chains: int = 4
-    warmup: int = 500
-    draws: int = 1000
-    seed: int = 0
-    target_accept: float = 0.9
-    refit: bool = True
 
 
 @dataclass
@@ -142,15 +131,11 @@ def check_family_names(names: list[str]) -> list[str]:
     Raises:
         BadInputError: an unknown family, or fewer than two.
     """
-    unknown = [name for name in names if name not in FAMILY_NAMES]
-    if unknown:
-        raise BadInputError(
-            f"unknown model family {unknown[0]!r} (known: {', '.join(FAMILY_NAMES)})",
-            field="--models",
-        )
+    for name in names:
+        check_family_name(name, field="models")
     names = list(dict.fromkeys(names))
     if len(names) < 2:
-        raise BadInputError("name at least two families to compare", field="--models")
+        raise BadInputError("name at least two families to compare", field="models")
     return names
 
 
@@ -294,9 +279,6 @@ def compare_families(
         BadInputError: unknown family names, fewer than two, or settings out of range.
     """
     names = check_family_names(names)
-    for field in ("chains", "warmup", "draws"):
-        if getattr(settings, field) < 1:
-            raise BadInputError(f"must be at least 1, got {getattr(settings, field)}", field=field)
     started = time.perf_counter()
     fits = {
         name: fit_family(scene, measurements, name, settings, progress=progress) for name in names

@@ -30,6 +30,7 @@ from brdf_infer.model import ModelFamily
 from brdf_infer.observations import build_observation_model, through_instrument
 from brdf_infer.priors import Prior
 from brdf_infer.scene import Scene
+from brdf_infer.settings import LSQ_STARTS
 
 
 def _from_real(prior: Prior, w):
@@ -95,7 +96,12 @@ class FamilyFit:
 
 
 def fit_family_lsq(
-    scene: Scene, measurements: Measurements, member: ModelFamily, *, starts: int = 8, seed: int = 0
+    scene: Scene,
+    measurements: Measurements,
+    member: ModelFamily,
+    *,
+    starts: int = LSQ_STARTS,
+    seed: int = 0,
 ) -> FamilyFit:
     """Multi-start least squares of ``member`` on the scene's rows (module docstring)."""
     started = time.perf_counter()

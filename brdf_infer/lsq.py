@@ -44,6 +44,7 @@ from brdf_infer.observations import (
 from brdf_infer.params import PARAM_NAMES, Params
 from brdf_infer.priors import DEFAULT_BOUNDS
 from brdf_infer.scene import Scene
+from brdf_infer.settings import LSQ_STARTS
 
 SOLVERS = {
     "lm": optx.LevenbergMarquardt,
@@ -229,7 +230,7 @@ def fit_lsq(
     scene: Scene,
     measurements: Measurements,
     *,
-    starts: int = 16,
+    starts: int = LSQ_STARTS,
     solver: str = "lm",
     seed: int = 0,
     init: Params | None = None,
@@ -257,10 +258,10 @@ def fit_lsq(
     """
     if solver not in SOLVERS:
         raise BadInputError(
-            f"unknown solver {solver!r} (known: {', '.join(SOLVERS)})", field="--solver"
+            f"unknown solver {solver!r} (known: {', '.join(SOLVERS)})", field="solver"
         )
     if starts < 1:
-        raise BadInputError(f"need at least one start, got {starts}", field="--starts")
+        raise BadInputError(f"need at least one start, got {starts}", field="starts")
     model = build_observation_model(scene, measurements)
     free = scene.free_parameters
     if model.n_points < len(free):

@@ -135,9 +135,9 @@ def resolve_params(name_or_file: str) -> Params:
         try:
             content = json.loads(name_or_file)
         except json.JSONDecodeError as error:
-            raise BadInputError(f"not valid JSON: {error.msg}", field="--params") from None
+            raise BadInputError(f"not valid JSON: {error.msg}", field="params") from None
         except RecursionError:
-            raise BadInputError("not valid JSON: nested too deeply", field="--params") from None
+            raise BadInputError("not valid JSON: nested too deeply", field="params") from None
         return params_from_mapping(content, source="--params")
     path = Path(name_or_file)
     if not path.exists():

@@ -26,9 +26,10 @@ the simulator's — and cannot see a wrong model (a wrong calibration size, rota
 or images per row, or the linearisation of the angle slopes): data and inference would share
 the error. The benchmark's misspecification study (:mod:`brdf_infer.bench._misspec`) measures
 what such errors cost the intervals. Planted faults in the inference only show that the check
-has power against what it checks: ``planted_fault`` (:data:`PLANTED_FAULTS`: the whitening's
-log-Jacobian dropped, or every free prior moved by one prior sd) and ``sigma_scale`` (the
-likelihood's σ scaled; the learned noise scales absorb most of it, so it fails through them).
+has power against what it checks: ``planted_fault``
+(:data:`brdf_infer.settings.PLANTED_FAULTS`: the whitening's log-Jacobian dropped, or every
+free prior moved by one prior sd) and ``sigma_scale`` (the likelihood's σ scaled; the learned
+noise scales absorb most of it, so it fails through them).
 """
 
 from __future__ import annotations
@@ -61,6 +62,7 @@ from brdf_infer.posterior import (
 )
 from brdf_infer.priors import Prior
 from brdf_infer.scene import Scene
+from brdf_infer.settings import SbcSettings, check_planted_fault_name
 
 QUANTITIES: tuple[str, ...] = (*PARAM_NAMES, "tis70")  # ranked for strumik2024
 NOISE_QUANTITIES: tuple[str, ...] = NOISE_SITES
@@ -70,43 +72,6 @@ TESTS_PER_QUANTITY = 3  # χ², KS and the 90 % coverage
 HISTOGRAM_BINS = 20
 MIN_EXPECTED_PER_BIN = 10  # replicates per bin of the χ² test, at least
 SBC_FILE = "sbc.json"
-PLANTED_FAULTS: dict[str, str] = {  # planted in the inference only; the simulations keep none
-    "jacobian": "the whitening's log-Jacobian dropped from the inference's density",
-    "prior": "every free parameter's prior moved by one prior sd in the inference",
-}
-
-
-@dataclass(frozen=True)
-class SbcSettings:
-    """How SBC runs.
-
-    Attributes:
-        replicates: simulated data sets N.
-        draws: posterior draws L the truth is ranked among (after thinning).
-        thin: keep every ``thin``-th NUTS draw (draws × thin iterations after the warmup).
-        warmup: NUTS warmup iterations per replicate.
-        seed: seed of the simulations and of the sampler.
-        sigma_scale: multiply the likelihood's σ by this in the inference only (1: no fault).
-        planted_fault: a fault planted in the inference only (a key of
-            :data:`PLANTED_FAULTS`; None: none), for ``strumik2024``.
-        target_accept: NUTS target acceptance probability.
-        warmup_tree_depth: largest NUTS tree depth during the warmup (10 after it). Without
-            the cap, the first warmup iterations of a replicate whose prior draw sits far from
-            the start run trees of up to 1023 leapfrog steps, and the warmup costs 3–20× the
-            kept draws (measured on the bundled scene: 5,000–45,000 warmup steps against
-            ≈ 2,000 after it); with depth 6 it is ≈ 7,000–10,000. The ranks are the check
-            that the adaptation is still good enough.
-    """
-
-    replicates: int = 200
-    draws: int = 100
-    thin: int = 2
-    warmup: int = 300
-    seed: int = 0
-    sigma_scale: float = 1.0
-    target_accept: float = 0.8
-    warmup_tree_depth: int = 6
-    planted_fault: str | None = None
 
 
 @dataclass(frozen=True)
@@ -256,17 +221,6 @@ def run_sbc(
         BadInputError: settings out of range, an unknown family, or a planted fault that does
             not apply (:func:`check_planted_fault`).
     """
-    for name in ("replicates", "draws", "thin"):
-        if getattr(settings, name) < 1:
-            raise BadInputError(f"must be at least 1, got {getattr(settings, name)}", field=name)
-    if settings.warmup < 1:
-        raise BadInputError(f"must be at least 1, got {settings.warmup}", field="warmup")
-    if not settings.sigma_scale > 0:
-        raise BadInputError(f"must be > 0, got {settings.sigma_scale}", field="sigma_scale")
-    if not 1 <= settings.warmup_tree_depth <= 10:
-        raise BadInputError(
-            f"must be 1 … 10, got {settings.warmup_tree_depth}", field="warmup_tree_depth"
-        )
     check_planted_fault(settings.planted_fault, scene, model)
     started = time.perf_counter()
     model = build_model(scene, measurements, model)
@@ -298,27 +252,18 @@ def run_sbc(
     )
 
 
-def check_planted_fault(
-    fault: str | None,
-    scene: Scene | None = None,
-    model: str | None = None,
-    field: str = "planted_fault",
-) -> None:
-    """Check that ``fault`` is None or a key of :data:`PLANTED_FAULTS` and, given the scene,
-    that it applies to the scene's posterior under the family ``model`` (default: the scene's).
+def check_planted_fault(fault: str | None, scene: Scene, model: str | None = None) -> None:
+    """Check that ``fault`` is None or a key of :data:`~brdf_infer.settings.PLANTED_FAULTS`
+    that applies to the scene's posterior under the family ``model`` (default: the scene's).
 
     Raises:
         BadInputError: an unknown fault, or one the posterior has nothing to plant it in (another
-            family; no free coefficient to whiten; no free parameter).
+            family; no free coefficient to whiten; no free parameter); field ``planted_fault``.
     """
+    check_planted_fault_name(fault)
     if fault is None:
         return
-    if fault not in PLANTED_FAULTS:
-        raise BadInputError(
-            f"unknown planted fault {fault!r} (known: {', '.join(PLANTED_FAULTS)})", field=field
-        )
-    if scene is None:
-        return
+    field = "planted_fault"
     name = scene.model.family if model is None else model
     if name != REFERENCE_FAMILY:
         raise BadInputError(
@@ -349,8 +294,9 @@ def moved_prior(prior: Prior) -> Prior:
 def planted_inference(
     model: PosteriorModel | FamilyPosteriorModel, fault: str | None
 ) -> PosteriorModel | FamilyPosteriorModel:
-    """The model the inference runs with ``fault`` (:data:`PLANTED_FAULTS`, checked by
-    :func:`check_planted_fault`) planted; the simulations keep ``model``."""
+    """The model the inference runs with ``fault`` (a key of
+    :data:`~brdf_infer.settings.PLANTED_FAULTS`, checked by :func:`check_planted_fault`)
+    planted; the simulations keep ``model``."""
     if fault == "jacobian":
         return dataclasses.replace(model, drop_log_jacobian=True)
     if fault == "prior":

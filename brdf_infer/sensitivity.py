@@ -39,12 +39,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from brdf_infer._nuts_settings import check_nuts_settings
 from brdf_infer.error_model import CALIBRATIONS, ROTATION_COUPLINGS
 from brdf_infer.errors import BadInputError
 from brdf_infer.measurements import Measurements
 from brdf_infer.model import REFERENCE_FAMILY
 from brdf_infer.scene import Scene, parse_errors
+from brdf_infer.settings import SensitivitySettings
 
 if TYPE_CHECKING:  # ArviZ is imported where it is used: the command line's parser stays light
     from arviz import InferenceData
@@ -53,28 +53,6 @@ SENSITIVITY_FILE = "sensitivity.json"
 SENSITIVITY_FIGURE = "sensitivity.png"
 TIS_ANGLE_DEG = 70.0  # the article's TIS angle (Sec. 7), always among the reported angles
 BASELINE = "default"
-
-
-@dataclass(frozen=True)
-class SensitivitySettings:
-    """How every variant is sampled (NUTS, the same settings and seed for all).
-
-    The defaults keep the study at a few minutes on 2 cores: 4 × 500 draws give the 95 %
-    intervals of TIS and π·BRDF0 to a few tenths of a per cent and PSIS-LOO its usual
-    precision. ``refit``: compute the leave-one-out term of a row with Pareto k > 0.7 exactly,
-    by one more posterior without it.
-    """
-
-    chains: int = 4
-    warmup: int = 500
-    draws: int = 500
-    seed: int = 0
-    target_accept: float = 0.8
-    refit: bool = True
-
-    def check(self) -> None:
-        """Raises BadInputError naming the setting that is out of range."""
-        check_nuts_settings(self)
 
 
 @dataclass(frozen=True)
@@ -125,7 +103,7 @@ def parse_variant(spec: str, scene: Scene) -> Variant:
 
     Raises:
         BadInputError: a part without ``=``, an unknown key, or a value out of range
-            (field ``--variants``).
+            (field ``variants``).
     """
     changes = {}
     for part in _split_changes(spec):
@@ -133,11 +111,11 @@ def parse_variant(spec: str, scene: Scene) -> Variant:
         if not equals or not key.strip():
             raise BadInputError(
                 f"{spec!r}: expected KEY=VALUE (keys of [errors], e.g. calibration=none)",
-                field="--variants",
+                field="variants",
             )
         changes[key.strip()] = _value(text.strip())
     named = variant(changes)
-    variant_scene(scene, named, field_name="--variants")
+    variant_scene(scene, named)
     return named
 
 
@@ -393,7 +371,6 @@ def sensitivity(
     from brdf_infer.posterior import build_posterior_model, chain_keys, programs_by_structure
 
     check_scene(scene)
-    settings.check()
     started = time.perf_counter()
     runs = [Variant(BASELINE), *(default_variants(scene) if variants is None else variants)]
     scenes = [variant_scene(scene, run) for run in runs]

@@ -36,6 +36,7 @@ from typing import Any
 from brdf_infer.measurements import Measurements
 from brdf_infer.plausibility import Implausible
 from brdf_infer.scene import Scene, Studies
+from brdf_infer.settings import LSQ_STARTS, RunSettings
 from brdf_infer.verdict import Verdict
 
 STUDIES_FILE = "studies.json"
@@ -47,32 +48,6 @@ RUN_TRACE_BAND_RAYS = 16_384  # per draw and configuration
 
 def _silent(message: str) -> None:
     del message
-
-
-@dataclass(frozen=True)
-class RunSettings:
-    """NUTS settings of the main job, the least-squares starts, the model family (None: the
-    scene's ``[model] family``), the studies (None: the scene's ``[studies]``) and ``force``:
-    go on past failed plausibility checks (the verdict then names them)."""
-
-    chains: int = 4
-    draws: int = 1000
-    warmup: int = 1000
-    seed: int = 0
-    lsq_starts: int = 16
-    model: str | None = None
-    studies: Studies | None = None
-    force: bool = False
-
-    def check(self) -> None:
-        """Raises BadInputError naming the setting that is out of range."""
-        from brdf_infer.errors import BadInputError
-
-        for name in ("chains", "draws", "lsq_starts"):
-            if getattr(self, name) < 1:
-                raise BadInputError(f"must be at least 1, got {getattr(self, name)}", field=name)
-        if self.warmup < 0:
-            raise BadInputError(f"must be >= 0, got {self.warmup}", field="warmup")
 
 
 def full_studies(scene: Scene) -> Studies:
@@ -184,7 +159,7 @@ def lsq_summary(
     scene: Scene,
     measurements: Measurements,
     *,
-    starts: int = 16,
+    starts: int = LSQ_STARTS,
     solver: str = "lm",
     seed: int = 0,
     scale_covariance: bool = False,
@@ -318,7 +293,6 @@ def _run(
     from brdf_infer.report import write_example, write_report
 
     start = time.perf_counter()
-    settings.check()
     name = settings.model or scene.model.family
     build_model(scene, measurements, name)  # an unknown family fails before any work
     reference = name == REFERENCE_FAMILY

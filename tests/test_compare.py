@@ -11,7 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from brdf_infer._cli_compare import comparison_table
+from brdf_infer.cli.compare import comparison_table
 from brdf_infer.compare import PARETO_K_LIMIT, CompareSettings, compare_families
 from brdf_infer.error_model import NoiseScales
 from brdf_infer.model import family
@@ -115,7 +115,7 @@ def test_compare_command_json_contract_and_files(tmp_path, capsys):
         assert entry["sampler_ok"] is False
         assert any(f.startswith("bulk ESS") for f in entry["sampler_failures"]), entry
     assert any("not to be trusted" in note for note in payload["warnings"])
-    text = comparison_table(payload, lambda head, rows: "\n".join(map(" | ".join, [head, *rows])))
+    text = comparison_table(payload)
     assert "R-hat max" in text and "ESS bulk min" in text and "FAIL" in text
     assert text.count("its place in the ranking is not to be trusted") == 2
     assert all("(sampler diagnostics fail)" in name for name in compare_frame(payload).index)

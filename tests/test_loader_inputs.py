@@ -1,7 +1,8 @@
 """Generated bad inputs for every loader (measurement CSV, scene TOML, Zemax .BSDF, parameter
 JSON): each ends in a result that holds what the loader promises or in one BadInputError line
 naming the file or option, never another exception, never a file written; the command line
-prints that line and exits 2 (``brdf_infer.bench._loader_inputs``).
+prints that line (an option's field named as its flag) and exits 2
+(``brdf_infer.bench._loader_inputs``).
 
 The suite runs the profile of ``tests/conftest.py`` (60 inputs per loader; fixed under CI);
 the ``slow`` set 5,000 per loader (the benchmark counts them too)."""
@@ -9,6 +10,7 @@ the ``slow`` set 5,000 per loader (the benchmark counts them too)."""
 from __future__ import annotations
 
 import io
+import re
 from contextlib import redirect_stderr, redirect_stdout
 
 import pytest
@@ -25,7 +27,9 @@ def _same_line_on_the_command_line(argv: list[str], message: str) -> None:
     with redirect_stdout(out), redirect_stderr(err):
         code = main(argv)
     assert (code, out.getvalue()) == (2, ""), (argv, err.getvalue())
-    assert err.getvalue() == f"brdf-infer: error: {message}\n"
+    # an option's field (no file named before it) as the command line's flag: params → --params
+    line = re.sub(r"^field '(\w+)'", lambda m: f"field '--{m[1].replace('_', '-')}'", message)
+    assert err.getvalue() == f"brdf-infer: error: {line}\n"
 
 
 def _property(name: str):

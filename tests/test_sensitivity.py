@@ -65,7 +65,7 @@ def test_a_variant_is_checked_as_an_errors_table(lya):
     ):
         with pytest.raises(BadInputError, match=match) as error:
             parse_variant(spec, scene)
-        assert error.value.field == "--variants"
+        assert error.value.field == "variants"
 
 
 def test_tis_angles_are_the_band_angles_and_70_degrees(lya):

@@ -90,7 +90,7 @@ def design_series(scene: Scene, measurements: Measurements, series: str | None =
         raise BadInputError(
             f"no measured series {name!r} in scene '{scene.name}' "
             f"(known: {', '.join(dict.fromkeys(measurements.series))})",
-            field="--series",
+            field="series",
         )
     return name
 

@@ -25,7 +25,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from brdf_infer._design_options import DesignOptions
 from brdf_infer._design_target import DesignTarget, parse_target
 from brdf_infer.design._candidates import Candidates, design_series, grid_candidates
 from brdf_infer.design._estimate import (
@@ -51,6 +50,7 @@ from brdf_infer.observations import (
 from brdf_infer.params import PARAM_NAMES, Params
 from brdf_infer.posterior import POSTERIOR_FILE, build_posterior_model, interval95
 from brdf_infer.scene import Scene, load_scene
+from brdf_infer.settings import DesignOptions
 
 DESIGN_FILE, DESIGN_FIGURE = "design.json", "design.png"
 
@@ -298,7 +298,6 @@ def design(
     """
     start = time.perf_counter()
     options = DesignOptions() if options is None else options
-    options.check()
     target = parse_target(target) if isinstance(target, str) else target
     scene, measurements = run.scene, run.measurements
     if candidates is None:

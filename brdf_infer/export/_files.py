@@ -69,7 +69,7 @@ def _abg_of_abg_run(source: Source, theta_i: np.ndarray) -> tuple[list[dict], di
         raise BadInputError(
             f"ABg rows are fitted to Eq. (7) or read from an abg run, not a run of {member.name} "
             "(export it with --format zemax-bsdf)",
-            field="--format",
+            field="format",
         )
     band = family_tis_band(member, source.physical, theta_i, FAMILY_TIS_DRAWS)
     columns = {name: np.quantile(source.physical[name], [0.025, 0.5, 0.975]) for name in "ABg"}
@@ -226,7 +226,7 @@ def run_export(
 def record_export(run: Path, result: dict) -> Path:
     """Note an export of ``run`` in ``run/exports.json`` (one entry per format and folder), so
     that ``brdf-infer report`` can show it."""
-    with writing(run, "export", option="--run", adds=True):
+    with writing(run, "export", option="run", adds=True):
         return _record_export(run, result)
 
 

@@ -18,6 +18,7 @@ from brdf_infer.model._families import (
     REFERENCE_FAMILY,
     Coordinate,
     ModelFamily,
+    check_family_name,
     family,
     strumik_family,
 )
@@ -69,6 +70,7 @@ __all__ = [
     "brdf_hemisphere",
     "brdf_inplane",
     "brdf_to_reflectance",
+    "check_family_name",
     "disk_integral",
     "family",
     "fold_statement",

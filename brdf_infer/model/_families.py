@@ -22,11 +22,13 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 
 import jax
 import jax.numpy as jnp
 
 from brdf_infer._units import DEG
+from brdf_infer.errors import BadInputError
 from brdf_infer.model._hemisphere import log_brdf_hemisphere
 from brdf_infer.model._lobes import (
     FIT_QUADRATURE,
@@ -286,6 +288,17 @@ def strumik_family(
         lambda ti, p: jnp.exp(log_tis(jnp.atleast_1d(ti), as_params(p), fold, constants)[0]),
         exact_tis=False,
     )
+
+
+def check_family_name(name: str, *, file: str | Path | None = None, field: str = "model") -> None:
+    """Raises BadInputError naming ``file`` and ``field`` when ``name`` is not one of
+    :data:`FAMILY_NAMES`."""
+    if name not in FAMILY_NAMES:
+        raise BadInputError(
+            f"unknown model family {name!r} (known: {', '.join(FAMILY_NAMES)})",
+            file=file,
+            field=field,
+        )
 
 
 def family(name: str, fold: bool = False, constants: HemisphereConstants = PAPER_CONSTANTS):

@@ -19,7 +19,7 @@ from brdf_infer._outlock import writing
 from brdf_infer.error_model import ERROR_MODELS
 from brdf_infer.errors import BadInputError
 from brdf_infer.measurements import Measurements
-from brdf_infer.model import FAMILY_NAMES, REFERENCE_FAMILY, family
+from brdf_infer.model import REFERENCE_FAMILY, check_family_name, family
 from brdf_infer.params import PARAM_NAMES
 from brdf_infer.posterior._bands import (
     compute_bands,
@@ -41,6 +41,7 @@ from brdf_infer.posterior._samplers import (
     run_nuts,
 )
 from brdf_infer.scene import Scene
+from brdf_infer.settings import PosteriorSettings
 from brdf_infer.verdict import PARETO_K_LIMIT, posterior_verdict
 
 CHECKPOINT_FILE = "emcee_checkpoint.npz"
@@ -63,7 +64,7 @@ def with_error_model(scene: Scene, error_model: str | None) -> Scene:
     if error_model not in ERROR_MODELS:
         raise BadInputError(
             f"unknown error model {error_model!r} ({', '.join(ERROR_MODELS)})",
-            field="--error-model",
+            field="error_model",
         )
     return dataclasses.replace(scene, errors=dataclasses.replace(scene.errors, model=error_model))
 
@@ -75,14 +76,11 @@ def build_model(
     ``[model] family``).
 
     Raises:
-        BadInputError: an unknown family (field ``--model``), or latent angles with a family
+        BadInputError: an unknown family (field ``model``), or latent angles with a family
             other than ``strumik2024``.
     """
     name = scene.model.family if name is None else name
-    if name not in FAMILY_NAMES:
-        raise BadInputError(
-            f"unknown model family {name!r} (known: {', '.join(FAMILY_NAMES)})", field="--model"
-        )
+    check_family_name(name)
     if name == REFERENCE_FAMILY:
         return build_posterior_model(scene, measurements)
     return build_family_model(scene, measurements, family(name))
@@ -153,14 +151,14 @@ def run_posterior(
     scene: Scene,
     measurements: Measurements,
     *,
-    sampler: str = "nuts",
-    chains: int = 4,
-    draws: int = 1000,
-    warmup: int = 1000,
-    walkers: int | None = None,
-    steps: int = 20000,
-    seed: int = 0,
-    target_accept: float = 0.8,
+    sampler: str = PosteriorSettings.sampler,
+    chains: int = PosteriorSettings.chains,
+    draws: int = PosteriorSettings.draws,
+    warmup: int | None = PosteriorSettings.warmup,
+    walkers: int | None = PosteriorSettings.walkers,
+    steps: int = PosteriorSettings.steps,
+    seed: int = PosteriorSettings.seed,
+    target_accept: float = PosteriorSettings.target_accept,
     out: Path | None = None,
     resume: bool = False,
     error_model: str | None = None,
@@ -173,7 +171,9 @@ def run_posterior(
 
     Args:
         sampler: ``nuts`` or ``emcee``.
-        chains, draws, warmup: NUTS settings (emcee: ``warmup`` is the burn-in in steps).
+        chains, draws, warmup: NUTS settings (emcee: ``warmup`` is the burn-in in steps;
+            None: 1000 NUTS warmup or 4000 emcee burn-in steps). Every default here is
+            :class:`~brdf_infer.settings.PosteriorSettings`'s, as ``brdf-infer posterior``'s.
         walkers, steps: emcee settings (walkers default: max(24, 2 × dimension)).
         seed: random seed of the sampler.
         target_accept: NUTS target acceptance probability (raise it towards 0.95 when a
@@ -193,23 +193,20 @@ def run_posterior(
     Raises:
         BadInputError: a setting out of range, or a checkpoint that this run did not write.
     """
-    if sampler not in ("nuts", "emcee"):
-        raise BadInputError(f"unknown sampler {sampler!r} (nuts, emcee)", field="--sampler")
-    for name, value in (
-        ("chains", chains),
-        ("draws", draws),
-        ("walkers", walkers),
-        ("steps", steps),
-    ):
-        if value is not None and value < 1:
-            raise BadInputError(f"must be at least 1, got {value}", field=f"--{name}")
-    if warmup < 0:
-        raise BadInputError(f"must be >= 0, got {warmup}", field="--warmup")
-    if not 0 < target_accept < 1:
-        raise BadInputError(f"must lie in (0, 1), got {target_accept}", field="--target-accept")
+    settings = PosteriorSettings(
+        sampler=sampler,
+        chains=chains,
+        draws=draws,
+        warmup=warmup,
+        walkers=walkers,
+        steps=steps,
+        seed=seed,
+        target_accept=target_accept,
+    )  # every setting checked
+    warmup = settings.warmup  # None: the sampler's default
     if resume and sampler != "emcee":
         raise BadInputError(
-            "--resume continues an emcee run; NUTS runs are not checkpointed", field="--resume"
+            "--resume continues an emcee run; NUTS runs are not checkpointed", field="resume"
         )
     claim = contextlib.nullcontext() if out is None else writing(out, "posterior")
     with claim:  # one writer per folder; an interrupted run leaves it marked incomplete

@@ -175,11 +175,11 @@ def emcee_settings(dimension: int, walkers: int | None, steps: int, burn: int, s
     walkers = max(24, 2 * dimension) if walkers is None else walkers
     if walkers < 2 * dimension:
         raise BadInputError(
-            f"emcee needs at least {2 * dimension} walkers, got {walkers}", field="--walkers"
+            f"emcee needs at least {2 * dimension} walkers, got {walkers}", field="walkers"
         )
     if not 0 <= burn < steps:
         raise BadInputError(
-            f"burn-in ({burn}) must be below the number of steps ({steps})", field="--warmup"
+            f"burn-in ({burn}) must be below the number of steps ({steps})", field="warmup"
         )
     return {"walkers": walkers, "steps": steps, "burn": burn, "seed": seed}
 

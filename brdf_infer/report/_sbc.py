@@ -12,7 +12,8 @@ from matplotlib.figure import Figure
 from brdf_infer._atomic import atomic_write_bytes, atomic_write_json
 from brdf_infer.model import FAMILIES
 from brdf_infer.report import _html
-from brdf_infer.sbc import COVERAGE_LEVELS, HISTOGRAM_BINS, PLANTED_FAULTS, SBC_FILE, SbcResult
+from brdf_infer.sbc import COVERAGE_LEVELS, HISTOGRAM_BINS, SBC_FILE, SbcResult
+from brdf_infer.settings import PLANTED_FAULTS
 from brdf_infer.uniformity import ecdf_band, uniform_rank_band
 from brdf_infer.verdict import ALL_PASS, Verdict
 

@@ -1,26 +1,30 @@
-"""``brdf-infer export``: arguments checked before any work, then the library's export."""
+"""``brdf-infer export``: Zemax ``.BSDF`` tables or ABg rows of a parameter set or a posterior
+run (:mod:`brdf_infer.export`), every option checked before any work; ``--check`` reads a
+``.BSDF`` file back."""
 
 from __future__ import annotations
 
 import argparse
 import contextlib
 import json
-import sys
-from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
 
-from brdf_infer._cli_fold import add_fold_arguments, chosen_fold, refuse_fold
 from brdf_infer._outdir import check_output_dir
 from brdf_infer._outlock import writing
+from brdf_infer.cli._common import emit_json, progress, scene_command_parser, table
+from brdf_infer.cli._options import add_fold_arguments, angles, chosen_fold, refuse_fold
 from brdf_infer.errors import BadInputError
 
 MAX_INTEGRAL_ERROR = 0.01  # a table whose own hemisphere integral misses its TIS by more
 
 
-def add_export_arguments(parser: argparse.ArgumentParser) -> None:
+def add_parser(commands) -> argparse.ArgumentParser:
     """The options of ``brdf-infer export``."""
+    parser = scene_command_parser(
+        commands, "export", "Zemax .BSDF tables or ABg fits of a parameter set or a posterior run"
+    )
     source = parser.add_mutually_exclusive_group(required=True)
     source.add_argument("--params", help="parameter set name (uv-paper, vis-paper) or JSON file")
     source.add_argument("--run", help="posterior run directory: median, 95 %% bounds and draws")
@@ -42,6 +46,8 @@ def add_export_arguments(parser: argparse.ArgumentParser) -> None:
     )
     add_fold_arguments(parser, "the scene's or the run's [model] fold, false unless set")
     parser.add_argument("--force", action="store_true", help="overwrite existing output files")
+    parser.set_defaults(handler=main)
+    return parser
 
 
 def _checked_options(args: argparse.Namespace) -> None:
@@ -93,13 +99,8 @@ def _source(args: argparse.Namespace, scene_name: str):
     )
 
 
-def command_export(
-    args: argparse.Namespace,
-    angles: Callable[..., np.ndarray],
-    table: Callable[[Sequence[str], Sequence[Sequence[str]]], str],
-    progress: Callable[[str], None],
-) -> None:
-    """Handler of ``brdf-infer export`` (``angles``, ``table``, ``progress`` from ``cli``)."""
+def main(args: argparse.Namespace) -> int:
+    """Export (nothing written on bad input) and print what was written."""
     from brdf_infer.export import (
         DEFAULT_THETA_I_DEG,
         planned_files,
@@ -109,22 +110,22 @@ def command_export(
     )
 
     if args.check is not None:
-        _check_file(Path(args.check), args.json, table)
-        return
+        _check_file(Path(args.check), args.json)
+        return 0
     _checked_options(args)
     theta_i = (
         DEFAULT_THETA_I_DEG
         if args.theta_i is None
         else angles(args.theta_i, "--theta-i", 0.0, 90.0, upper_open=True)
     )
-    out = check_output_dir(args.out)
+    out = check_output_dir(args.out, option="--out")
     source = _source(args, args.scene)
     draws = args.draws if args.format == "zemax-bsdf" else (args.draws or 100)
     available = source.count
     if source.from_run and draws > available:
         raise BadInputError(f"{draws} > the run's {available} draws", field="--draws")
     # one writer per folder; an export that died here left files its rerun may replace
-    claim = args.claims.enter_context(writing(out, "export"))
+    claim = args.claims.enter_context(writing(out, "export", option="--out"))
     unfinished = claim.previous is not None and claim.previous.command == "export"
     existing = [name for name in planned_files(source, args.format, draws) if (out / name).exists()]
     if existing and not (args.force or unfinished):
@@ -146,12 +147,13 @@ def command_export(
                     f"by {100 * error:.1f} %; use a finer --radial-step / --azimuth-step"
                 )
     if args.json:
-        print(json.dumps(result))
-        return
-    _print_result(result, table)
+        emit_json(result)
+        return 0
+    _print_result(result)
+    return 0
 
 
-def _print_result(result: dict, table) -> None:
+def _print_result(result: dict) -> None:
     if result["format"] == "abg":
         rows = [
             [
@@ -185,7 +187,7 @@ def _print_result(result: dict, table) -> None:
     print(f"{len(result['files'])} files in {folder}/ ({result['seconds']:.1f} s)")
 
 
-def _check_file(path: Path, as_json: bool, table) -> None:
+def _check_file(path: Path, as_json: bool) -> None:
     """Read a .BSDF file; per angle of incidence its TIS line and the table's own integral."""
     from brdf_infer.export import read_bsdf, table_integral
 
@@ -213,13 +215,12 @@ def _check_file(path: Path, as_json: bool, table) -> None:
         "table_integral": None if np.isnan(integrals).all() else integrals.tolist(),
     }
     if as_json:
-        print(json.dumps(payload))
+        emit_json(payload)
         return
     print(
         f"{path}: {contents.symmetry}, {contents.scatter_type}, "
         f"{contents.theta_i_deg.size} angles of incidence, {contents.azimuth_deg.size} azimuths, "
-        f"{contents.radial_deg.size} radials",
-        file=sys.stdout,
+        f"{contents.radial_deg.size} radials"
     )
     rows = [
         [f"{t:g}", f"{contents.tis[0, k]:.8g}", f"{integrals[0, k]:.6g}"]

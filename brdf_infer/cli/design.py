@@ -1,20 +1,33 @@
-"""``brdf-infer design``: arguments checked before any work, then the library's study."""
+"""``brdf-infer design``: where to measure next (:mod:`brdf_infer.design`), with the defaults
+of :class:`~brdf_infer.settings.DesignOptions`; every option checked before any work."""
 
 from __future__ import annotations
 
 import argparse
-import json
-from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from brdf_infer._design_options import DesignOptions
 from brdf_infer._outdir import check_output_dir
 from brdf_infer._outlock import writing
+from brdf_infer.cli._common import (
+    add_json_argument,
+    command_parser,
+    emit_json,
+    headless,
+    progress,
+    table,
+)
+from brdf_infer.settings import DesignOptions
 
 
-def add_design_arguments(parser: argparse.ArgumentParser) -> None:
+def add_parser(commands) -> argparse.ArgumentParser:
     """The options of ``brdf-infer design``."""
-    defaults = DesignOptions()
+    defaults = DesignOptions
+    parser = command_parser(
+        commands,
+        "design",
+        "where to measure next: the expected posterior sd of a target after new rows at each "
+        "feasible setting, and the best K settings together",
+    )
     parser.add_argument("run_dir", help="directory of a posterior run (posterior.nc, ...)")
     parser.add_argument(
         "--scene", help="check the run is of this scene (default: the run's own scene file)"
@@ -37,7 +50,9 @@ def add_design_arguments(parser: argparse.ArgumentParser) -> None:
         "the series with the most rows)",
     )
     parser.add_argument(
-        "--budget", type=int, help="rows chosen together (default: [design] budget, 3)"
+        "--budget",
+        type=int,
+        help=f"rows chosen together (default: [design] budget, {defaults.budget})",
     )
     parser.add_argument("--draws", type=int, default=defaults.draws, help="posterior draws used")
     parser.add_argument(
@@ -48,21 +63,19 @@ def add_design_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--seed", type=int, default=defaults.seed, help="random seed")
     parser.add_argument("--out", help="write design.json and design.png here (default: RUN_DIR)")
-    parser.add_argument("--json", action="store_true", help="one JSON object on stdout")
+    add_json_argument(parser)
+    parser.set_defaults(handler=main)
+    return parser
 
 
-def command_design(
-    args: argparse.Namespace,
-    table: Callable[[Sequence[str], Sequence[Sequence[str]]], str],
-    progress: Callable[[str], None],
-) -> None:
+def main(args: argparse.Namespace) -> int:
     """Run ``brdf-infer design`` (every option checked before any work, nothing written on
-    bad input)."""
+    bad input) and print the chosen settings."""
+    headless()
     from brdf_infer.design import (
         DESIGN_FIGURE,
         DESIGN_FILE,
         DESIGN_HEADERS,
-        DesignOptions,
         design,
         design_rows,
         design_series,
@@ -73,7 +86,7 @@ def command_design(
     )
 
     target = parse_target(args.target)
-    out = check_output_dir(args.out or args.run_dir)
+    out = check_output_dir(args.out or args.run_dir, option="--out")
     run = load_design_run(Path(args.run_dir), args.scene)
     scene = run.scene
     options = DesignOptions(
@@ -82,7 +95,6 @@ def command_design(
         budget=args.budget if args.budget is not None else scene.design.budget,
         seed=args.seed,
     )
-    options.check()
     series = design_series(scene, run.measurements, args.series)
     candidates = None
     if args.candidates != "grid":
@@ -95,12 +107,12 @@ def command_design(
     # into the run folder: added to a finished run (its own lock, the run stays complete);
     # elsewhere: one writer per folder
     adds = Path(out).resolve() == Path(args.run_dir).resolve()
-    args.claims.enter_context(writing(out, "design", adds=adds))
+    args.claims.enter_context(writing(out, "design", option="--out", adds=adds))
     write_design(out, result)
     payload = result.as_json()
     if args.json:
-        print(json.dumps(payload))
-        return
+        emit_json(payload)
+        return 0
     current = payload["current"]
     if current["median"] is not None:
         print(
@@ -111,3 +123,4 @@ def command_design(
     print(table(DESIGN_HEADERS, design_rows(payload)))
     print(f"{len(payload['candidates'])} candidates, {payload['seconds']:.1f} s")
     print(f"written: {out / DESIGN_FILE}, {out / DESIGN_FIGURE}")
+    return 0

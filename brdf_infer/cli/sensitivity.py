@@ -1,20 +1,33 @@
-"""``brdf-infer sensitivity``: arguments checked before any work, then the library's study."""
+"""``brdf-infer sensitivity``: the posterior under the scene's error model and with each
+assumption changed (:mod:`brdf_infer.sensitivity`), with the defaults of
+:class:`~brdf_infer.settings.SensitivitySettings`."""
 
 from __future__ import annotations
 
 import argparse
-import json
 import sys
-from collections.abc import Callable, Sequence
 
-from brdf_infer._outdir import claim_output_dir
+from brdf_infer.cli._common import (
+    claimed_output_dir,
+    emit_json,
+    headless,
+    progress,
+    scene_command_parser,
+    table,
+)
+from brdf_infer.cli._options import scene_and_measurements
+from brdf_infer.settings import SensitivitySettings
 
 
-def add_sensitivity_arguments(parser: argparse.ArgumentParser) -> None:
+def add_parser(commands) -> argparse.ArgumentParser:
     """The options of ``brdf-infer sensitivity``."""
-    from brdf_infer.sensitivity import SensitivitySettings
-
-    defaults = SensitivitySettings()
+    defaults = SensitivitySettings
+    parser = scene_command_parser(
+        commands,
+        "sensitivity",
+        "the posterior under the scene's error model and with each assumption changed "
+        "(calibration, rotation coupling, images per row, spread): TIS, π·BRDF0, PSIS-LOO",
+    )
     parser.add_argument(
         "--variants",
         nargs="+",
@@ -35,15 +48,13 @@ def add_sensitivity_arguments(parser: argparse.ArgumentParser) -> None:
         help="also write sensitivity.json and sensitivity.png here (into a run folder: the "
         "report shows them)",
     )
+    parser.set_defaults(handler=main)
+    return parser
 
 
-def command_sensitivity(
-    args: argparse.Namespace,
-    scene_and_measurements: Callable,
-    table: Callable[[Sequence[str], Sequence[Sequence[str]]], str],
-    progress: Callable[[str], None],
-) -> None:
-    """Run ``brdf-infer sensitivity`` (every option and variant checked before sampling)."""
+def main(args: argparse.Namespace) -> int:
+    """Run the study (every option and variant checked before sampling) and print it."""
+    headless()
     from brdf_infer.report import (
         SENSITIVITY_HEADERS,
         power_scaling_rows,
@@ -53,7 +64,6 @@ def command_sensitivity(
     from brdf_infer.sensitivity import (
         SENSITIVITY_FIGURE,
         SENSITIVITY_FILE,
-        SensitivitySettings,
         check_scene,
         default_variants,
         parse_variant,
@@ -67,7 +77,6 @@ def command_sensitivity(
         seed=args.seed,
         refit=not args.no_refit,
     )
-    settings.check()
     scene, measurements = scene_and_measurements(args.scene)
     check_scene(scene)
     variants = (
@@ -75,25 +84,19 @@ def command_sensitivity(
         if args.variants is None
         else [parse_variant(spec, scene) for spec in args.variants]
     )
-    out = claim_output_dir(args.out, "sensitivity", args.claims) if args.out else None
+    out = claimed_output_dir(args, args.out, "sensitivity") if args.out else None
     progress(
         f"sensitivity of scene '{scene.name}' to its error model: the default and "
         f"{len(variants)} variant(s) ({', '.join(v.name for v in variants)}), "
         f"{settings.chains} chains × ({settings.warmup} + {settings.draws}) each ..."
     )
-    result = sensitivity(
-        scene,
-        measurements,
-        variants,
-        settings,
-        progress=sys.stderr.isatty(),
-    )
+    result = sensitivity(scene, measurements, variants, settings, progress=sys.stderr.isatty())
     payload = result.as_json()
     if out is not None:
         write_sensitivity(out, result)
     if args.json:
-        print(json.dumps(payload))
-        return
+        emit_json(payload)
+        return 0
     print(f"sensitivity to the error-model assumptions, scene '{scene.name}'")
     print(table(SENSITIVITY_HEADERS, sensitivity_rows(payload)))
     scaling = power_scaling_rows(payload)
@@ -103,3 +106,4 @@ def command_sensitivity(
     print(f"{result.seconds:.1f} s")
     if out is not None:
         print(f"written: {out / SENSITIVITY_FILE}, {out / SENSITIVITY_FIGURE}")
+    return 0

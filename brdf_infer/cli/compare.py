@@ -1,52 +1,69 @@
-"""``brdf-infer compare``: arguments checked before any work, then the library's comparison."""
+"""``brdf-infer compare``: model families ranked by PSIS-LOO (:mod:`brdf_infer.compare`) with
+the defaults of :class:`~brdf_infer.settings.CompareSettings`."""
 
 from __future__ import annotations
 
 import argparse
-import json
 import sys
-from collections.abc import Callable, Sequence
 
-from brdf_infer._nuts_settings import check_nuts_settings
-from brdf_infer._outdir import claim_output_dir
+from brdf_infer.cli._common import (
+    claimed_output_dir,
+    emit_json,
+    headless,
+    progress,
+    scene_command_parser,
+    table,
+)
+from brdf_infer.cli._options import (
+    add_force_argument,
+    add_instrument_argument,
+    forced,
+    scene_and_measurements,
+)
+from brdf_infer.settings import CompareSettings
 
 DEFAULT_MODELS = ("strumik2024", "abg", "harvey-shack", "lambertian", "lambertian+abg")
 
 
-def add_compare_arguments(parser: argparse.ArgumentParser) -> None:
+def add_parser(commands) -> argparse.ArgumentParser:
     """The options of ``brdf-infer compare``."""
-    parser.add_argument(
-        "--models",
-        nargs="+",
-        default=list(DEFAULT_MODELS),
-        help="model families to compare",
+    defaults = CompareSettings
+    parser = scene_command_parser(
+        commands,
+        "compare",
+        "rank model families (Eq. 7, ABg, Harvey–Shack, Lambertian, …) by PSIS-LOO",
     )
-    parser.add_argument("--chains", type=int, default=4, help="NUTS chains per family")
-    parser.add_argument("--warmup", type=int, default=500, help="NUTS warmup per chain")
-    parser.add_argument("--draws", type=int, default=1000, help="NUTS draws per chain")
-    parser.add_argument("--seed", type=int, default=0, help="random seed")
+    parser.add_argument(
+        "--models", nargs="+", default=list(DEFAULT_MODELS), help="model families to compare"
+    )
+    parser.add_argument(
+        "--chains", type=int, default=defaults.chains, help="NUTS chains per family"
+    )
+    parser.add_argument("--warmup", type=int, default=defaults.warmup, help="NUTS warmup per chain")
+    parser.add_argument("--draws", type=int, default=defaults.draws, help="NUTS draws per chain")
+    parser.add_argument("--seed", type=int, default=defaults.seed, help="random seed")
     parser.add_argument(
         "--target-accept",
         type=float,
-        default=0.9,  # CompareSettings.target_accept (not imported here: arviz)
+        default=defaults.target_accept,
         help="NUTS target acceptance (0.9: one setting for families that diverge more easily)",
     )
     parser.add_argument(
         "--no-refit", action="store_true", help="no exact refits where Pareto k > 0.7"
     )
     parser.add_argument("--out", help="also write compare.json and compare.png here")
+    add_force_argument(parser)
+    add_instrument_argument(parser)
+    parser.set_defaults(handler=main)
+    return parser
 
 
-def command_compare(
-    args: argparse.Namespace,
-    scene_and_measurements: Callable,
-    table: Callable[[Sequence[str], Sequence[Sequence[str]]], str],
-    progress: Callable[[str], None],
-) -> None:
-    """Run ``brdf-infer compare`` (options checked before the scene's work starts)."""
+def main(args: argparse.Namespace) -> int:
+    """Compare the families (options checked before the scene's work starts) and print the
+    ranking."""
+    headless()
     from brdf_infer.compare import (
         COMPARE_FILE,
-        CompareSettings,
         check_family_names,
         compare_families,
     )
@@ -61,9 +78,9 @@ def command_compare(
         target_accept=args.target_accept,
         refit=not args.no_refit,
     )
-    check_nuts_settings(settings)
-    scene, measurements = scene_and_measurements(args.scene)
-    out = claim_output_dir(args.out, "compare", args.claims) if args.out else None
+    scene, measurements = scene_and_measurements(args.scene, args.instrument, args.force)
+    forced(scene, measurements)
+    out = claimed_output_dir(args, args.out, "compare") if args.out else None
     progress(
         f"comparing {', '.join(names)} on scene '{scene.name}' by PSIS-LOO "
         f"({settings.chains} chains × {settings.draws} draws each) ..."
@@ -78,18 +95,17 @@ def command_compare(
     for note in result.warnings:
         progress(f"warning: {note}")
     if args.json:
-        print(json.dumps(payload))
-        return
+        emit_json(payload)
+        return 0
     print(f"PSIS-LOO comparison on scene '{scene.name}' (best first)")
-    print(comparison_table(payload, table))
+    print(comparison_table(payload))
     print(f"{result.seconds:.1f} s")
     if out is not None:
         print(f"written: {out / COMPARE_FILE}, {out / 'compare.png'}")
+    return 0
 
 
-def comparison_table(
-    payload: dict, table: Callable[[Sequence[str], Sequence[Sequence[str]]], str]
-) -> str:
+def comparison_table(payload: dict) -> str:
     """The human table of ``compare``'s JSON (best first): each family's rank with its
     sampler diagnostics beside it, and a line for each family whose diagnostics fail."""
     rows = [

@@ -1,0 +1,136 @@
+"""Options several commands share (``--force``, ``--model``, ``--instrument``, ``--fold``),
+their checks before any work, and the scene they read."""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+from brdf_infer.cli._common import progress
+from brdf_infer.errors import BadInputError
+
+
+def add_force_argument(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--force",
+        action="store_true",
+        help="go on past a failed plausibility check (values that look like percent, angles "
+        "that look like radians, a fit whose pi*BRDF0 or TIS exceeds 1); the verdict then "
+        "names it",
+    )
+
+
+def add_model_argument(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--model",
+        help="model family: strumik2024, abg, harvey-shack, lambertian, lambertian+abg "
+        "(default: the scene's [model] family)",
+    )
+
+
+def add_instrument_argument(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--instrument",
+        help="what a raw reflectance is: point (Eq. 6), aperture (dPs/Pi through the detector "
+        "aperture), image (Eq. 2 over the signal square) (default: the scene's [instrument])",
+    )
+
+
+def add_fold_arguments(parser: argparse.ArgumentParser, default: str) -> None:
+    """``--fold`` and ``--no-fold`` into ``args.fold`` (True, False; None when neither is
+    given); ``default`` says in the help what neither means.
+
+    Products default to the physical BRDF (no folding, the conservative choice for a
+    stray-light budget); a posterior run's products follow its scene's ``[model] fold``. The
+    article's Table 3 comparison folds explicitly with ``--fold``. ``--no-fold`` stays
+    accepted (scripts use it).
+    """
+    group = parser.add_mutually_exclusive_group()
+    group.add_argument(
+        "--fold",
+        dest="fold",
+        action="store_const",
+        const=True,
+        default=None,
+        help="include Eq. (10)'s folding, a measurement artefact (the article's Table 3 does)",
+    )
+    group.add_argument(
+        "--no-fold",
+        dest="fold",
+        action="store_const",
+        const=False,
+        help=f"leave Eq. (10) out: the physical BRDF (default: {default})",
+    )
+
+
+def chosen_fold(requested: bool | None, default: bool = False) -> bool:
+    """The fold switch: ``requested`` on the command line, else ``default`` (a run's own)."""
+    return default if requested is None else requested
+
+
+def refuse_fold(requested: bool | None, family_name: str) -> None:
+    """A family other than ``strumik2024`` has no Eq. (10) to fold with.
+
+    Raises:
+        BadInputError: ``--fold`` was asked for.
+    """
+    if requested:
+        raise BadInputError(f"a run of {family_name} has no Eq. (10)", field="--fold")
+
+
+def checked_instrument(name: str | None) -> None:
+    """``--instrument``: a known instrument model (checked before the scene is read)."""
+    from brdf_infer.instrument import INSTRUMENT_MODELS
+
+    if name is not None and name not in INSTRUMENT_MODELS:
+        raise BadInputError(
+            f"unknown instrument model {name!r} (known: {', '.join(INSTRUMENT_MODELS)})",
+            field="--instrument",
+        )
+
+
+def scene_and_measurements(name: str, instrument: str | None = None, force: bool | None = None):
+    """The scene (every file it names checked; predicting through ``instrument`` when given)
+    and its rows, checked for plausibility (:mod:`brdf_infer.plausibility`): a failed check
+    stops the command unless ``force`` (:func:`forced` then reports it); a command without
+    ``--force`` (``force=None``) only warns. Other warnings on stderr."""
+    from brdf_infer.plausibility import measurement_checks, measurement_warnings, require_plausible
+    from brdf_infer.scene import check_instrument, load_scene
+
+    checked_instrument(instrument)
+    scene = load_scene(name)
+    if instrument is not None:
+        scene = check_instrument(scene, instrument)
+    measurements = scene.load_measurements()
+    implausible = measurement_checks(scene, measurements)
+    if force is None:
+        warnings = [found.message for found in implausible]
+    else:
+        require_plausible(implausible, force)
+        warnings = []
+    for warning in warnings + measurement_warnings(measurements):
+        progress(f"warning: {warning}")
+    return scene, measurements
+
+
+def forced(scene, measurements) -> list[str]:
+    """The input checks a ``--force`` command goes past, one line each (also on stderr)."""
+    from brdf_infer.plausibility import measurement_checks
+
+    lines = [found.record for found in measurement_checks(scene, measurements)]
+    for line in lines:
+        progress(f"warning: forced past a plausibility check: {line}")
+    return lines
+
+
+def angles(values, option: str, low: float, high: float, upper_open: bool = False) -> np.ndarray:
+    """``values`` [deg] as an array, each checked to lie in [low, high] (or [low, high))."""
+    array = np.asarray(values, dtype=float)
+    bad = ~np.isfinite(array) | (array < low) | ((array >= high) if upper_open else (array > high))
+    if bad.any():
+        bracket = ")" if upper_open else "]"
+        raise BadInputError(
+            f"{array[bad][0]:g} deg is outside [{low:g}, {high:g}{bracket}", field=option
+        )
+    return array

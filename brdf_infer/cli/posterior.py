@@ -1,0 +1,110 @@
+"""``brdf-infer posterior``: :func:`brdf_infer.posterior.run_posterior` (NUTS or emcee) with
+the defaults of :class:`~brdf_infer.settings.PosteriorSettings`."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from brdf_infer.cli._common import (
+    claimed_output_dir,
+    emit_json,
+    print_posterior_summary,
+    print_verdict,
+    progress,
+    scene_command_parser,
+)
+from brdf_infer.cli._options import (
+    add_force_argument,
+    add_instrument_argument,
+    add_model_argument,
+    forced,
+    scene_and_measurements,
+)
+from brdf_infer.settings import (
+    EMCEE_BURN_IN,
+    NUTS_WARMUP,
+    SAMPLERS,
+    PosteriorSettings,
+    check_family_name,
+)
+
+
+def add_parser(commands) -> argparse.ArgumentParser:
+    """The options of ``brdf-infer posterior``."""
+    defaults = PosteriorSettings
+    parser = scene_command_parser(commands, "posterior", "sample the posterior with NUTS or emcee")
+    parser.add_argument(
+        "--sampler", choices=list(SAMPLERS), default=defaults.sampler, help="sampler"
+    )
+    parser.add_argument("--chains", type=int, default=defaults.chains, help="NUTS chains")
+    parser.add_argument("--draws", type=int, default=defaults.draws, help="NUTS draws per chain")
+    parser.add_argument(
+        "--warmup",
+        type=int,
+        default=defaults.warmup,
+        help=f"NUTS warmup per chain ({NUTS_WARMUP}) or emcee burn-in steps ({EMCEE_BURN_IN})",
+    )
+    parser.add_argument(
+        "--walkers",
+        type=int,
+        default=defaults.walkers,
+        help="emcee walkers (default: max(24, 2 x dimension))",
+    )
+    parser.add_argument("--steps", type=int, default=defaults.steps, help="emcee steps")
+    parser.add_argument("--seed", type=int, default=defaults.seed, help="random seed")
+    parser.add_argument("--out", help="output directory (default: reports/<scene>/<sampler>)")
+    parser.add_argument("--resume", action="store_true", help="continue an interrupted emcee run")
+    parser.add_argument(
+        "--error-model",
+        choices=["generative", "spread"],
+        help="override the scene's errors.model (spread: the earlier model, for comparison)",
+    )
+    parser.add_argument(
+        "--target-accept",
+        type=float,
+        default=defaults.target_accept,
+        help="NUTS target acceptance probability (raise towards 0.95 if a run diverges)",
+    )
+    add_model_argument(parser)
+    add_instrument_argument(parser)
+    add_force_argument(parser)
+    parser.set_defaults(handler=main)
+    return parser
+
+
+def main(args: argparse.Namespace) -> int:
+    """Sample the posterior into ``--out`` and print its summary and verdict."""
+    from brdf_infer.posterior import run_posterior
+
+    check_family_name(args.model)
+    scene, measurements = scene_and_measurements(args.scene, args.instrument, args.force)
+    passed = forced(scene, measurements)
+    out = claimed_output_dir(
+        args, args.out or Path("reports") / scene.name / args.sampler, "posterior"
+    )
+    run = run_posterior(
+        scene,
+        measurements,
+        sampler=args.sampler,
+        chains=args.chains,
+        draws=args.draws,
+        warmup=args.warmup,
+        walkers=args.walkers,
+        steps=args.steps,
+        seed=args.seed,
+        out=out,
+        resume=args.resume,
+        error_model=args.error_model,
+        model=args.model,
+        target_accept=args.target_accept,
+        announce=lambda what: progress(what + " ..."),
+        forced=passed,
+    )
+    summary = run.summary
+    if args.json:
+        emit_json({"out": str(out), **summary})
+        return 0
+    print_posterior_summary(summary, out)
+    print_verdict(summary["verdict"])
+    return 0

@@ -1,0 +1,174 @@
+"""``brdf-infer run``: the main job, :func:`brdf_infer.workflow.run`, with the defaults of
+:class:`~brdf_infer.settings.RunSettings`."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from brdf_infer.cli._common import (
+    claimed_output_dir,
+    emit_json,
+    headless,
+    print_posterior_summary,
+    print_verdict,
+    progress,
+    scene_command_parser,
+)
+from brdf_infer.cli._options import (
+    add_force_argument,
+    add_instrument_argument,
+    add_model_argument,
+    scene_and_measurements,
+)
+from brdf_infer.errors import BadInputError
+from brdf_infer.settings import RunSettings, check_family_name
+
+
+def add_parser(commands) -> argparse.ArgumentParser:
+    """The options of ``brdf-infer run``."""
+    parser = scene_command_parser(
+        commands,
+        "run",
+        "main job: paper fit, least squares, NUTS posterior and report in reports/<scene>/, "
+        "plus the studies the scene's [studies] table or the options below ask for",
+    )
+    parser.add_argument("--out", help="output directory (default: reports/<scene>)")
+    parser.add_argument("--example", help="also write the small committed example report here")
+    parser.add_argument("--chains", type=int, default=RunSettings.chains, help="NUTS chains")
+    parser.add_argument("--draws", type=int, default=RunSettings.draws, help="NUTS draws per chain")
+    parser.add_argument(
+        "--warmup", type=int, default=RunSettings.warmup, help="NUTS warmup per chain"
+    )
+    parser.add_argument("--seed", type=int, default=RunSettings.seed, help="random seed")
+    studies = parser.add_argument_group(
+        "studies (default: the scene's [studies] table; any of these replaces it)"
+    )
+    studies.add_argument(
+        "--full",
+        action="store_true",
+        help="every study the scene can run (other error model, instrument models, ray "
+        "traces, model comparison, sensitivity to the error-model assumptions)",
+    )
+    studies.add_argument(
+        "--error-models", nargs="+", metavar="NAME", help="posteriors under these error models"
+    )
+    studies.add_argument(
+        "--instruments", nargs="+", metavar="NAME", help="posteriors under these instrument models"
+    )
+    studies.add_argument("--raytrace", action="store_true", help="ray-trace the posterior")
+    studies.add_argument(
+        "--compare", nargs="+", metavar="FAMILY", help="model families compared by PSIS-LOO"
+    )
+    studies.add_argument(
+        "--sensitivity",
+        action="store_true",
+        help="posteriors with each error-model assumption changed (brdf-infer sensitivity)",
+    )
+    add_model_argument(parser)
+    add_instrument_argument(parser)
+    add_force_argument(parser)
+    parser.set_defaults(handler=main)
+    return parser
+
+
+def main(args: argparse.Namespace) -> int:
+    """Run the main job (options checked before any work) and print its summary."""
+    headless()
+    from brdf_infer.workflow import run
+
+    check_family_name(args.model)
+    # the input checks stop here, the fits' in run(); run() reports what it is forced past
+    scene, measurements = scene_and_measurements(args.scene, args.instrument, args.force)
+    settings = RunSettings(
+        chains=args.chains,
+        draws=args.draws,
+        warmup=args.warmup,
+        seed=args.seed,
+        model=args.model,
+        studies=requested_studies(args, scene),
+        force=args.force,
+    )
+    out = claimed_output_dir(args, args.out or Path("reports") / scene.name, "run")
+    result = run(
+        scene,
+        measurements,
+        out,
+        settings,
+        example=Path(args.example) if args.example else None,
+        progress=progress,
+    )
+    if args.json:
+        emit_json(result.as_json())
+        return 0
+    _print_result(result, scene, measurements, out)
+    return 0
+
+
+def _print_result(result, scene, measurements, out: Path) -> None:
+    paper, lsq = result.paper_fit, result.lsq
+    print(f"scene '{scene.name}': {len(measurements)} measurements, model {result.model}")
+    if paper is not None:
+        print(
+            f"paper fit: sigma_E = {100 * paper['sigma_e']:.2f} % on {paper['n_points']} points "
+            f"(selection '{paper['selection']}')"
+        )
+    print(
+        f"least squares: chi2 = {lsq['cost']:.2f} for {lsq['n_points']} points "
+        f"({lsq['starts_converged']}/{lsq['starts']} starts at the optimum); "
+        f"fit quality {lsq['fit_quality']}"
+    )
+    print_posterior_summary(result.posterior, out)
+    if result.comparison is not None:
+        best = result.comparison["models"][0]
+        untrusted = [m["name"] for m in result.comparison["models"] if not m["sampler_ok"]]
+        caveat = (
+            f"; sampler diagnostics fail for {', '.join(untrusted)}: not to be trusted in the "
+            "ranking"
+            if untrusted
+            else ""
+        )
+        print(f"model comparison: {best['name']} first (PSIS-LOO, see the report){caveat}")
+    print_verdict(result.verdict.as_json())
+    print(f"report: {result.report}")
+    print(f"done in {result.seconds:.1f} s")
+
+
+def requested_studies(args: argparse.Namespace, scene):
+    """The studies the options ask for (None: none given, the scene's ``[studies]``)."""
+    from brdf_infer.error_model import ERROR_MODELS
+    from brdf_infer.instrument import INSTRUMENT_MODELS
+    from brdf_infer.model import FAMILY_NAMES
+    from brdf_infer.scene import Studies
+    from brdf_infer.workflow import full_studies
+
+    if args.full:
+        return full_studies(scene)
+    given = (args.error_models, args.instruments, args.compare)
+    if all(value is None for value in given) and not (args.raytrace or args.sensitivity):
+        return None
+    for option, values, known in (
+        ("--error-models", args.error_models, ERROR_MODELS),
+        ("--instruments", args.instruments, INSTRUMENT_MODELS),
+        ("--compare", args.compare, FAMILY_NAMES),
+    ):
+        for value in values or ():
+            if value not in known:
+                raise BadInputError(
+                    f"unknown name {value!r} (known: {', '.join(known)})", field=option
+                )
+    if args.compare is not None and len(set(args.compare)) < 2:
+        raise BadInputError("name at least two families to compare", field="--compare")
+    if args.raytrace and scene.raytrace is None:
+        raise BadInputError(
+            "the scene has no [raytrace] table to ray-trace with",
+            file=scene.path,
+            field="--raytrace",
+        )
+    return Studies(
+        error_models=tuple(args.error_models or ()),
+        instruments=tuple(args.instruments or ()),
+        raytrace=args.raytrace,
+        compare=tuple(dict.fromkeys(args.compare or ())),
+        sensitivity=args.sensitivity,
+    )
