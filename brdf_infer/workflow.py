@@ -53,8 +53,10 @@ def _silent(message: str) -> None:
 def full_studies(scene: Scene) -> Studies:
     """Every study the scene can run: the other error model, every instrument model its
     geometry supports, ray traces where it has a ``[raytrace]`` setup, the comparison of
-    the reference model with ABg and Lambertian (or the scene's own list), and the sensitivity
-    to the error-model assumptions where the scene has a TIS."""
+    the reference model with ABg and Lambertian (or the scene's own list), the sensitivity
+    to the error-model assumptions where the scene has a TIS, and where to measure next (the
+    scene's ``[studies] design`` target, else TIS(70°) where the scene has a TIS, else
+    π·BRDF0)."""
     from brdf_infer.error_model import ERROR_MODELS
     from brdf_infer.instrument_comparison import supported_instruments
 
@@ -64,6 +66,7 @@ def full_studies(scene: Scene) -> Studies:
         raytrace=scene.raytrace is not None,
         compare=scene.studies.compare or ("strumik2024", "abg", "lambertian", "lambertian+abg"),
         sensitivity=scene.model.out_of_plane,
+        design=scene.studies.design or ("tis:70" if scene.model.out_of_plane else "pi_brdf0"),
     )
 
 

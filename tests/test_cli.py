@@ -160,6 +160,8 @@ def test_run_with_the_instrument_study_samples_each_model_side_by_side(tmp_path,
         (["--instruments", "lens"], "--instruments"),
         (["--error-models", "student"], "--error-models"),
         (["--compare", "abg"], "--compare"),
+        (["--design", "gloss"], "--design"),
+        (["--design", "tis:95"], "--design"),
     ],
 )
 def test_run_refuses_unknown_studies_before_any_work(tmp_path, capsys, argv, field):

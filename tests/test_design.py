@@ -265,3 +265,17 @@ def test_run_does_the_design_study_the_scene_asks_for(tmp_path, capsys):
         "where to measure next (pi_brdf0)"
     ]
     assert "Where to measure next" in (out / "report.html").read_text()
+
+
+def test_run_asks_for_the_design_study_by_flag_and_in_full():
+    """``run --design TARGET`` and ``run --full`` ask for the study; the scene's own
+    ``[studies] design`` target wins in ``--full``."""
+    from brdf_infer.cli import build_parser
+    from brdf_infer.cli.run import requested_studies
+    from brdf_infer.scene import load_scene
+    from brdf_infer.workflow import full_studies
+
+    scene = load_scene("lya")
+    args = build_parser().parse_args(["run", "--design", "pi_brdf0"])
+    assert requested_studies(args, scene).requested() == ["where to measure next (pi_brdf0)"]
+    assert "where to measure next (tis:70)" in full_studies(scene).requested()

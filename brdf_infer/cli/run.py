@@ -48,7 +48,8 @@ def add_parser(commands) -> argparse.ArgumentParser:
         "--full",
         action="store_true",
         help="every study the scene can run (other error model, instrument models, ray "
-        "traces, model comparison, sensitivity to the error-model assumptions)",
+        "traces, model comparison, sensitivity to the error-model assumptions, where to "
+        "measure next)",
     )
     studies.add_argument(
         "--error-models", nargs="+", metavar="NAME", help="posteriors under these error models"
@@ -64,6 +65,12 @@ def add_parser(commands) -> argparse.ArgumentParser:
         "--sensitivity",
         action="store_true",
         help="posteriors with each error-model assumption changed (brdf-infer sensitivity)",
+    )
+    studies.add_argument(
+        "--design",
+        metavar="TARGET",
+        help="where to measure next for TARGET (brdf-infer design: tis:70, pi_brdf0, a "
+        "parameter, brdf:THETA_I,THETA_S or all), with the scene's [design] budget",
     )
     add_model_argument(parser)
     add_instrument_argument(parser)
@@ -136,6 +143,7 @@ def _print_result(result, scene, measurements, out: Path) -> None:
 
 def requested_studies(args: argparse.Namespace, scene):
     """The studies the options ask for (None: none given, the scene's ``[studies]``)."""
+    from brdf_infer._design_target import parse_target
     from brdf_infer.error_model import ERROR_MODELS
     from brdf_infer.instrument import INSTRUMENT_MODELS
     from brdf_infer.model import FAMILY_NAMES
@@ -145,8 +153,12 @@ def requested_studies(args: argparse.Namespace, scene):
     if args.full:
         return full_studies(scene)
     given = (args.error_models, args.instruments, args.compare)
-    if all(value is None for value in given) and not (args.raytrace or args.sensitivity):
+    if all(value is None for value in given) and not (
+        args.raytrace or args.sensitivity or args.design
+    ):
         return None
+    if args.design is not None:
+        parse_target(args.design, field="--design")
     for option, values, known in (
         ("--error-models", args.error_models, ERROR_MODELS),
         ("--instruments", args.instruments, INSTRUMENT_MODELS),
@@ -171,4 +183,5 @@ def requested_studies(args: argparse.Namespace, scene):
         raytrace=args.raytrace,
         compare=tuple(dict.fromkeys(args.compare or ())),
         sensitivity=args.sensitivity,
+        design=args.design,
     )
