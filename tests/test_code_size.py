@@ -66,6 +66,19 @@ SPLIT: dict[str, tuple[str, ...]] = {
     "brdf_infer/export/_files.py": tuple(
         f"brdf_infer/export/{name}.py" for name in ("_files", "_source", "_zemax")
     ),
+    "brdf_infer/scene.py": tuple(
+        f"brdf_infer/scene/{name}.py"
+        for name in (
+            "__init__",
+            "_errors",
+            "_fields",
+            "_load",
+            "_parse",
+            "_records",
+            "_setups",
+            "_tables",
+        )
+    ),
 }
 
 

@@ -1,0 +1,144 @@
+"""Readers of the scene's analysis tables: ``[model] family``, ``[paper_fit] selection``,
+``name``, ``[studies]`` and ``[design]``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from brdf_infer.errors import BadInputError
+from brdf_infer.scene._fields import (
+    _angle_range,
+    _boolean,
+    _names,
+    _number,
+    _string,
+    _table,
+)
+from brdf_infer.scene._records import DesignSettings, Studies
+from brdf_infer.selections import SELECTIONS
+
+
+def _model_family(model: dict, path: Path) -> str:
+    """``[model] family``, one of the model families (default ``strumik2024``)."""
+    from brdf_infer.model import check_family_name
+
+    name = model.get("family", "strumik2024")
+    check_family_name(name, file=path, field="model.family")
+    return name
+
+
+def _compare_families(names, path: Path, field_name: str) -> tuple[str, ...]:
+    """Model families to compare by PSIS-LOO (at least two; none: no comparison)."""
+    from brdf_infer.model import FAMILY_NAMES
+
+    names = _names(names, path, field_name, FAMILY_NAMES, "model family")
+    if len(names) == 1:
+        raise BadInputError("name at least two families to compare", file=path, field=field_name)
+    return names
+
+
+def _parse_studies(document: dict, path: Path) -> Studies:
+    """The ``[studies]`` table (and the older top-level ``compare = [...]``)."""
+    from brdf_infer.error_model import ERROR_MODELS
+    from brdf_infer.instrument import INSTRUMENT_MODELS
+
+    table = _table(document, "studies", path, set(Studies.__dataclass_fields__))
+    if "compare" in document and "compare" in table:
+        raise BadInputError(
+            "give compare once: in [studies] (the top-level key is its older form)",
+            file=path,
+            field="studies.compare",
+        )
+    compare = table.get("compare", document.get("compare", []))
+    field_name = "studies.compare" if "compare" in table else "compare"
+    return Studies(
+        error_models=_names(
+            table.get("error_models", []),
+            path,
+            "studies.error_models",
+            ERROR_MODELS,
+            "error model",
+        ),
+        instruments=_names(
+            table.get("instruments", []),
+            path,
+            "studies.instruments",
+            INSTRUMENT_MODELS,
+            "instrument model",
+        ),
+        raytrace=_boolean(table, "raytrace", path, "studies.", False),
+        compare=_compare_families(compare, path, field_name),
+        sensitivity=_boolean(table, "sensitivity", path, "studies.", False),
+        design=_design_target(table, path),
+    )
+
+
+def _design_target(table: dict, path: Path) -> str | None:
+    from brdf_infer._design_target import parse_target
+
+    if "design" not in table:
+        return None
+    parse_target(table["design"], field="studies.design", file=path)
+    return table["design"].strip()
+
+
+def _parse_design(document: dict, path: Path, series: dict) -> DesignSettings:
+    """The ``[design]`` table (:class:`DesignSettings`)."""
+    table = _table(document, "design", path, set(DesignSettings.__dataclass_fields__))
+    defaults = DesignSettings()
+    name = table.get("series")
+    if name is not None and name not in series:
+        raise BadInputError(
+            f"no series {name!r} in the scene (known: {', '.join(series)})",
+            file=path,
+            field="design.series",
+        )
+    clearance = _number(table, "source_clearance_deg", path, default=defaults.source_clearance_deg)
+    if not 0.0 <= clearance < 90.0:
+        raise BadInputError(
+            f"expected an angle in [0, 90) deg, got {clearance:g}",
+            file=path,
+            field="design.source_clearance_deg",
+        )
+    try:
+        step = _number(table, "step_deg", path, default=defaults.step_deg, positive=True)
+    except BadInputError as error:
+        raise BadInputError(error.problem, file=path, field="design.step_deg") from None
+    budget = table.get("budget", defaults.budget)
+    if isinstance(budget, bool) or not isinstance(budget, int) or not 1 <= budget <= 10:
+        raise BadInputError(
+            f"expected an integer in [1, 10], got {budget!r}", file=path, field="design.budget"
+        )
+    return DesignSettings(
+        theta_i_deg=_angle_range(table, "theta_i_deg", path, defaults.theta_i_deg, 0.0, 89.0),
+        theta_s_deg=_angle_range(table, "theta_s_deg", path, defaults.theta_s_deg, -89.0, 89.0),
+        step_deg=step,
+        source_clearance_deg=clearance,
+        series=name,
+        budget=budget,
+    )
+
+
+def _scene_name(document: dict, path: Path) -> str:
+    """``name``: it names the scene's results folder (``reports/<name>``, a batch's
+    ``OUT/<name>``), so it is a plain folder name."""
+    name = _string(document, "name", path)
+    if not name.strip() or name in (".", "..") or any(c in name for c in "/\\\x00"):
+        raise BadInputError(
+            f"expected a non-empty name without '/', got {name!r} (it names the results folder)",
+            file=path,
+            field="name",
+        )
+    return name
+
+
+def _selection(paper: dict, path: Path) -> str:
+    """``[paper_fit] selection``: a name of :data:`brdf_infer.selections.SELECTIONS`."""
+    name = _string(paper, "selection", path, default="paper")
+    if name not in SELECTIONS:
+        raise BadInputError(
+            f"unknown selection {name!r} (known: {', '.join(SELECTIONS)})",
+            file=path,
+            field="paper_fit.selection",
+        )
+    return name
