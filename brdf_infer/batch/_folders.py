@@ -1,0 +1,55 @@
+"""Run folders of a batch: their names, and the half-written ones a killed batch left."""
+
+from __future__ import annotations
+
+import os
+import shutil
+from pathlib import Path
+
+from brdf_infer.batch._entries import SceneEntry
+
+PARTIAL_MARK = ".partial-"  # out/.<scene>.partial-<pid>: a run folder being written
+OLD_MARK = ".old-"  # out/.<scene>.old-<pid>: the folder a complete one is replacing
+
+
+def _folder_names(entries: list[SceneEntry]) -> list[str]:
+    """One folder name per scene: its name, made unique with a suffix where names repeat."""
+    names, seen = [], {}
+    for entry in entries:
+        base = entry.scene.name if entry.scene is not None else Path(entry.source).stem
+        seen[base] = seen.get(base, 0) + 1
+        names.append(base if seen[base] == 1 else f"{base}-{seen[base]}")
+    return names
+
+
+def _remove(path: Path) -> None:
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path, ignore_errors=True)
+    else:
+        path.unlink(missing_ok=True)
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def remove_stale_partials(out: Path) -> list[Path]:
+    """Remove run folders left half-written in ``out`` by a batch that was killed outright
+    (SIGKILL, power loss): ``.<scene>.partial-<pid>`` (and ``.<scene>.old-<pid>``, the folder
+    it was replacing) of a process that no longer runs."""
+    removed = []
+    if not out.is_dir():
+        return removed
+    for mark in (PARTIAL_MARK, OLD_MARK):
+        for path in out.glob(f".*{mark}*"):
+            pid = path.name.rsplit(mark, 1)[-1]
+            if pid.isdigit() and (int(pid) == os.getpid() or not _pid_alive(int(pid))):
+                _remove(path)
+                removed.append(path)
+    return removed
