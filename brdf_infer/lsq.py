@@ -24,21 +24,21 @@ from __future__ import annotations
 import functools
 import time
 from dataclasses import dataclass, field
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
+from brdf_infer._reweighting import REWEIGHT_TOLERANCE as REWEIGHT_TOLERANCE
+from brdf_infer._reweighting import Reweighting
+from brdf_infer._reweighting import paule_mandel as paule_mandel
 from brdf_infer.coordinates import ANGLE_SCALE_DEG, INTERNAL_NAMES, from_internal, to_internal
-from brdf_infer.error_model import angle_slopes, theta_s_per_rotation
 from brdf_infer.errors import BadInputError
 from brdf_infer.measurements import Measurements
 from brdf_infer.observations import (
     build_observation_model,
-    log_reflectance_at,
-    predicted_log_reflectance,
     standardized_residuals,
 )
 from brdf_infer.params import PARAM_NAMES, Params
@@ -53,7 +53,6 @@ SOLVERS = {
 }
 CONVERGED_COST_TOLERANCE = 1e-6  # relative (χ² units, at least 1e-6 absolute)
 REWEIGHT_ITERATIONS = 12  # at most, of the σ update (angle terms, Paule–Mandel σ_rep)
-REWEIGHT_TOLERANCE = 1e-6  # relative change of every σ_i that ends the reweighting
 ILL_CONDITIONED = 1e8  # condition number of J in internal coordinates
 # optimistix outcomes reported per start (anything else is reported as "other")
 STATUS_NAMES: tuple[str, ...] = (
@@ -256,6 +255,32 @@ def fit_lsq(
         BadInputError: unknown solver, fewer than one start, or fewer points than free
             parameters.
     """
+    model = _checked_model(scene, measurements, solver, starts)
+    free = scene.free_parameters
+    transform = free_transform(scene)
+    free_index = free_indices(scene)
+    z0 = start_points(scene, transform, starts, seed, init)
+    u0 = jnp.asarray(np.stack([transform.from_free(z) for z in z0]))
+    solve = _batched_solver(solver, rtol, atol, max_steps, free_index, model.fold)
+    reweight = Reweighting(scene, model, len(free))
+    model = model.with_sigma(reweight.sigma)
+    solved = _solve_reweighted(solve, u0, model, transform, free_index, reweight)
+    return _lsq_result(
+        scene,
+        measurements,
+        solved,
+        transform,
+        free_index,
+        reweight,
+        starts,
+        solver,
+        scale_covariance,
+    )
+
+
+def _checked_model(scene: Scene, measurements: Measurements, solver: str, starts: int):
+    """The observation model of the rows, once the solver, the starts and the number of points
+    are checked (:func:`fit_lsq` Raises)."""
     if solver not in SOLVERS:
         raise BadInputError(
             f"unknown solver {solver!r} (known: {', '.join(SOLVERS)})", field="solver"
@@ -270,13 +295,24 @@ def fit_lsq(
             "(fix some in the scene's [priors])",
             file=measurements.path,
         )
-    transform = free_transform(scene)
-    free_index = free_indices(scene)
-    z0 = start_points(scene, transform, starts, seed, init)
-    u0 = jnp.asarray(np.stack([transform.from_free(z) for z in z0]))
-    solve = _batched_solver(solver, rtol, atol, max_steps, free_index, model.fold)
-    reweight = _Reweighting(scene, model, len(free))
-    model = model.with_sigma(reweight.sigma)
+    return model
+
+
+class _Solved(NamedTuple):
+    """The last solve of :func:`_solve_reweighted` and the model (row weights) it used."""
+
+    model: Any
+    z_free: Any
+    costs: Any
+    status: Any
+    settled: bool
+    seconds: float
+    compile_seconds: float
+
+
+def _solve_reweighted(solve, u0, model, transform, free_index, reweight: Reweighting) -> _Solved:
+    """Compile the batched solver once and solve from every start, reweighting the rows and
+    solving again until the weights settle (at most ``REWEIGHT_ITERATIONS`` solves)."""
     arguments = (model.data, transform, model.constants)
     clock = time.perf_counter()
     compiled = solve.lower(u0, *arguments).compile()
@@ -295,8 +331,24 @@ def fit_lsq(
             arguments = (model.data, transform, model.constants)
             u0 = u0.at[0].set(jnp.asarray(transform.from_free(np.asarray(z_free[best_index]))))
     seconds = time.perf_counter() - clock
+    return _Solved(model, z_free, costs, status, settled, seconds, compile_seconds)
 
-    costs = np.where(np.isfinite(costs), np.asarray(costs), np.inf)
+
+def _lsq_result(
+    scene: Scene,
+    measurements: Measurements,
+    solved: _Solved,
+    transform,
+    free_index,
+    reweight: Reweighting,
+    starts: int,
+    solver: str,
+    scale_covariance: bool,
+) -> LsqResult:
+    """The best start of the last solve, its covariance and the fit's warnings."""
+    model, z_free, status, settled = solved.model, solved.z_free, solved.status, solved.settled
+    free = scene.free_parameters
+    costs = np.where(np.isfinite(solved.costs), np.asarray(solved.costs), np.inf)
     best_index = int(np.argmin(costs))
     best_cost = float(costs[best_index])
     tolerance = CONVERGED_COST_TOLERANCE * max(1.0, best_cost)
@@ -352,91 +404,13 @@ def fit_lsq(
         start_costs=costs,
         start_status=[STATUS_NAMES[s] if s >= 0 else "other" for s in np.asarray(status)],
         solver=solver,
-        seconds=seconds,
-        compile_seconds=compile_seconds,
+        seconds=solved.seconds,
+        compile_seconds=solved.compile_seconds,
         row_sigma=np.asarray(model.data.sigma),
         repeatability=reweight.repeatability,
         reweightings=reweight.solves,
         warnings=warnings,
     )
-
-
-class _Reweighting:
-    """The per-row σ of least squares, updated after each solve (module docstring)."""
-
-    def __init__(self, scene: Scene, model, n_free: int):
-        errors = scene.errors
-        self.model, self.errors = model, errors
-        self.value_variance = np.asarray(model.data.sigma) ** 2
-        self.generative = errors.model == "generative"
-        self.dof = model.n_points - n_free
-        self.learned = self.generative and errors.learns_repeatability and self.dof > 0
-        if not self.generative:
-            self.repeatability = 0.0
-        elif errors.learns_repeatability:
-            self.repeatability = errors.reflectance_rel  # starting value, then Paule–Mandel
-        else:
-            self.repeatability = float(errors.repeatability)
-        self.angle_variance = np.zeros_like(self.value_variance)
-        self.sigma = self._sigma()
-        self.solves = 0
-
-    def _sigma(self) -> np.ndarray:
-        return np.sqrt(self.value_variance + self.repeatability**2 + self.angle_variance)
-
-    def update(self, params: Params) -> bool:
-        """Recompute σ at ``params``; True when it changed enough to solve again."""
-        self.solves += 1
-        if not self.generative:
-            return False
-        data, errors = self.model.data, self.errors
-        if errors.angles_on:
-            g_rot, g_cam = angle_slopes(
-                lambda ti, ts: log_reflectance_at(
-                    ti, ts, params, self.model.fold, self.model.constants, data
-                ),
-                data.theta_i_deg,
-                data.theta_s_deg,
-                theta_s_per_rotation(errors, len(self.value_variance)),
-            )
-            self.angle_variance = np.asarray(
-                (g_rot * errors.rotation_deg) ** 2 + (g_cam * errors.camera_deg) ** 2
-            )
-        if self.learned:
-            residuals = np.asarray(
-                predicted_log_reflectance(params, data, self.model.fold, self.model.constants)
-                - data.log_reflectance
-            )
-            self.repeatability = paule_mandel(
-                residuals, self.value_variance + self.angle_variance, self.dof
-            )
-        previous, self.sigma = self.sigma, self._sigma()
-        return bool(np.max(np.abs(self.sigma / previous - 1.0)) > REWEIGHT_TOLERANCE)
-
-
-def paule_mandel(residuals: np.ndarray, variances: np.ndarray, dof: int) -> float:
-    """The s ≥ 0 with Σ rᵢ²/(vᵢ + s²) = dof (Paule & Mandel 1982), by bisection.
-
-    0 when the rows already scatter no more than their variances say (χ²/dof ≤ 1).
-    """
-    residuals, variances = np.asarray(residuals, float), np.asarray(variances, float)
-
-    def excess(s: float) -> float:
-        total = variances + s * s
-        safe = np.where(total > 0, total, 1.0)
-        terms = np.where(total > 0, residuals**2 / safe, np.where(residuals == 0, 0.0, np.inf))
-        return float(np.sum(terms)) - dof
-
-    if excess(0.0) <= 0:
-        return 0.0
-    low, high = 0.0, float(np.sqrt(np.sum(residuals**2) / dof))
-    for _ in range(200):
-        middle = 0.5 * (low + high)
-        if excess(middle) > 0:
-            low = middle
-        else:
-            high = middle
-    return high
 
 
 def _internal_covariance(residuals_free, z_best, reduced_chi2):

@@ -1,0 +1,93 @@
+"""The per-row σ of least squares (:mod:`brdf_infer.lsq`), reweighted after each solve: the
+angle terms at the current parameters and, where the repeatability is learned, σ_rep by the
+Paule–Mandel condition."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from brdf_infer.error_model import angle_slopes, theta_s_per_rotation
+from brdf_infer.observations import log_reflectance_at, predicted_log_reflectance
+from brdf_infer.params import Params
+from brdf_infer.scene import Scene
+
+REWEIGHT_TOLERANCE = 1e-6  # relative change of every σ_i that ends the reweighting
+
+
+class Reweighting:
+    """The per-row σ of least squares, updated after each solve (:mod:`brdf_infer.lsq`'s
+    docstring)."""
+
+    def __init__(self, scene: Scene, model, n_free: int):
+        errors = scene.errors
+        self.model, self.errors = model, errors
+        self.value_variance = np.asarray(model.data.sigma) ** 2
+        self.generative = errors.model == "generative"
+        self.dof = model.n_points - n_free
+        self.learned = self.generative and errors.learns_repeatability and self.dof > 0
+        if not self.generative:
+            self.repeatability = 0.0
+        elif errors.learns_repeatability:
+            self.repeatability = errors.reflectance_rel  # starting value, then Paule–Mandel
+        else:
+            self.repeatability = float(errors.repeatability)
+        self.angle_variance = np.zeros_like(self.value_variance)
+        self.sigma = self._sigma()
+        self.solves = 0
+
+    def _sigma(self) -> np.ndarray:
+        return np.sqrt(self.value_variance + self.repeatability**2 + self.angle_variance)
+
+    def update(self, params: Params) -> bool:
+        """Recompute σ at ``params``; True when it changed enough to solve again."""
+        self.solves += 1
+        if not self.generative:
+            return False
+        data, errors = self.model.data, self.errors
+        if errors.angles_on:
+            g_rot, g_cam = angle_slopes(
+                lambda ti, ts: log_reflectance_at(
+                    ti, ts, params, self.model.fold, self.model.constants, data
+                ),
+                data.theta_i_deg,
+                data.theta_s_deg,
+                theta_s_per_rotation(errors, len(self.value_variance)),
+            )
+            self.angle_variance = np.asarray(
+                (g_rot * errors.rotation_deg) ** 2 + (g_cam * errors.camera_deg) ** 2
+            )
+        if self.learned:
+            residuals = np.asarray(
+                predicted_log_reflectance(params, data, self.model.fold, self.model.constants)
+                - data.log_reflectance
+            )
+            self.repeatability = paule_mandel(
+                residuals, self.value_variance + self.angle_variance, self.dof
+            )
+        previous, self.sigma = self.sigma, self._sigma()
+        return bool(np.max(np.abs(self.sigma / previous - 1.0)) > REWEIGHT_TOLERANCE)
+
+
+def paule_mandel(residuals: np.ndarray, variances: np.ndarray, dof: int) -> float:
+    """The s ≥ 0 with Σ rᵢ²/(vᵢ + s²) = dof (Paule & Mandel 1982), by bisection.
+
+    0 when the rows already scatter no more than their variances say (χ²/dof ≤ 1).
+    """
+    residuals, variances = np.asarray(residuals, float), np.asarray(variances, float)
+
+    def excess(s: float) -> float:
+        total = variances + s * s
+        safe = np.where(total > 0, total, 1.0)
+        terms = np.where(total > 0, residuals**2 / safe, np.where(residuals == 0, 0.0, np.inf))
+        return float(np.sum(terms)) - dof
+
+    if excess(0.0) <= 0:
+        return 0.0
+    low, high = 0.0, float(np.sqrt(np.sum(residuals**2) / dof))
+    for _ in range(200):
+        middle = 0.5 * (low + high)
+        if excess(middle) > 0:
+            low = middle
+        else:
+            high = middle
+    return high
