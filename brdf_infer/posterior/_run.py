@@ -193,6 +193,43 @@ def run_posterior(
     Raises:
         BadInputError: a setting out of range, or a checkpoint that this run did not write.
     """
+    warmup = _checked_warmup(
+        sampler, chains, draws, warmup, walkers, steps, seed, target_accept, resume
+    )
+    claim = contextlib.nullcontext() if out is None else writing(out, "posterior")
+    with claim:  # one writer per folder; an interrupted run leaves it marked incomplete
+        started = time.perf_counter()
+        scene = with_error_model(scene, error_model)
+        name = scene.model.family if model is None else model
+        model = build_model(scene, measurements, name)
+        what = _describe(
+            model, measurements, sampler, chains, draws, warmup, walkers, steps, seed, out, resume
+        )
+        if announce is not None:
+            announce(f"posterior of scene '{scene.name}' ({name}) with {sampler}: {what}")
+        result = _sample(
+            model,
+            measurements,
+            sampler,
+            chains=chains,
+            draws=draws,
+            warmup=warmup,
+            walkers=walkers,
+            steps=steps,
+            seed=seed,
+            target_accept=target_accept,
+            out=out,
+            resume=resume,
+            progress=progress,
+        )
+        return complete_run(model, measurements, result, seed, out, started, forced=forced)
+
+
+def _checked_warmup(
+    sampler, chains, draws, warmup, walkers, steps, seed, target_accept, resume
+) -> int | None:
+    """Every setting of :func:`run_posterior` checked; the warmup (None: the sampler's
+    default)."""
     settings = PosteriorSettings(
         sampler=sampler,
         chains=chains,
@@ -208,49 +245,69 @@ def run_posterior(
         raise BadInputError(
             "--resume continues an emcee run; NUTS runs are not checkpointed", field="resume"
         )
-    claim = contextlib.nullcontext() if out is None else writing(out, "posterior")
-    with claim:  # one writer per folder; an interrupted run leaves it marked incomplete
-        started = time.perf_counter()
-        scene = with_error_model(scene, error_model)
-        name = scene.model.family if model is None else model
-        model = build_model(scene, measurements, name)
-        if sampler == "nuts":
-            what = f"{chains} chains x ({warmup} warmup + {draws} draws)"
-        else:
-            dimension = FlatPotential(model).dimension
-            settings = emcee_settings(dimension, walkers, steps, warmup, seed)
-            if resume:
-                identity = {**run_fingerprint(model, measurements), "dimension": str(dimension)}
-                load_checkpoint(None if out is None else out / CHECKPOINT_FILE, settings, identity)
-            what = f"{settings['walkers']} walkers x {steps} steps ({warmup} burn-in)"
-        if announce is not None:
-            announce(f"posterior of scene '{scene.name}' ({name}) with {sampler}: {what}")
-        if sampler == "nuts":
-            result = run_nuts(
-                model,
-                chains=chains,
-                warmup=warmup,
-                draws=draws,
-                seed=seed,
-                target_accept=target_accept,
-                progress=progress,
-            )
-        else:
-            checkpoint = None if out is None else out / CHECKPOINT_FILE
-            if out is not None:
-                out.mkdir(parents=True, exist_ok=True)
-            result = run_emcee(
-                model,
-                walkers=walkers,
-                steps=steps,
-                burn=warmup,
-                seed=seed,
-                checkpoint=checkpoint,
-                resume=resume,
-                fingerprint=run_fingerprint(model, measurements),
-                progress=progress,
-            )
-        return complete_run(model, measurements, result, seed, out, started, forced=forced)
+    return warmup
+
+
+def _describe(
+    model, measurements, sampler, chains, draws, warmup, walkers, steps, seed, out, resume
+) -> str:
+    """The run's sampler settings in words (:func:`run_posterior`'s ``announce``); an emcee
+    checkpoint to resume is checked first."""
+    if sampler == "nuts":
+        what = f"{chains} chains x ({warmup} warmup + {draws} draws)"
+    else:
+        dimension = FlatPotential(model).dimension
+        settings = emcee_settings(dimension, walkers, steps, warmup, seed)
+        if resume:
+            identity = {**run_fingerprint(model, measurements), "dimension": str(dimension)}
+            load_checkpoint(None if out is None else out / CHECKPOINT_FILE, settings, identity)
+        what = f"{settings['walkers']} walkers x {steps} steps ({warmup} burn-in)"
+    return what
+
+
+def _sample(
+    model,
+    measurements,
+    sampler,
+    *,
+    chains,
+    draws,
+    warmup,
+    walkers,
+    steps,
+    seed,
+    target_accept,
+    out,
+    resume,
+    progress,
+) -> Draws:
+    """The draws of :func:`run_posterior`'s sampler (emcee: checkpointed in ``out``)."""
+    if sampler == "nuts":
+        result = run_nuts(
+            model,
+            chains=chains,
+            warmup=warmup,
+            draws=draws,
+            seed=seed,
+            target_accept=target_accept,
+            progress=progress,
+        )
+    else:
+        checkpoint = None if out is None else out / CHECKPOINT_FILE
+        if out is not None:
+            out.mkdir(parents=True, exist_ok=True)
+        result = run_emcee(
+            model,
+            walkers=walkers,
+            steps=steps,
+            burn=warmup,
+            seed=seed,
+            checkpoint=checkpoint,
+            resume=resume,
+            fingerprint=run_fingerprint(model, measurements),
+            progress=progress,
+        )
+    return result
 
 
 class _StepClock:

@@ -16,6 +16,7 @@ import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any, NamedTuple
 
 import emcee
 import jax
@@ -282,30 +283,72 @@ def run_emcee(
     settings = emcee_settings(density.ndim, walkers, steps, burn, seed)
     walkers = settings["walkers"]
     identity = {**(fingerprint or {}), "dimension": str(density.ndim)}
-    chain_parts, log_prob_parts, accepted, done = [], [], np.zeros(walkers), 0
-    initialise_seconds = 0.0
     with compile_clock() as compile_seconds:
-        if resume:
-            saved = load_checkpoint(checkpoint, settings, identity)
-            done = int(saved["done"])
-            chain_parts, log_prob_parts = [saved["chain"]], [saved["log_prob"]]
-            accepted = saved["accepted"]
-            state = emcee.State(
-                saved["coords"],
-                log_prob=saved["state_log_prob"],
-                random_state=_random_state_from(saved),
-            )
-        else:
-            clock = time.perf_counter()
-            start = density.initial_positions(walkers, seed)
-            state = emcee.State(
-                start,
-                log_prob=density(start),
-                random_state=np.random.RandomState(seed).get_state(),
-            )
-            initialise_seconds = time.perf_counter() - clock - compile_seconds[0]  # MAP search
+        initial = _emcee_start(
+            density, settings, identity, seed, checkpoint, resume, compile_seconds
+        )
 
     clock = time.perf_counter()
+    accepted = _emcee_chunks(
+        density, initial, settings, identity, steps, checkpoint, checkpoint_every, progress
+    )
+    sampling_seconds = time.perf_counter() - clock
+    seconds = {
+        "initialise": initial.initialise_seconds,
+        "sampling": sampling_seconds,
+        "compile": compile_seconds[0],
+    }
+    return _emcee_draws(density, initial, accepted, settings, seconds, steps, burn)
+
+
+class _EmceeStart(NamedTuple):
+    """Where an emcee run starts: its sampler state and the chain so far (resumed), or the
+    walkers around the MAP."""
+
+    state: Any
+    chain_parts: list
+    log_prob_parts: list
+    accepted: np.ndarray
+    done: int
+    initialise_seconds: float
+
+
+def _emcee_start(density, settings, identity, seed, checkpoint, resume, compile_seconds):
+    """The run's start (:func:`run_emcee`): from ``checkpoint`` with ``resume``, else the
+    walkers in a small ball around the MAP (its search timed, less ``compile_seconds``)."""
+    walkers = settings["walkers"]
+    chain_parts, log_prob_parts, accepted, done = [], [], np.zeros(walkers), 0
+    initialise_seconds = 0.0
+    if resume:
+        saved = load_checkpoint(checkpoint, settings, identity)
+        done = int(saved["done"])
+        chain_parts, log_prob_parts = [saved["chain"]], [saved["log_prob"]]
+        accepted = saved["accepted"]
+        state = emcee.State(
+            saved["coords"],
+            log_prob=saved["state_log_prob"],
+            random_state=_random_state_from(saved),
+        )
+    else:
+        clock = time.perf_counter()
+        start = density.initial_positions(walkers, seed)
+        state = emcee.State(
+            start,
+            log_prob=density(start),
+            random_state=np.random.RandomState(seed).get_state(),
+        )
+        initialise_seconds = time.perf_counter() - clock - compile_seconds[0]  # MAP search
+    return _EmceeStart(state, chain_parts, log_prob_parts, accepted, done, initialise_seconds)
+
+
+def _emcee_chunks(
+    density, initial, settings, identity, steps, checkpoint, checkpoint_every, progress
+):
+    """Sample from ``initial`` to ``steps`` in chunks of ``checkpoint_every`` steps, each
+    chunk's chain appended to ``initial``'s and checkpointed; the accepted counts."""
+    walkers = settings["walkers"]
+    state, chain_parts, log_prob_parts = initial.state, initial.chain_parts, initial.log_prob_parts
+    accepted, done = initial.accepted, initial.done
     bar = None
     if _progress_enabled(progress):
         from tqdm import tqdm
@@ -341,8 +384,13 @@ def run_emcee(
                 )
     if bar is not None:
         bar.close()
-    sampling_seconds = time.perf_counter() - clock
+    return accepted
 
+
+def _emcee_draws(density, initial, accepted, settings, seconds, steps, burn) -> Draws:
+    """The draws after ``burn``, thinned by ⌈τ_max/2⌉, the walkers as chains."""
+    walkers = settings["walkers"]
+    chain_parts, log_prob_parts = initial.chain_parts, initial.log_prob_parts
     chain = np.concatenate(chain_parts)[burn:]  # (steps − burn, walkers, ndim)
     log_prob = np.concatenate(log_prob_parts)[burn:]
     tau = emcee.autocorr.integrated_time(chain, quiet=True)
@@ -360,11 +408,7 @@ def run_emcee(
         stats={"lp": np.swapaxes(log_prob, 0, 1)},
         sampler="emcee",
         settings=settings,
-        seconds={
-            "initialise": initialise_seconds,
-            "sampling": sampling_seconds,
-            "compile": compile_seconds[0],
-        },
+        seconds=seconds,
         extra={
             "autocorrelation_time": tau,
             "steps_per_autocorrelation_time": float((steps - burn) / np.max(tau)),
