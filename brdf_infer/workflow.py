@@ -33,6 +33,14 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from brdf_infer._run_studies import (
+    Job,
+    compare_study,
+    design_study,
+    error_model_posterior,
+    instrument_study,
+    sensitivity_study,
+)
 from brdf_infer.measurements import Measurements
 from brdf_infer.plausibility import Implausible
 from brdf_infer.scene import Scene, Studies
@@ -289,11 +297,9 @@ def _run(
     progress: Callable[[str], None],
 ) -> RunResult:
     """:func:`run` with ``out`` held."""
-    from brdf_infer._atomic import atomic_write_json
     from brdf_infer.model import REFERENCE_FAMILY
     from brdf_infer.plausibility import measurement_checks, require_plausible
-    from brdf_infer.posterior import build_model, run_posterior
-    from brdf_infer.report import write_example, write_report
+    from brdf_infer.posterior import build_model
 
     start = time.perf_counter()
     name = settings.model or scene.model.family
@@ -311,39 +317,10 @@ def _run(
     require_plausible(implausible, settings.force)
     steps = 4 + len(error_models) + bool(instruments) + traces + bool(studies.compare)
     steps += sensitive + designed
-    step = iter(range(1, steps + 1))
-    paper = None
-    if reference:
-        progress(
-            f"[{next(step)}/{steps}] paper fit of scene '{scene.name}' ({len(measurements)} rows)"
-        )
-        paper = paper_fit_summary(scene, measurements)
-        implausible += fit_checks(scene, measurements, paper)
-        require_plausible(implausible, settings.force)  # before the least squares' compile
-    else:
-        progress(f"[{next(step)}/{steps}] model {name}: no paper fit (it is Eq. 7's regression)")
-    progress(f"[{next(step)}/{steps}] least-squares fit of all free parameters of {name}")
-    if reference:
-        lsq = lsq_summary(
-            scene, measurements, starts=settings.lsq_starts, seed=settings.seed, progress=progress
-        )
-    else:
-        from brdf_infer.family_fit import fit_family_lsq
-        from brdf_infer.model import family
-
-        lsq = fit_family_lsq(
-            scene, measurements, family(name), starts=settings.lsq_starts, seed=settings.seed
-        ).as_json(scene.name)
-    implausible += fit_checks(scene, measurements, lsq)
-    require_plausible(implausible, settings.force)  # before anything is written or sampled
-    forced = [found.record for found in implausible]
-    for line in forced:
-        progress(f"warning: forced past a plausibility check: {line}")
-    out.mkdir(parents=True, exist_ok=True)
-    if paper is not None:
-        atomic_write_json(out / "fit_paper.json", paper)
-    atomic_write_json(out / "fit_lsq.json", lsq)
-    progress(f"[{next(step)}/{steps}] NUTS posterior ({settings.chains} chains x {settings.draws})")
+    job = Job(scene, measurements, out, settings, progress, name, studies, reference, steps)
+    paper = _paper_fit(job, implausible)
+    lsq = _least_squares(job, implausible)
+    forced = _write_fits(job, implausible, paper, lsq)
     options = {
         "chains": settings.chains,
         "draws": settings.draws,
@@ -351,72 +328,19 @@ def _run(
         "seed": settings.seed,
         "model": name,
     }
-    posterior = run_posterior(scene, measurements, out=out, forced=forced, **options)
+    posterior = _posterior(job, options, forced)
     for error_model in error_models:
-        progress(f"[{next(step)}/{steps}] NUTS posterior with the {error_model} error model")
-        run_posterior(
-            scene,
-            measurements,
-            error_model=error_model,
-            out=out / "variants" / error_model,
-            forced=forced,
-            **options,
-        )
+        error_model_posterior(job, error_model, options, forced)
     if instruments:
-        from brdf_infer.instrument_comparison import INSTRUMENT_FILE, compare_instruments
-
-        progress(f"[{next(step)}/{steps}] instrument models: posteriors side by side")
-        atomic_write_json(
-            out / INSTRUMENT_FILE,
-            compare_instruments(
-                scene,
-                measurements,
-                out,
-                options,
-                instruments=[scene.instrument.model, *instruments],
-                done={scene.instrument.model: (out, posterior)},
-                progress=progress,
-            ),
-        )
+        instrument_study(job, instruments, options, posterior)
     if traces:
-        progress(f"[{next(step)}/{steps}] ray tracing series {scene.raytrace.series} (Sec. 6)")
-        atomic_write_json(
-            out / "raytrace.json", {"traces": run_traces(scene, measurements, posterior)}
-        )
-    comparison = None
-    if studies.compare:
-        from brdf_infer.compare import compare_families
-        from brdf_infer.report import write_comparison
-
-        progress(
-            f"[{next(step)}/{steps}] model comparison by PSIS-LOO: {', '.join(studies.compare)}"
-        )
-        result = compare_families(scene, measurements, list(studies.compare))
-        write_comparison(out, result)
-        comparison = result.as_json()
+        _raytrace_study(job, posterior)
+    comparison = compare_study(job) if studies.compare else None
     if sensitive:
-        from brdf_infer.report import write_sensitivity
-        from brdf_infer.sensitivity import SensitivitySettings, sensitivity
-
-        progress(f"[{next(step)}/{steps}] sensitivity to the error-model assumptions")
-        write_sensitivity(
-            out,
-            sensitivity(scene, measurements, settings=SensitivitySettings(seed=settings.seed)),
-        )
+        sensitivity_study(job)
     if designed:
-        from brdf_infer.design import DesignOptions, design, load_design_run, write_design
-
-        progress(f"[{next(step)}/{steps}] where to measure next for {studies.design}")
-        options = DesignOptions(budget=scene.design.budget, seed=settings.seed)
-        write_design(out, design(load_design_run(out, scene), studies.design, options=options))
-    atomic_write_json(
-        out / STUDIES_FILE,
-        {"run": studies.requested(), "not_run": not_run(scene, studies) if reference else []},
-    )
-    progress(f"[{next(step)}/{steps}] report")
-    report, verdict = write_report(out, progress=_silent)
-    if example is not None:
-        write_example(out, example)
+        design_study(job)
+    report, verdict = _report(job, example)
     return RunResult(
         out=out,
         report=report,
@@ -428,6 +352,104 @@ def _run(
         comparison=comparison,
         seconds=time.perf_counter() - start,
     )
+
+
+def _paper_fit(job: Job, implausible: list[Implausible]) -> dict[str, Any] | None:
+    """Step 1: the paper fit (Eq. 7's regression; none for another family), checked."""
+    from brdf_infer.plausibility import require_plausible
+
+    scene, measurements = job.scene, job.measurements
+    paper = None
+    if job.reference:
+        job.step(f"paper fit of scene '{scene.name}' ({len(measurements)} rows)")
+        paper = paper_fit_summary(scene, measurements)
+        implausible += fit_checks(scene, measurements, paper)
+        require_plausible(implausible, job.settings.force)  # before the least squares' compile
+    else:
+        job.step(f"model {job.name}: no paper fit (it is Eq. 7's regression)")
+    return paper
+
+
+def _least_squares(job: Job, implausible: list[Implausible]) -> dict[str, Any]:
+    """Step 2: the least-squares fit of every free parameter (its checks added to
+    ``implausible``)."""
+    scene, measurements, settings, name = job.scene, job.measurements, job.settings, job.name
+    job.step(f"least-squares fit of all free parameters of {name}")
+    if job.reference:
+        lsq = lsq_summary(
+            scene,
+            measurements,
+            starts=settings.lsq_starts,
+            seed=settings.seed,
+            progress=job.progress,
+        )
+    else:
+        from brdf_infer.family_fit import fit_family_lsq
+        from brdf_infer.model import family
+
+        lsq = fit_family_lsq(
+            scene, measurements, family(name), starts=settings.lsq_starts, seed=settings.seed
+        ).as_json(scene.name)
+    implausible += fit_checks(scene, measurements, lsq)
+    return lsq
+
+
+def _write_fits(
+    job: Job, implausible: list[Implausible], paper: dict[str, Any] | None, lsq: dict[str, Any]
+) -> list[str]:
+    """The plausibility checks passed (or forced: returned, one line each, each warned of),
+    then the fits written."""
+    from brdf_infer._atomic import atomic_write_json
+    from brdf_infer.plausibility import require_plausible
+
+    out = job.out
+    require_plausible(implausible, job.settings.force)  # before anything is written or sampled
+    forced = [found.record for found in implausible]
+    for line in forced:
+        job.progress(f"warning: forced past a plausibility check: {line}")
+    out.mkdir(parents=True, exist_ok=True)
+    if paper is not None:
+        atomic_write_json(out / "fit_paper.json", paper)
+    atomic_write_json(out / "fit_lsq.json", lsq)
+    return forced
+
+
+def _posterior(job: Job, options: dict[str, Any], forced: list[str]):
+    """Step 3: the scene's NUTS posterior into the run folder."""
+    from brdf_infer.posterior import run_posterior
+
+    settings = job.settings
+    job.step(f"NUTS posterior ({settings.chains} chains x {settings.draws})")
+    return run_posterior(job.scene, job.measurements, out=job.out, forced=forced, **options)
+
+
+def _raytrace_study(job: Job, posterior) -> None:
+    """Study: ray traces of the posterior (Sec. 6)."""
+    from brdf_infer._atomic import atomic_write_json
+
+    scene = job.scene
+    job.step(f"ray tracing series {scene.raytrace.series} (Sec. 6)")
+    atomic_write_json(
+        job.out / "raytrace.json", {"traces": run_traces(scene, job.measurements, posterior)}
+    )
+
+
+def _report(job: Job, example: Path | None) -> tuple[Path, Verdict]:
+    """Last step: the studies run (``studies.json``), the report and (``example``) the
+    example copy."""
+    from brdf_infer._atomic import atomic_write_json
+    from brdf_infer.report import write_example, write_report
+
+    scene, out, studies = job.scene, job.out, job.studies
+    atomic_write_json(
+        out / STUDIES_FILE,
+        {"run": studies.requested(), "not_run": not_run(scene, studies) if job.reference else []},
+    )
+    job.step("report")
+    report, verdict = write_report(out, progress=_silent)
+    if example is not None:
+        write_example(out, example)
+    return report, verdict
 
 
 def _check_studies(scene: Scene, instruments: list[str], sensitive: bool) -> None:

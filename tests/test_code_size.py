@@ -79,6 +79,10 @@ SPLIT: dict[str, tuple[str, ...]] = {
             "_tables",
         )
     ),
+    "brdf_infer/lsq.py": ("brdf_infer/lsq.py", "brdf_infer/_reweighting.py"),
+    "brdf_infer/posterior/_run.py": ("brdf_infer/posterior/_run.py",),
+    "brdf_infer/posterior/_samplers.py": ("brdf_infer/posterior/_samplers.py",),
+    "brdf_infer/workflow.py": ("brdf_infer/workflow.py", "brdf_infer/_run_studies.py"),
     "brdf_infer/batch.py": tuple(
         f"brdf_infer/batch/{name}.py"
         for name in ("__init__", "_batch", "_entries", "_folders", "_groups", "_signals")
