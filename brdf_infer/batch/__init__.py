@@ -49,7 +49,7 @@ from brdf_infer.batch._entries import (
 from brdf_infer.batch._folders import OLD_MARK, PARTIAL_MARK, remove_stale_partials
 from brdf_infer.batch._groups import expand_sources, structure_key
 from brdf_infer.batch._signals import GRACE_SECONDS, run_batch_until_signalled
-from brdf_infer.settings import BatchSettings
+from brdf_infer.settings import BatchSettings as BatchSettings  # as before: bench imports it here
 
 __all__ = [
     "BATCH_FILE",
@@ -60,7 +60,6 @@ __all__ = [
     "Batch",
     "BatchInterrupted",
     "BatchResult",
-    "BatchSettings",
     "SceneEntry",
     "expand_sources",
     "remove_stale_partials",
