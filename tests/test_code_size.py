@@ -7,87 +7,16 @@ is its number of lines; a function's (or method's, nested functions included) is
 excused by a ``#`` comment line immediately above its ``def`` or its first decorator: the
 comment says why splitting it would hurt.
 
-The limits hold for the modules in ``SPLIT`` (those split so far); the rest of the package
-follows as it is split.
 """
 
 import ast
 from dataclasses import dataclass
 from pathlib import Path
 
-import pytest
-
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGE = "brdf_infer"
 MODULE_LIMIT = 500
 FUNCTION_LIMIT = 80
-
-# each module split to the limits (its path before the split) → the modules it became
-SPLIT: dict[str, tuple[str, ...]] = {
-    "brdf_infer/report/_build.py": tuple(
-        f"brdf_infer/report/{name}.py"
-        for name in (
-            "_build",
-            "_compare",
-            "_error_model",
-            "_example",
-            "_export",
-            "_results",
-            "_run_tables",
-            "_traces",
-        )
-    ),
-    "brdf_infer/raytrace/_series.py": tuple(
-        f"brdf_infer/raytrace/{name}.py"
-        for name in ("_images", "_payload", "_series", "_setup", "_tally")
-    ),
-    "brdf_infer/raytrace/_trace.py": ("brdf_infer/raytrace/_trace.py",),
-    "brdf_infer/bench/_loader_inputs.py": tuple(
-        f"brdf_infer/bench/{name}.py"
-        for name in (
-            "_inputs",
-            "_inputs_bsdf",
-            "_inputs_csv",
-            "_inputs_params",
-            "_inputs_scene",
-            "_loader_inputs",
-        )
-    ),
-    "brdf_infer/bench/_peers.py": tuple(
-        f"brdf_infer/bench/{name}.py"
-        for name in ("_peers", "_peers_check", "_peers_runs", "_peers_section")
-    ),
-    "brdf_infer/bench/_report.py": ("brdf_infer/bench/_report.py", "brdf_infer/bench/_sections.py"),
-    "brdf_infer/bench/_instrument.py": ("brdf_infer/bench/_instrument.py",),
-    "brdf_infer/posterior/_model.py": tuple(
-        f"brdf_infer/posterior/{name}.py" for name in ("_likelihood", "_model", "_whitening")
-    ),
-    "brdf_infer/measurements.py": ("brdf_infer/measurements.py",),
-    "brdf_infer/export/_files.py": tuple(
-        f"brdf_infer/export/{name}.py" for name in ("_files", "_source", "_zemax")
-    ),
-    "brdf_infer/scene.py": tuple(
-        f"brdf_infer/scene/{name}.py"
-        for name in (
-            "__init__",
-            "_errors",
-            "_fields",
-            "_load",
-            "_parse",
-            "_records",
-            "_setups",
-            "_tables",
-        )
-    ),
-    "brdf_infer/lsq.py": ("brdf_infer/lsq.py", "brdf_infer/_reweighting.py"),
-    "brdf_infer/posterior/_run.py": ("brdf_infer/posterior/_run.py",),
-    "brdf_infer/posterior/_samplers.py": ("brdf_infer/posterior/_samplers.py",),
-    "brdf_infer/workflow.py": ("brdf_infer/workflow.py", "brdf_infer/_run_studies.py"),
-    "brdf_infer/batch.py": tuple(
-        f"brdf_infer/batch/{name}.py"
-        for name in ("__init__", "_batch", "_entries", "_folders", "_groups", "_signals")
-    ),
-}
 
 
 @dataclass(frozen=True)
@@ -150,18 +79,13 @@ def long_functions(root: Path = ROOT, limit: int = FUNCTION_LIMIT) -> list[LongF
     return found
 
 
-@pytest.mark.parametrize("module", SPLIT)
-def test_split_modules_are_under_the_module_limit(module):
-    sizes = module_sizes()
-    missing = [m for m in SPLIT[module] if m not in sizes]
-    assert not missing, f"no such modules (update SPLIT): {missing}"
-    over = {m: sizes[m] for m in SPLIT[module] if sizes[m] > MODULE_LIMIT}
+def test_no_module_is_over_the_limit():
+    over = {m: n for m, n in module_sizes().items() if n > MODULE_LIMIT}
     assert not over, f"modules over {MODULE_LIMIT} lines: {over}"
 
 
-@pytest.mark.parametrize("module", SPLIT)
-def test_long_functions_of_split_modules_say_why(module):
-    unexcused = [f for f in long_functions() if f.path in SPLIT[module] and not f.excused]
+def test_long_functions_say_why():
+    unexcused = [f for f in long_functions() if not f.excused]
     assert not unexcused, (
         f"functions over {FUNCTION_LIMIT} lines with no comment above saying why:\n"
         + "\n".join(str(f) for f in unexcused)
