@@ -52,3 +52,14 @@ def test_the_readme_scene_is_the_start_of_the_documented_one():
     (small,) = toml_blocks(README.read_text())
     full = toml_blocks((REPO / "docs" / "scenes.md").read_text())
     assert any(block.startswith(small) for block in full)
+
+
+def test_the_code_map_names_every_module_and_package():
+    """docs/code-map.md matches the layout: every top-level module and subpackage of
+    brdf_infer/ is named on it."""
+    text = (REPO / "docs" / "code-map.md").read_text()
+    package = REPO / "brdf_infer"
+    names = [f"`{p.name}`" for p in package.glob("*.py") if p.name != "__init__.py"]
+    names += [f"`{p.name}/`" for p in package.iterdir() if (p / "__init__.py").is_file()]
+    missing = [name for name in names if name not in text]
+    assert not missing, f"not on the code map: {missing}"
