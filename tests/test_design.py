@@ -279,3 +279,12 @@ def test_run_asks_for_the_design_study_by_flag_and_in_full():
     args = build_parser().parse_args(["run", "--design", "pi_brdf0"])
     assert requested_studies(args, scene).requested() == ["where to measure next (pi_brdf0)"]
     assert "where to measure next (tis:70)" in full_studies(scene).requested()
+
+
+def test_the_design_table_shows_tis_and_pi_brdf0_in_per_cent():
+    from brdf_infer.design import design_rows
+
+    chosen = {"step": 1, "theta_i_deg": 10.0, "theta_s_deg": -20.0, "series": "II"}
+    chosen |= {"expected_sd": 0.00388, "sd_ratio": 0.968, "eig_nats": 0.07}
+    assert design_rows({"target": "tis_70deg", "chosen": [chosen]})[0][4] == "0.388 %"
+    assert design_rows({"target": "alpha", "chosen": [chosen]})[0][4] == "0.00388"

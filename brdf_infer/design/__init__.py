@@ -24,7 +24,7 @@ from brdf_infer.design._study import (
     target_values,
     write_design,
 )
-from brdf_infer.design._table import DESIGN_HEADERS, design_rows
+from brdf_infer.design._table import DESIGN_HEADERS, design_rows, target_scale
 
 __all__ = [
     "DESIGN_FIGURE",
@@ -49,6 +49,7 @@ __all__ = [
     "read_candidates",
     "read_design",
     "set_outcome",
+    "target_scale",
     "target_values",
     "write_design",
 ]

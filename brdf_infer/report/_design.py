@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from brdf_infer.design import DESIGN_HEADERS, design_rows
+from brdf_infer.design import DESIGN_HEADERS, design_rows, target_scale
 from brdf_infer.report import _html
 
 
@@ -21,9 +21,10 @@ def design_section(run: Path) -> list[str]:
     current = payload["current"]
     today = ""
     if current.get("median") is not None:
+        k, unit = target_scale(payload)
         today = (
-            f" Today: {current['median']:.4g} ({current['lo95']:.4g}–{current['hi95']:.4g}, "
-            f"95 %), sd {current['sd']:.3g}."
+            f" Today: {k * current['median']:.4g}{unit} ({k * current['lo95']:.4g}–"
+            f"{k * current['hi95']:.4g}{unit}, 95 %), sd {k * current['sd']:.3g}{unit}."
         )
     parts = [
         "<h2>Where to measure next</h2>",
