@@ -2,6 +2,8 @@
 
 import html
 import json
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -188,3 +190,13 @@ def test_single_scene_commands_compute_on_the_cpu_and_batch_on_the_default_devic
         assert jnp.zeros(1).devices() == {cpu}
     with placement("batch"):
         assert jnp.zeros(1).devices() == {jax.devices()[0]}
+
+
+def test_a_reader_that_leaves_early_is_not_an_error():
+    """``brdf-infer ... | head``: stdout closed before the table is written ends quietly with
+    exit code 0 (a BrokenPipeError is an OSError; it must not be reported as bad input)."""
+    argv = [sys.executable, "-m", "brdf_infer", "tis", "--theta-i", *map(str, range(89))]
+    process = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    process.stdout.close()
+    _, err = process.communicate(timeout=600)
+    assert process.returncode == 0 and err == b"", err.decode()

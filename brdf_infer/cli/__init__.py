@@ -101,6 +101,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     except Float32Error as error:
         print(f"brdf-infer: error: {error}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    # before OSError, its base class: `brdf-infer ... | head`: the reader left, so do we
+    except BrokenPipeError:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 0
     except OSError as error:
         where = f"{error.filename}: " if error.filename else ""
         print(f"brdf-infer: error: {where}{error.strerror or error}", file=sys.stderr)
@@ -109,10 +114,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         hint = " (continue it with --resume)" if getattr(args, "sampler", None) == "emcee" else ""
         print(f"brdf-infer: interrupted{hint}", file=sys.stderr)
         return EXIT_INTERRUPTED
-    except BrokenPipeError:  # e.g. `brdf-infer ... | head`: the reader left, so do we
-        devnull = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(devnull, sys.stdout.fileno())
-        return 0
 
 
 def entry_point() -> None:
