@@ -4,17 +4,19 @@ one place where the library's field names become the command line's flags."""
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, NoReturn
+from typing import Any, NoReturn, TypeVar
 
 from brdf_infer._device import DEVICES
 from brdf_infer._outdir import claim_output_dir
 from brdf_infer.errors import BadInputError
 
 EXIT_BAD_INPUT = 2
+T = TypeVar("T")
 # fields of an option that names a folder: its errors name the folder as their file
 FOLDER_OPTIONS = frozenset({"out", "resume", "run"})
 
@@ -81,6 +83,20 @@ def add_json_argument(parser: argparse.ArgumentParser) -> None:
 def flag(field: str) -> str:
     """The option of a settings record's field: ``target_accept`` → ``--target-accept``."""
     return "--" + field.replace("_", "-")
+
+
+def record_from_args(record: type[T], args: argparse.Namespace, **computed: Any) -> T:
+    """The settings ``record`` (a dataclass) from the command's options: each field from the
+    option of its name (:func:`flag`), the fields in ``computed`` from those values instead
+    (an option that is not the field itself, e.g. ``refit=not args.no_refit``); a field with
+    no option keeps its default."""
+    options = vars(args)
+    values = {
+        field.name: options[field.name]
+        for field in dataclasses.fields(record)
+        if field.name in options and field.name not in computed
+    }
+    return record(**values, **computed)
 
 
 def named_by_flag(error: BadInputError, args: argparse.Namespace) -> BadInputError:

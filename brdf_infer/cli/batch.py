@@ -15,6 +15,7 @@ from brdf_infer.cli._common import (
     emit_json,
     headless,
     progress,
+    record_from_args,
     table,
 )
 from brdf_infer.cli._options import add_force_argument, add_model_argument
@@ -70,15 +71,7 @@ def main(args: argparse.Namespace) -> int:
     from brdf_infer.batch import BatchInterrupted, run_batch_until_signalled
 
     check_family_name(args.model)
-    settings = BatchSettings(
-        chains=args.chains,
-        draws=args.draws,
-        warmup=args.warmup,
-        seed=args.seed,
-        target_accept=args.target_accept,
-        mode=args.mode,
-        force=args.force,
-    )
+    settings = record_from_args(BatchSettings, args)
     out = claimed_output_dir(args, args.out or Path("reports") / "batch", "batch")
     try:
         result = run_batch_until_signalled(

@@ -11,6 +11,7 @@ from brdf_infer.cli._common import (
     emit_json,
     headless,
     progress,
+    record_from_args,
     scene_command_parser,
     table,
 )
@@ -70,14 +71,7 @@ def main(args: argparse.Namespace) -> int:
     from brdf_infer.report import write_comparison
 
     names = check_family_names(args.models)
-    settings = CompareSettings(
-        chains=args.chains,
-        warmup=args.warmup,
-        draws=args.draws,
-        seed=args.seed,
-        target_accept=args.target_accept,
-        refit=not args.no_refit,
-    )
+    settings = record_from_args(CompareSettings, args, refit=not args.no_refit)
     scene, measurements = scene_and_measurements(args.scene, args.instrument, args.force)
     forced(scene, measurements)
     out = claimed_output_dir(args, args.out, "compare") if args.out else None

@@ -13,6 +13,7 @@ from brdf_infer.cli._common import (
     print_posterior_summary,
     print_verdict,
     progress,
+    record_from_args,
     scene_command_parser,
 )
 from brdf_infer.cli._options import (
@@ -87,15 +88,7 @@ def main(args: argparse.Namespace) -> int:
     check_family_name(args.model)
     # the input checks stop here, the fits' in run(); run() reports what it is forced past
     scene, measurements = scene_and_measurements(args.scene, args.instrument, args.force)
-    settings = RunSettings(
-        chains=args.chains,
-        draws=args.draws,
-        warmup=args.warmup,
-        seed=args.seed,
-        model=args.model,
-        studies=requested_studies(args, scene),
-        force=args.force,
-    )
+    settings = record_from_args(RunSettings, args, studies=requested_studies(args, scene))
     out = claimed_output_dir(args, args.out or Path("reports") / scene.name, "run")
     result = run(
         scene,

@@ -12,6 +12,7 @@ from brdf_infer.cli._common import (
     emit_json,
     headless,
     progress,
+    record_from_args,
     scene_command_parser,
     table,
 )
@@ -80,17 +81,7 @@ def main(args: argparse.Namespace) -> int:
     from brdf_infer.sbc import COVERAGE_LEVELS, check_planted_fault, run_sbc
 
     check_family_name(args.model)
-    settings = SbcSettings(
-        replicates=args.replicates,
-        draws=args.draws,
-        thin=args.thin,
-        warmup=args.warmup,
-        seed=args.seed,
-        sigma_scale=args.sigma_scale,
-        target_accept=args.target_accept,
-        warmup_tree_depth=args.warmup_tree_depth,
-        planted_fault=args.planted_fault,
-    )
+    settings = record_from_args(SbcSettings, args)
     scene, measurements = scene_and_measurements(args.scene, args.instrument)
     check_planted_fault(args.planted_fault, scene, args.model)
     out = claimed_output_dir(args, args.out or Path("reports") / scene.name / "sbc", "sbc")

@@ -12,6 +12,7 @@ from brdf_infer.cli._common import (
     emit_json,
     headless,
     progress,
+    record_from_args,
     scene_command_parser,
     table,
 )
@@ -70,13 +71,7 @@ def main(args: argparse.Namespace) -> int:
         sensitivity,
     )
 
-    settings = SensitivitySettings(
-        chains=args.chains,
-        warmup=args.warmup,
-        draws=args.draws,
-        seed=args.seed,
-        refit=not args.no_refit,
-    )
+    settings = record_from_args(SensitivitySettings, args, refit=not args.no_refit)
     scene, measurements = scene_and_measurements(args.scene)
     check_scene(scene)
     variants = (
