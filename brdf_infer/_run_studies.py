@@ -25,7 +25,7 @@ class Job:
     progress: Callable[[str], None]
     name: str  # the model family
     studies: Studies
-    reference: bool  # the family is strumik2024 (Eq. 7)
+    paper_parameters: bool  # the family's parameters are Eq. (7)'s: its studies run
     steps: int
     _numbers: Iterator[int] = field(init=False)
 

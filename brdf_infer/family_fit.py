@@ -27,7 +27,7 @@ from brdf_infer.error_model import value_sigma
 from brdf_infer.fit_quality import FitQuality, scaled_sigma
 from brdf_infer.measurements import Measurements
 from brdf_infer.model import ModelFamily
-from brdf_infer.observations import build_observation_model, through_instrument
+from brdf_infer.observations import build_observation_model, log_reflectance
 from brdf_infer.priors import Prior
 from brdf_infer.scene import Scene
 from brdf_infer.settings import LSQ_STARTS
@@ -116,13 +116,7 @@ def fit_family_lsq(
         return {c.site: _from_real(c.prior, w[k]) for k, c in enumerate(member.coordinates)}
 
     def residuals(w, _):
-        physical = member.to_physical(internal(w))
-        mean = member.log_brdf_rows(rows.theta_i_deg, rows.theta_s_deg, physical, rows.phi_s_deg)
-        mean = through_instrument(
-            mean + rows.log_aperture,
-            rows.kernel,
-            lambda ti, t, p: member.log_brdf(ti, t, p, physical),
-        )
+        mean = log_reflectance(member, member.to_physical(internal(w)), rows)
         return (mean - rows.log_reflectance) / sigma
 
     rng = np.random.default_rng(seed)

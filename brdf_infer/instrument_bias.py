@@ -70,7 +70,7 @@ def synthetic_data(
     return replace(measurements, reflectance=noisy.reflectance / clean * truth)
 
 
-def _quantities(scene: Scene, params: Params) -> dict[str, np.ndarray]:
+def _bias_quantities(scene: Scene, params: Params) -> dict[str, np.ndarray]:
     """BRDF0, α and TIS(70°) (with Eq. 10's folding where the scene's [model] fold has it, as
     every TIS band of a run)."""
     from brdf_infer.model import tis
@@ -106,10 +106,10 @@ def bias_experiment(
     from brdf_infer.posterior import build_posterior_model, interval95, run_nuts
 
     truth_values = traced_values(scene, measurements, params, generated_by, rays, seed=7)
-    truth = {k: float(v) for k, v in _quantities(scene, params).items()}
+    truth = {k: float(v) for k, v in _bias_quantities(scene, params).items()}
     point_scene = check_instrument(scene, "point")
     limit = fit_lsq(point_scene, replace(measurements, reflectance=truth_values), starts=8)
-    point_limit = {k: float(v) for k, v in _quantities(scene, limit.params).items()}
+    point_limit = {k: float(v) for k, v in _bias_quantities(scene, limit.params).items()}
     fits = []
     for seed in seeds:
         data = synthetic_data(scene, measurements, params, truth_values, seed)
@@ -120,7 +120,7 @@ def bias_experiment(
                 model, chains=chains, warmup=warmup, draws=draws, seed=seed, progress=False
             )
             drawn = Params(*(np.asarray(result.sites[n]).reshape(-1) for n in Params._fields))
-            intervals = {k: interval95(v) for k, v in _quantities(scene, drawn).items()}
+            intervals = {k: interval95(v) for k, v in _bias_quantities(scene, drawn).items()}
             fits.append(
                 {
                     "seed": seed,

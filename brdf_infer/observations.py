@@ -1,4 +1,5 @@
-"""Observation model: parameters → predicted ln R of each measurement row (Eqs. 6, 7, 10).
+"""Observation model: parameters → predicted ln R of each measurement row (Eqs. 6, 7, 10),
+for every model family along one path (:func:`log_reflectance`).
 
 Assembled from a scene: only what the scene uses is computed (folding only when the scene
 turns it on).
@@ -16,7 +17,7 @@ from brdf_infer._units import DEG
 from brdf_infer.error_model import noise_layout
 from brdf_infer.instrument import Kernel, build_kernel, kernel_log_reflectance
 from brdf_infer.measurements import Measurements
-from brdf_infer.model import log_brdf_hemisphere, log_brdf_inplane
+from brdf_infer.model import ModelFamily, Physical, strumik_family
 from brdf_infer.params import HemisphereConstants, Params
 from brdf_infer.scene import Scene
 
@@ -50,39 +51,24 @@ class Observations(NamedTuple):
     kernel: Kernel | None = None
 
 
-def row_log_brdf(
-    theta_i_deg,
-    theta_s_deg,
-    params: Params,
-    fold: bool,
-    constants: HemisphereConstants,
-    phi_s_deg=None,
-) -> jnp.ndarray:
-    """ln BRDF of each row: Eq. (7) (+ Eq. 10) in the plane at a signed θs, Eq. (8) out of it
-    (``phi_s_deg`` finite)."""
-    log_brdf = log_brdf_inplane(theta_i_deg, theta_s_deg, params, fold, constants)
-    if phi_s_deg is None:
-        return log_brdf
-    outside = jnp.isfinite(phi_s_deg)
-    phi = jnp.where(outside, phi_s_deg, 180.0)
-    log_hemisphere = log_brdf_hemisphere(theta_i_deg, theta_s_deg, phi, params, fold, constants)
-    return jnp.where(outside, log_hemisphere, log_brdf)
+def log_reflectance(member: ModelFamily, physical: Physical, data: Observations) -> jnp.ndarray:
+    """ln R of every row under the family ``member``, the one forward path of every fit, the
+    posterior, the simulations and the predictions: ln BRDF of the row (in the plane at a
+    signed θs, Eq. 8 out of it) + ln(Ω cos θs), Eq. (6); ln BRDF itself for BRDF rows; with a
+    kernel, ln Σ w_k BRDF_k at its nodes (``brdf_infer.instrument``)."""
+    log_brdf = member.log_brdf_rows(data.theta_i_deg, data.theta_s_deg, physical, data.phi_s_deg)
+    return through_instrument(
+        log_brdf + data.log_aperture,
+        data.kernel,
+        lambda ti, t, p: member.log_brdf(ti, t, p, physical),
+    )
 
 
 def predicted_log_reflectance(
     params: Params, data: Observations, fold: bool, constants: HemisphereConstants
 ) -> jnp.ndarray:
-    """ln R of every row: ln BRDF of Eq. (7) (+ Eq. 10; Eq. 8 out of the plane) + ln(Ω cos θs),
-    Eq. (6); ln BRDF itself for BRDF rows; with a kernel, ln Σ w_k BRDF_k of Eq. (8) at its
-    nodes (``brdf_infer.instrument``)."""
-    log_brdf = row_log_brdf(
-        data.theta_i_deg, data.theta_s_deg, params, fold, constants, data.phi_s_deg
-    )
-    return through_instrument(
-        log_brdf + data.log_aperture,
-        data.kernel,
-        lambda ti, t, p: log_brdf_hemisphere(ti, t, p, params, fold, constants),
-    )
+    """:func:`log_reflectance` under Eq. (7) (+ Eq. 10 when ``fold``; Eq. 8 out of the plane)."""
+    return log_reflectance(strumik_family(fold, constants), params._asdict(), data)
 
 
 def through_instrument(point_log_reflectance, kernel: Kernel | None, log_brdf) -> jnp.ndarray:
@@ -110,6 +96,23 @@ def log_cos_theta_s(theta_s_deg) -> jnp.ndarray:
     return jnp.log(jnp.cos(safe * DEG))
 
 
+def family_log_reflectance_at(
+    member: ModelFamily,
+    theta_i_deg,
+    theta_s_deg,
+    physical: Physical,
+    rows: Observations | None = None,
+) -> jnp.ndarray:
+    """ln R(θi, θs) under ``member`` up to the constant ln Ω: ln BRDF + ln cos θs (for the
+    angle slopes); with ``rows``, each row's own kind (no cos θs for BRDF rows, Eq. 8 out of the
+    plane), without them in the plane at a signed θs."""
+    log_cos = log_cos_theta_s(theta_s_deg)
+    if rows is None:
+        return member.log_brdf_signed(theta_i_deg, theta_s_deg, physical) + log_cos
+    log_brdf = member.log_brdf_rows(theta_i_deg, theta_s_deg, physical, rows.phi_s_deg)
+    return log_brdf + rows.cos_weight * log_cos
+
+
 def log_reflectance_at(
     theta_i_deg,
     theta_s_deg,
@@ -118,13 +121,9 @@ def log_reflectance_at(
     constants: HemisphereConstants,
     rows: Observations | None = None,
 ) -> jnp.ndarray:
-    """ln R(θi, θs) up to the constant ln Ω: ln BRDF + ln cos θs (for the angle slopes); with
-    ``rows``, each row's own kind (no cos θs for BRDF rows, Eq. 8 out of the plane)."""
-    log_cos = log_cos_theta_s(theta_s_deg)
-    if rows is None:
-        return log_brdf_inplane(theta_i_deg, theta_s_deg, params, fold, constants) + log_cos
-    log_brdf = row_log_brdf(theta_i_deg, theta_s_deg, params, fold, constants, rows.phi_s_deg)
-    return log_brdf + rows.cos_weight * log_cos
+    """:func:`family_log_reflectance_at` under Eq. (7) (+ Eq. 10 when ``fold``)."""
+    member = strumik_family(fold, constants)
+    return family_log_reflectance_at(member, theta_i_deg, theta_s_deg, params._asdict(), rows)
 
 
 def standardized_residuals(

@@ -47,18 +47,16 @@ from scipy import stats
 
 from brdf_infer.errors import BadInputError
 from brdf_infer.measurements import Measurements
-from brdf_infer.model import REFERENCE_FAMILY, ModelFamily, family, log_tis
-from brdf_infer.params import PARAM_NAMES, Params
+from brdf_infer.model import ModelFamily, check_family_name, family
+from brdf_infer.params import PARAM_NAMES
 from brdf_infer.posterior import (
     LINEAR,
     NOISE_SITES,
-    FamilyPosteriorModel,
     ModelData,
     NutsProgram,
     PosteriorModel,
     build_model,
     chain_keys,
-    model_name,
 )
 from brdf_infer.priors import Prior
 from brdf_infer.scene import Scene
@@ -125,13 +123,13 @@ class SbcResult:
         }
 
 
-def _tis70(sites: dict, member: ModelFamily, constants) -> np.ndarray:
-    """TIS(70°) of every draw (any leading shape); only its order matters to the ranks."""
+def _tis70(sites: dict, member: ModelFamily) -> np.ndarray:
+    """TIS(70°) of every draw (any leading shape), with the family's fold (the scene's, as the
+    run reports it); only its order matters to the ranks."""
     flat = {name: jnp.asarray(sites[name]).reshape(-1) for name in member.parameters}
     shape = np.shape(sites[member.parameters[0]])
-    if member.name == REFERENCE_FAMILY:  # Eq. (9), batched over the draws in one call
-        params = Params(*(flat[name] for name in PARAM_NAMES))
-        values = log_tis(jnp.array([70.0]), params, True, constants)[..., 0]
+    if member.log_tis_draws is not None:  # Eq. (9), batched over the draws in one call
+        values = member.log_tis_draws(jnp.array([70.0]), flat)[..., 0]
     else:  # a 2-D quadrature per draw, in batches
         values = jax.jit(
             lambda p: jax.lax.map(lambda one: member.tis(70.0, one), p, batch_size=64)
@@ -139,18 +137,16 @@ def _tis70(sites: dict, member: ModelFamily, constants) -> np.ndarray:
     return np.asarray(values).reshape(shape)
 
 
-def _quantities(sites: dict, member: ModelFamily, constants) -> dict[str, np.ndarray]:
+def _ranked_values(sites: dict, member: ModelFamily) -> dict[str, np.ndarray]:
     """The ranked quantities of draws (any leading shape): the family's physical parameters,
     TIS(70°) and the learned noise scales."""
     values = {name: np.asarray(sites[name]) for name in member.parameters}
-    values["tis70"] = _tis70(sites, member, constants)
+    values["tis70"] = _tis70(sites, member)
     values.update({name: np.asarray(sites[name]) for name in NOISE_QUANTITIES if name in sites})
     return values
 
 
-def simulate(
-    model: PosteriorModel | FamilyPosteriorModel, replicates: int, seed: int
-) -> dict[str, np.ndarray]:
+def simulate(model: PosteriorModel, replicates: int, seed: int) -> dict[str, np.ndarray]:
     """Prior draws of every site and a simulated ``obs`` per replicate (leading axis)."""
     predictive = Predictive(model, num_samples=replicates)
     return jax.device_get(
@@ -171,7 +167,7 @@ def replicate_data(data: ModelData, log_reflectance: np.ndarray) -> ModelData:
 
 
 def ranked_quantities(
-    model: PosteriorModel | FamilyPosteriorModel,
+    model: PosteriorModel,
     simulated: dict,
     sites: dict[str, np.ndarray],
     thin: int,
@@ -187,10 +183,8 @@ def ranked_quantities(
     Returns:
         The truths (replicates,) and the thinned draws (replicates, draws) of each quantity.
     """
-    constants = model.scene.model.constants
-    member = family(model_name(model), model.scene.model.fold, constants)
     thinned = {k: v[:, 0, thin - 1 :: thin] for k, v in sites.items()}
-    return _quantities(simulated, member, constants), _quantities(thinned, member, constants)
+    return _ranked_values(simulated, model.family), _ranked_values(thinned, model.family)
 
 
 def ranks_of(truth: dict[str, np.ndarray], posterior: dict[str, np.ndarray]) -> dict:
@@ -265,9 +259,10 @@ def check_planted_fault(fault: str | None, scene: Scene, model: str | None = Non
         return
     field = "planted_fault"
     name = scene.model.family if model is None else model
-    if name != REFERENCE_FAMILY:
+    check_family_name(name)
+    if not family(name).paper_parameters:  # the faults are planted in Eq. (7)'s whitening
         raise BadInputError(
-            f"planted fault {fault!r} is for the {REFERENCE_FAMILY} family, not {name}",
+            f"planted fault {fault!r} is for the strumik2024 family, not {name}",
             field=field,
         )
     fixed = {name for name, prior in scene.priors.items() if prior.fixed}
@@ -291,9 +286,7 @@ def moved_prior(prior: Prior) -> Prior:
     return prior
 
 
-def planted_inference(
-    model: PosteriorModel | FamilyPosteriorModel, fault: str | None
-) -> PosteriorModel | FamilyPosteriorModel:
+def planted_inference(model: PosteriorModel, fault: str | None) -> PosteriorModel:
     """The model the inference runs with ``fault`` (a key of
     :data:`~brdf_infer.settings.PLANTED_FAULTS`, checked by :func:`check_planted_fault`)
     planted; the simulations keep ``model``."""

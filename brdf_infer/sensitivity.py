@@ -42,7 +42,7 @@ import numpy as np
 from brdf_infer.error_model import CALIBRATIONS, ROTATION_COUPLINGS
 from brdf_infer.errors import BadInputError
 from brdf_infer.measurements import Measurements
-from brdf_infer.model import REFERENCE_FAMILY
+from brdf_infer.model import family
 from brdf_infer.scene import Scene, parse_errors
 from brdf_infer.settings import SensitivitySettings
 
@@ -164,9 +164,9 @@ def default_variants(scene: Scene) -> list[Variant]:
 def check_scene(scene: Scene) -> None:
     """Refuse a scene the study cannot answer for: another family than ``strumik2024``
     (π·BRDF0 is its parameter) or no out-of-plane model (no TIS)."""
-    if scene.model.family != REFERENCE_FAMILY:
+    if not family(scene.model.family).paper_parameters:
         raise BadInputError(
-            f"the sensitivity study samples {REFERENCE_FAMILY} (π·BRDF0 and the TIS of Eq. 9), "
+            "the sensitivity study samples strumik2024 (π·BRDF0 and the TIS of Eq. 9), "
             f"not {scene.model.family}",
             file=scene.path,
             field="model.family",
@@ -285,7 +285,14 @@ def _summarise(
     and the sampler's health of one variant's draws."""
     from brdf_infer._arviz import az
     from brdf_infer.compare import PARETO_K_LIMIT
-    from brdf_infer.posterior import NOISE_SITES, draws_params, interval95, loo_terms, tis_band
+    from brdf_infer.posterior import (
+        FAMILY_TIS_DRAWS,
+        NOISE_SITES,
+        draws_physical,
+        interval95,
+        loo_terms,
+        tis_band,
+    )
 
     sites = output.sites
     log_lik = loo_terms(model, sites)[0]
@@ -306,12 +313,12 @@ def _summarise(
         pointwise = refit(pointwise, refitted)
     else:
         refitted = []
-    params = draws_params(sites)
-    band = tis_band(params, angles, scene.model.fold, scene.model.constants)
+    physical = draws_physical(sites, model.family)
+    band = tis_band(model.family, physical, angles, FAMILY_TIS_DRAWS)
     return VariantResult(
         variant=changed,
         tis={key: band[key] for key in ("theta_i_deg", "median", "lo95", "hi95")},
-        pi_brdf0=interval95(np.pi * np.asarray(params.brdf0)),
+        pi_brdf0=interval95(np.pi * physical["brdf0"]),
         elpd_loo=float(np.sum(pointwise)),
         se=float(np.sqrt(pointwise.size * np.var(pointwise))),
         pointwise=pointwise,

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from brdf_infer.measurements import Measurements
-from brdf_infer.model import brdf_inplane
+from brdf_infer.observations import build_observation_model, predicted_log_reflectance
 from brdf_infer.params import Params
 from brdf_infer.scene import Scene
 
@@ -21,10 +21,12 @@ def synthetic_measurements(
     noise_rel: float = 0.0,
     seed: int = 0,
 ) -> Measurements:
-    """Rows of ``template`` with reflectance predicted by ``params`` (Eqs. 6, 7, 10).
+    """Rows of ``template`` with reflectance predicted by ``params`` along the one forward
+    path of the fits and the posterior (:func:`brdf_infer.observations.log_reflectance`:
+    Eqs. 6, 7, 10; Eq. 8 out of the plane; the scene's instrument kernel).
 
     Args:
-        scene: apertures and model components (folding).
+        scene: apertures, instrument and model components (folding).
         template: the geometry (series, sample, θi, θs) to reproduce.
         params: the generating parameters, paper units.
         noise_rel: 1σ of multiplicative log-normal noise, e.g. 0.065 [-].
@@ -33,10 +35,9 @@ def synthetic_measurements(
     Returns:
         A table like ``template`` with new ``reflectance`` and ``reflectance_err = noise_rel·R``.
     """
-    brdf = brdf_inplane(
-        template.theta_i_deg, template.theta_s_deg, params, scene.model.fold, scene.model.constants
-    )
-    clean = np.asarray(brdf) * np.exp(scene.log_conversion(template))
+    rows = build_observation_model(scene, template).data
+    log_clean = predicted_log_reflectance(params, rows, scene.model.fold, scene.model.constants)
+    clean = np.exp(np.asarray(log_clean))
     noise = np.random.default_rng(seed).normal(0.0, noise_rel, clean.shape) if noise_rel else 0.0
     reflectance = clean * np.exp(noise)
     return replace(template, reflectance=reflectance, reflectance_err=noise_rel * reflectance)

@@ -131,16 +131,15 @@ def fit_checks(scene: Scene, measurements: Measurements, fit: dict[str, Any]) ->
     (:func:`paper_fit_summary`, :func:`lsq_summary` or a family's ``as_json``): π·BRDF0 and
     the TIS at the scene's incidence angles."""
     from brdf_infer import plausibility
-    from brdf_infer.model import REFERENCE_FAMILY, family
+    from brdf_infer.model import family, run_family_name
     from brdf_infer.params import Params
 
-    name = fit.get("model", REFERENCE_FAMILY)
+    member = family(run_family_name(fit), scene.model.fold, scene.model.constants)
     what = "the paper fit" if fit["method"] == "paper" else "the least-squares fit"
-    if name == REFERENCE_FAMILY:
+    if member.paper_parameters:
         return plausibility.fit_checks(scene, measurements, Params(**fit["params"]), what)
-    member = family(name, scene.model.fold, scene.model.constants)
     return plausibility.family_fit_checks(
-        scene, measurements, member, fit["params"], f"{what} of {name}"
+        scene, measurements, member, fit["params"], f"{what} of {member.name}"
     )
 
 
@@ -175,16 +174,18 @@ def lsq_summary(
     seed: int = 0,
     scale_covariance: bool = False,
     progress: Callable[[str], None] = _silent,
+    paper: dict[str, float] | None = None,
 ) -> dict[str, Any]:
     """The least-squares fit as the JSON of ``fit --method lsq`` (warnings also to
     ``progress``): ``sigma`` is the 1σ as asked (scaled by √(χ²/dof) with
     ``scale_covariance``), ``sigma_scaled`` always the scaled one, next to ``chi2_dof`` and
-    the ``fit_quality`` statement (:mod:`brdf_infer.fit_quality`)."""
+    the ``fit_quality`` statement (:mod:`brdf_infer.fit_quality`); ``paper_fit_cost``: the χ²
+    of the paper fit's parameters ``paper`` under the same weights (None: fitted here)."""
     from brdf_infer.fit_quality import FitQuality, scaled_sigma
     from brdf_infer.lsq import fit_lsq
     from brdf_infer.observations import build_observation_model
     from brdf_infer.paper_fit import paper_fit
-    from brdf_infer.params import PARAM_NAMES, params_to_dict
+    from brdf_infer.params import PARAM_NAMES, Params, params_to_dict
 
     progress(f"least squares: {starts} starts, solver {solver} ...")
     result = fit_lsq(
@@ -201,7 +202,8 @@ def lsq_summary(
     learned = scene.errors.model == "generative" and scene.errors.learns_repeatability
     quality = FitQuality(result.cost, dof, result.repeatability if learned and dof > 0 else None)
     model = build_observation_model(scene, measurements).with_sigma(result.row_sigma)
-    paper_cost = float(model.chi2(paper_fit(scene, measurements).params))
+    paper_params = paper_fit(scene, measurements).params if paper is None else Params(**paper)
+    paper_cost = float(model.chi2(paper_params))
     return {
         "method": "lsq",
         "scene": scene.name,
@@ -297,29 +299,28 @@ def _run(
     progress: Callable[[str], None],
 ) -> RunResult:
     """:func:`run` with ``out`` held."""
-    from brdf_infer.model import REFERENCE_FAMILY
     from brdf_infer.plausibility import measurement_checks, require_plausible
     from brdf_infer.posterior import build_model
 
     start = time.perf_counter()
     name = settings.model or scene.model.family
-    build_model(scene, measurements, name)  # an unknown family fails before any work
-    reference = name == REFERENCE_FAMILY
+    # an unknown family fails before any work; the studies written for Eq. (7) need its family
+    eq7 = build_model(scene, measurements, name).family.paper_parameters
     studies = settings.studies if settings.studies is not None else scene.studies
     error_models = [m for m in studies.error_models if m != scene.errors.model]
     instruments = [m for m in studies.instruments if m != scene.instrument.model]
-    instruments = instruments if reference else []
-    traces = studies.raytrace and scene.raytrace is not None and reference
-    sensitive = studies.sensitivity and reference
-    designed = bool(studies.design) and reference
+    instruments = instruments if eq7 else []
+    traces = studies.raytrace and scene.raytrace is not None and eq7
+    sensitive = studies.sensitivity and eq7
+    designed = bool(studies.design) and eq7
     _check_studies(scene, instruments, sensitive)
     implausible = measurement_checks(scene, measurements)
     require_plausible(implausible, settings.force)
     steps = 4 + len(error_models) + bool(instruments) + traces + bool(studies.compare)
     steps += sensitive + designed
-    job = Job(scene, measurements, out, settings, progress, name, studies, reference, steps)
+    job = Job(scene, measurements, out, settings, progress, name, studies, eq7, steps)
     paper = _paper_fit(job, implausible)
-    lsq = _least_squares(job, implausible)
+    lsq = _least_squares(job, implausible, paper)
     forced = _write_fits(job, implausible, paper, lsq)
     options = {
         "chains": settings.chains,
@@ -360,7 +361,7 @@ def _paper_fit(job: Job, implausible: list[Implausible]) -> dict[str, Any] | Non
 
     scene, measurements = job.scene, job.measurements
     paper = None
-    if job.reference:
+    if job.paper_parameters:
         job.step(f"paper fit of scene '{scene.name}' ({len(measurements)} rows)")
         paper = paper_fit_summary(scene, measurements)
         implausible += fit_checks(scene, measurements, paper)
@@ -370,18 +371,21 @@ def _paper_fit(job: Job, implausible: list[Implausible]) -> dict[str, Any] | Non
     return paper
 
 
-def _least_squares(job: Job, implausible: list[Implausible]) -> dict[str, Any]:
+def _least_squares(
+    job: Job, implausible: list[Implausible], paper: dict[str, Any] | None
+) -> dict[str, Any]:
     """Step 2: the least-squares fit of every free parameter (its checks added to
-    ``implausible``)."""
+    ``implausible``; ``paper``: step 1's fit, whose χ² it reports)."""
     scene, measurements, settings, name = job.scene, job.measurements, job.settings, job.name
     job.step(f"least-squares fit of all free parameters of {name}")
-    if job.reference:
+    if job.paper_parameters:
         lsq = lsq_summary(
             scene,
             measurements,
             starts=settings.lsq_starts,
             seed=settings.seed,
             progress=job.progress,
+            paper=paper["params"],
         )
     else:
         from brdf_infer.family_fit import fit_family_lsq
@@ -443,7 +447,10 @@ def _report(job: Job, example: Path | None) -> tuple[Path, Verdict]:
     scene, out, studies = job.scene, job.out, job.studies
     atomic_write_json(
         out / STUDIES_FILE,
-        {"run": studies.requested(), "not_run": not_run(scene, studies) if job.reference else []},
+        {
+            "run": studies.requested(),
+            "not_run": not_run(scene, studies) if job.paper_parameters else [],
+        },
     )
     job.step("report")
     report, verdict = write_report(out, progress=_silent)

@@ -16,7 +16,7 @@ from brdf_infer.compare import PARETO_K_LIMIT, CompareSettings, compare_families
 from brdf_infer.error_model import NoiseScales
 from brdf_infer.model import family
 from brdf_infer.params import UV_PAPER
-from brdf_infer.posterior import build_family_model, build_posterior_model
+from brdf_infer.posterior import build_posterior_model
 from brdf_infer.report._compare import compare_frame
 from tests.helpers import SUITE_WARMUP, run_cli
 
@@ -30,11 +30,11 @@ def synthetic(scene, measurements, truth: str, seed: int):
     """The bundled geometry with ln R drawn from ``truth`` under the scene's error model
     (sample and repeatability scales 0.05)."""
     if truth == "abg":
-        model = build_family_model(scene, measurements, family("abg"))
+        model = build_posterior_model(scene, measurements, family("abg"))
         params = {k: jnp.asarray(v) for k, v in ABG_TRUTH.items()}
     else:
         model = build_posterior_model(scene, measurements)
-        params = UV_PAPER
+        params = UV_PAPER._asdict()
     errors = scene.errors
     scales = NoiseScales(
         sample_sd=jnp.asarray(0.05),
@@ -179,7 +179,7 @@ def test_a_row_with_the_left_out_sigma_carries_no_information(lya):
     from brdf_infer.compare import LEFT_OUT_SIGMA
 
     scene, measurements = lya
-    model = build_family_model(scene, measurements, family("abg"))
+    model = build_posterior_model(scene, measurements, family("abg"))
     row = 7
     noise = model.data.noise
     left_out = model.data._replace(

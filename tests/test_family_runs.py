@@ -13,7 +13,7 @@ from scipy import integrate, stats
 from brdf_infer._arviz import az
 from brdf_infer.model import family
 from brdf_infer.params import PAPER_CONSTANTS
-from brdf_infer.posterior import family_bands, family_tis_band
+from brdf_infer.posterior import posterior_bands, tis_band
 from tests import independent_bsdf as oracle
 from tests.helpers import SUITE_WARMUP, run_cli
 
@@ -81,7 +81,7 @@ def test_tis_of_a_family_run_is_its_own_quadrature_over_its_draws(abg_run, capsy
 
     expected, _ = integrate.dblquad(integrand, 0, math.pi / 2, 0, 2 * math.pi, epsrel=1e-10)
     physical = {n: np.asarray(posterior[n]).reshape(-1)[:1] for n in ("A", "B", "g")}
-    value = family_tis_band(family("abg"), physical, [70.0], 1)["median"][0]
+    value = tis_band(family("abg"), physical, [70.0], 1)["median"][0]
     assert value == pytest.approx(expected, rel=1e-7)
 
 
@@ -152,7 +152,7 @@ def test_a_lambertian_run_has_the_exact_tis_of_its_draws(tmp_path, capsys):
 
 def test_family_bands_are_quantiles_of_the_family_brdf_over_draws():
     values = np.linspace(0.01, 0.05, 101)
-    bands = family_bands(family("lambertian"), {"tis": values}, [30.0])
+    bands = posterior_bands(family("lambertian"), {"tis": values}, [30.0])
     brdf = np.asarray(bands["brdf_inplane"]["median"])
     np.testing.assert_allclose(brdf, np.median(values) / np.pi, rtol=1e-12)
     np.testing.assert_allclose(bands["tis"]["lo95"], np.quantile(values, 0.025), rtol=1e-12)

@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 from brdf_infer._arviz import az
-from brdf_infer.model import tis
+from brdf_infer.model import strumik_family, tis
 from brdf_infer.params import PAPER_CONSTANTS, UV_PAPER, Params
-from brdf_infer.posterior import compute_bands, draws_params
+from brdf_infer.posterior import draws_params, posterior_bands
 from brdf_infer.posterior._results import write_inference_data
 from tests import independent_bsdf as oracle
 from tests.helpers import run_cli
@@ -43,8 +43,9 @@ def _draws_near_uv_paper(count: int = 64) -> Params:
 def test_bands_follow_the_fold_switch_and_say_which():
     """Planted fault: the TIS band folded whatever the scene said (as before issue 22)."""
     draws = _draws_near_uv_paper()
-    plain = compute_bands(draws, [45.0], False, PAPER_CONSTANTS)
-    folded = compute_bands(draws, [45.0], True, PAPER_CONSTANTS)
+    physical = draws._asdict()
+    plain = posterior_bands(strumik_family(False, PAPER_CONSTANTS), physical, [45.0])
+    folded = posterior_bands(strumik_family(True, PAPER_CONSTANTS), physical, [45.0])
     assert plain["fold"] is False and folded["fold"] is True
     at = plain["tis"]["theta_i_deg"].index(85.0)
     assert 100 * plain["tis"]["median"][at] == pytest.approx(7.8987, abs=5e-4)

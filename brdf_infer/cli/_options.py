@@ -69,14 +69,18 @@ def chosen_fold(requested: bool | None, default: bool = False) -> bool:
     return default if requested is None else requested
 
 
-def refuse_fold(requested: bool | None, family_name: str) -> None:
-    """A family other than ``strumik2024`` has no Eq. (10) to fold with.
+def folded_family(member, requested: bool | None):
+    """A run's family with ``--fold``/``--no-fold`` applied (None: the run's own switch).
 
     Raises:
-        BadInputError: ``--fold`` was asked for.
+        BadInputError: ``--fold`` for a family without Eq. (10).
     """
-    if requested:
-        raise BadInputError(f"a run of {family_name} has no Eq. (10)", field="--fold")
+    if requested is None:
+        return member
+    try:
+        return member.with_fold(requested)
+    except ValueError:
+        raise BadInputError(f"a run of {member.name} has no Eq. (10)", field="--fold") from None
 
 
 def checked_instrument(name: str | None) -> None:

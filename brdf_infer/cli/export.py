@@ -14,7 +14,7 @@ import numpy as np
 from brdf_infer._outdir import check_output_dir
 from brdf_infer._outlock import writing
 from brdf_infer.cli._common import emit_json, progress, scene_command_parser, table
-from brdf_infer.cli._options import add_fold_arguments, angles, chosen_fold, refuse_fold
+from brdf_infer.cli._options import add_fold_arguments, angles, chosen_fold, folded_family
 from brdf_infer.errors import BadInputError
 
 MAX_INTEGRAL_ERROR = 0.01  # a table whose own hemisphere integral misses its TIS by more
@@ -65,27 +65,25 @@ def _checked_options(args: argparse.Namespace) -> None:
 
 def _source(args: argparse.Namespace, scene_name: str):
     from brdf_infer.export import Source
-    from brdf_infer.model import REFERENCE_FAMILY
     from brdf_infer.params import resolve_params
-    from brdf_infer.posterior import load_run_draws, load_run_family
+    from brdf_infer.posterior import draws_params, load_run_family
 
     if args.run is not None:
         run = Path(args.run)
         member, physical = load_run_family(run)
+        member = folded_family(member, args.fold)
         with contextlib.suppress(OSError, ValueError, KeyError):
             scene_name = json.loads((run / "summary.json").read_text())["scene"]
-        if member.name != REFERENCE_FAMILY:
-            refuse_fold(args.fold, member.name)
-            if args.format == "abg" and member.name != "abg":
-                raise BadInputError(
-                    f"ABg rows are fitted to Eq. (7) or read from an abg run, not a run of "
-                    f"{member.name} (export it with --format zemax-bsdf)",
-                    field="--format",
-                )
-            return Source(str(run), None, True, False, None, scene_name, member, physical)
-        params, run_fold, constants = load_run_draws(run)
-        fold = chosen_fold(args.fold, run_fold)
-        return Source(str(run), params, True, fold, constants, scene_name)
+        if member.paper_parameters:
+            params = draws_params(physical)
+            return Source(str(run), params, True, member.fold, member.constants, scene_name)
+        if args.format == "abg" and member.name != "abg":
+            raise BadInputError(
+                f"ABg rows are fitted to Eq. (7) or read from an abg run, not a run of "
+                f"{member.name} (export it with --format zemax-bsdf)",
+                field="--format",
+            )
+        return Source(str(run), None, True, False, None, scene_name, member, physical)
     from brdf_infer.scene import load_scene
 
     scene = load_scene(scene_name)

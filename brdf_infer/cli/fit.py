@@ -58,7 +58,7 @@ def add_parser(commands) -> argparse.ArgumentParser:
 
 def main(args: argparse.Namespace) -> int:
     """Fit, check the fit's plausibility and print it."""
-    from brdf_infer.model import REFERENCE_FAMILY
+    from brdf_infer.model import family
     from brdf_infer.plausibility import require_plausible
     from brdf_infer.workflow import fit_checks
 
@@ -66,12 +66,13 @@ def main(args: argparse.Namespace) -> int:
     scene, measurements = scene_and_measurements(args.scene, args.instrument, args.force)
     passed = forced(scene, measurements)
     model = args.model or scene.model.family
-    if model != REFERENCE_FAMILY and args.method != "lsq":
+    member = family(model, scene.model.fold, scene.model.constants)
+    if not member.paper_parameters and args.method != "lsq":
         raise BadInputError(
             f"the paper's regression is Eq. (7)'s; fit {model} with --method lsq",
             field="--model",
         )
-    payload = _fit(args, scene, measurements, model)
+    payload = _fit(args, scene, measurements, member)
     implausible = fit_checks(scene, measurements, payload)
     require_plausible(implausible, args.force)
     payload["implausible"] = passed + [found.record for found in implausible]
@@ -79,7 +80,7 @@ def main(args: argparse.Namespace) -> int:
         progress(f"warning: forced past a plausibility check: {found.record}")
     if args.json:
         emit_json(payload)
-    elif model != REFERENCE_FAMILY:
+    elif not member.paper_parameters:
         print(f"least-squares fit of {model} to scene '{scene.name}'")
         print(_sigma_table(payload, digits=6))
         print(
@@ -95,16 +96,15 @@ def main(args: argparse.Namespace) -> int:
     return 0
 
 
-def _fit(args: argparse.Namespace, scene, measurements, model: str) -> dict[str, Any]:
-    """The fit's JSON: ``model``'s least squares, or the reference model's fit."""
-    from brdf_infer.model import REFERENCE_FAMILY, family
-
-    if model != REFERENCE_FAMILY:
+def _fit(args: argparse.Namespace, scene, measurements, member) -> dict[str, Any]:
+    """The fit's JSON: the family's least squares, or for Eq. (7) the paper's regression or
+    least squares over its six parameters (with fixed ones, reweighting and a grid)."""
+    if not member.paper_parameters:
         from brdf_infer.family_fit import fit_family_lsq
 
-        progress(f"least squares of {model}: {args.starts} starts ...")
+        progress(f"least squares of {member.name}: {args.starts} starts ...")
         return fit_family_lsq(
-            scene, measurements, family(model), starts=args.starts, seed=args.seed
+            scene, measurements, member, starts=args.starts, seed=args.seed
         ).as_json(scene.name)
     if args.method == "lsq":
         from brdf_infer.workflow import lsq_summary

@@ -82,9 +82,15 @@ def _payload(args: argparse.Namespace, scene, measurements) -> dict:
 
     shown = None if args.json else progress
     if args.run is not None:
-        from brdf_infer.posterior import load_run_draws
+        from brdf_infer.posterior import draws_params, load_run_family
 
-        all_draws, _, _ = load_run_draws(Path(args.run))
+        member, physical = load_run_family(Path(args.run))
+        if not member.paper_parameters:
+            raise BadInputError(
+                f"a run of {member.name}: the ray tracer traces Eq. (7)'s BRDF (strumik2024)",
+                field="--run",
+            )
+        all_draws = draws_params(physical)
         return raytrace_posterior_payload(
             scene,
             measurements,

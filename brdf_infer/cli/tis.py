@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from brdf_infer.cli._common import add_json_argument, command_parser, emit_json, progress, table
-from brdf_infer.cli._options import add_fold_arguments, angles, chosen_fold, refuse_fold
+from brdf_infer.cli._options import add_fold_arguments, angles, chosen_fold, folded_family
 
 TIS_RUN_FAMILY_DRAWS = 1000  # a lobe family's TIS is a 2-D quadrature (≈ 1 ms each)
 
@@ -96,24 +96,16 @@ def _tis_warnings(theta_i: np.ndarray, values: np.ndarray) -> list[str]:
 
 
 def _tis_from_run(args: argparse.Namespace, theta_i: np.ndarray) -> None:
-    from brdf_infer.model import REFERENCE_FAMILY, fold_statement
-    from brdf_infer.posterior import family_tis_band, load_run_draws, load_run_family, tis_band
+    from brdf_infer.model import fold_statement
+    from brdf_infer.posterior import load_run_family, tis_band
 
     start = time.perf_counter()
     member, physical = load_run_family(Path(args.run))
-    if member.name == REFERENCE_FAMILY:
-        params, run_fold, constants = load_run_draws(Path(args.run))
-        fold = chosen_fold(args.fold, run_fold)
-        band = {
-            **tis_band(params, theta_i, fold, constants),
-            "draws": int(np.size(params.brdf0)),
-        }
-        what = "Eq. (9)"
-    else:
-        refuse_fold(args.fold, member.name)
-        fold = False
-        band = family_tis_band(member, physical, theta_i, TIS_RUN_FAMILY_DRAWS)
-        what = member.name
+    member = folded_family(member, args.fold)
+    fold = member.fold
+    band = tis_band(member, physical, theta_i, TIS_RUN_FAMILY_DRAWS)
+    band.setdefault("draws", int(np.size(next(iter(physical.values())))))  # every draw
+    what = "Eq. (9)" if member.paper_parameters else member.name
     seconds = time.perf_counter() - start
     if args.json:
         emit_json({**band, "model": member.name, "fold": fold, "seconds": seconds})

@@ -48,7 +48,7 @@ from brdf_infer.export._source import Source, draw_indices
 from brdf_infer.export._zemax import export_zemax
 from brdf_infer.model import fold_statement, tis
 from brdf_infer.params import Params, params_to_dict
-from brdf_infer.posterior import FAMILY_TIS_DRAWS, family_tis_band
+from brdf_infer.posterior import FAMILY_TIS_DRAWS, tis_band
 
 EXPORTS_FILE = "exports.json"  # in a run folder: the exports made from it, for the report
 ABG_COLUMNS = ("theta_i_deg", "A", "B", "g", "tis_model", "tis_abg", "rms_log_error")
@@ -71,7 +71,7 @@ def _abg_of_abg_run(source: Source, theta_i: np.ndarray) -> tuple[list[dict], di
             "(export it with --format zemax-bsdf)",
             field="format",
         )
-    band = family_tis_band(member, source.physical, theta_i, FAMILY_TIS_DRAWS)
+    band = tis_band(member, source.physical, theta_i, FAMILY_TIS_DRAWS)
     columns = {name: np.quantile(source.physical[name], [0.025, 0.5, 0.975]) for name in "ABg"}
     rows = []
     for k, t in enumerate(theta_i):

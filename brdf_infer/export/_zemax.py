@@ -15,9 +15,9 @@ import numpy as np
 from brdf_infer.bsdf_file import BSDF_SOURCE, BsdfFile, specular_frame_to_model, write_bsdf
 from brdf_infer.export._grid import ScatterGrid, brdf_table, table_integral
 from brdf_infer.export._source import _BAND_QUANTILES, Source, draw_indices
-from brdf_infer.model import ModelFamily, fold_statement, tis
+from brdf_infer.model import ModelFamily, fold_statement, strumik_family, tis
 from brdf_infer.params import Params, params_to_dict
-from brdf_infer.posterior import FAMILY_TIS_DRAWS, family_tis_band, tis_band
+from brdf_infer.posterior import FAMILY_TIS_DRAWS, tis_band
 
 _MEANING = {
     "params": "BRDF of one parameter set; TIS lines: its exact Eq. (9) TIS",
@@ -164,7 +164,8 @@ def export_zemax(
                 [f"parameters: {_parameter_text(source.params)}"],
             )
         ]
-    band = tis_band(source.params, theta_i, source.fold, source.constants)
+    member = strumik_family(source.fold, source.constants)
+    band = tis_band(member, source.params._asdict(), theta_i, FAMILY_TIS_DRAWS)
     quantiles = np.empty(
         (len(_BAND_QUANTILES), theta_i.size, grid.azimuth_deg.size, grid.radial_deg.size)
     )
@@ -242,7 +243,7 @@ def _export_family_zemax(
     """:func:`export_zemax` for a run of another model family (module docstring)."""
     member, theta_i = source.family, grid.theta_i_deg
     progress(f"TIS band of {member.name} over at most {FAMILY_TIS_DRAWS} draws")
-    band = family_tis_band(member, source.physical, theta_i, FAMILY_TIS_DRAWS)
+    band = tis_band(member, source.physical, theta_i, FAMILY_TIS_DRAWS)
     quantiles = np.empty(
         (len(_BAND_QUANTILES), theta_i.size, grid.azimuth_deg.size, grid.radial_deg.size)
     )

@@ -18,8 +18,10 @@ from brdf_infer.model._families import (
     REFERENCE_FAMILY,
     Coordinate,
     ModelFamily,
+    Physical,
     check_family_name,
     family,
+    run_family_name,
     strumik_family,
 )
 from brdf_infer.model._hemisphere import (
@@ -60,6 +62,7 @@ __all__ = [
     "TIS_NODES",
     "Coordinate",
     "ModelFamily",
+    "Physical",
     "Quadrature",
     "abg_integral",
     "abg_log_bsdf",
@@ -83,6 +86,7 @@ __all__ = [
     "log_tis",
     "positive_power",
     "reflectance_to_brdf",
+    "run_family_name",
     "solid_angle",
     "strumik_family",
     "tis",

@@ -5,8 +5,9 @@ plane at φ = 180°, Sec. 4.1) and evaluated on arrays by broadcasting; its para
 sampled in internal coordinates (well conditioned, unbounded or simply bounded) under default
 priors, and mapped to the physical parameters in the units the ray tracers use.
 
-* ``strumik2024``: Eqs. (7), (8), (10) (its posterior has its own whitened model,
-  :mod:`brdf_infer.posterior`; listed here for the shared interface).
+* ``strumik2024``: Eqs. (7), (8), (10); its parameters are Eq. (7)'s
+  (:attr:`ModelFamily.paper_parameters`): its posterior samples the scene's ``[priors]`` in
+  whitened coordinates (:mod:`brdf_infer.posterior`), its TIS is Eq. (9) batched.
 * ``abg``: A / (B + ρ^g), ρ = |β − β₀| (Harvey 1976), sampled as ln(A/B) (the BRDF at the
   specular direction), ln ρ_k = ln(B)/g (the knee) and g.
 * ``harvey-shack``: b₀ [1 + (ρ/L)²]^(S/2), sampled as ln b₀, ln L and S.
@@ -30,6 +31,7 @@ import jax.numpy as jnp
 from brdf_infer._units import DEG
 from brdf_infer.errors import BadInputError
 from brdf_infer.model._hemisphere import log_brdf_hemisphere
+from brdf_infer.model._inplane import log_brdf_inplane
 from brdf_infer.model._lobes import (
     FIT_QUADRATURE,
     abg_integral,
@@ -67,6 +69,15 @@ class ModelFamily:
         log_brdf: ln BRDF(θi, θ, φ; physical) [ln sr⁻¹], angles in degrees, broadcasting.
         tis: TIS(θi; physical) [-] for one scalar θi and scalar parameters.
         exact_tis: the TIS is closed-form (else a quadrature).
+        title: how a figure names the model.
+        as_params: the physical parameters as Eq. (7)'s six (:class:`Params`); only
+            ``strumik2024`` has them (:attr:`paper_parameters`).
+        fold: Eq. (10)'s folding is in the BRDF (``strumik2024`` with the scene's switch).
+        constants: Eq. (8)'s Δφ and Eq. (10)'s folding constants (``strumik2024``).
+        log_brdf_inplane: ln BRDF in the plane of incidence at a signed θs in closed form
+            (Eq. 7); None: the hemisphere's BRDF at φ = 180° (forward) or 0°.
+        log_tis_draws: ln TIS(θi) of every draw at every θi in one call, (draws, angles)
+            (Eq. 9 batched); None: :attr:`tis` per draw, a quadrature, over thinned draws.
     """
 
     name: str
@@ -77,9 +88,37 @@ class ModelFamily:
     log_brdf: Callable[..., jnp.ndarray]
     tis: Callable[..., jnp.ndarray]
     exact_tis: bool
+    title: str = ""
+    as_params: Callable[[Physical], Params] | None = None
+    fold: bool = False
+    constants: HemisphereConstants = PAPER_CONSTANTS
+    log_brdf_inplane: Callable[..., jnp.ndarray] | None = None
+    log_tis_draws: Callable[..., jnp.ndarray] | None = None
+
+    @property
+    def paper_parameters(self) -> bool:
+        """The family's parameters are Eq. (7)'s six: the paper's regression, the whitened
+        posterior under the scene's ``[priors]`` (:mod:`brdf_infer.posterior`), π·BRDF0 and
+        the studies written for Eq. (7) (instrument kernels, ray tracing, sensitivity, where
+        to measure next) apply to it."""
+        return self.as_params is not None
+
+    def with_fold(self, fold: bool) -> ModelFamily:
+        """The same family with Eq. (10)'s folding on or off.
+
+        Raises:
+            ValueError: ``fold`` for a family without Eq. (10).
+        """
+        if self.paper_parameters:
+            return strumik_family(fold, self.constants)
+        if fold:
+            raise ValueError(f"{self.name} has no Eq. (10) folding")
+        return self
 
     def log_brdf_signed(self, theta_i_deg, theta_s_deg, physical: Physical) -> jnp.ndarray:
         """ln BRDF in the plane of incidence at a signed θs (forward > 0, Sec. 4.1)."""
+        if self.log_brdf_inplane is not None:
+            return self.log_brdf_inplane(theta_i_deg, theta_s_deg, physical)
         theta_s = jnp.asarray(theta_s_deg, float)
         phi = jnp.where(theta_s >= 0.0, 180.0, 0.0)
         return self.log_brdf(theta_i_deg, jnp.abs(theta_s), phi, physical)
@@ -222,6 +261,7 @@ FAMILIES: dict[str, ModelFamily] = {
         _abg_log_brdf,
         _abg_tis,
         exact_tis=False,
+        title="abg",
     ),
     "harvey-shack": ModelFamily(
         "harvey-shack",
@@ -232,6 +272,7 @@ FAMILIES: dict[str, ModelFamily] = {
         _hs_log_brdf,
         _hs_tis,
         exact_tis=False,
+        title="harvey-shack",
     ),
     "lambertian": ModelFamily(
         "lambertian",
@@ -242,6 +283,7 @@ FAMILIES: dict[str, ModelFamily] = {
         _lambert_log_brdf,
         _lambert_tis,
         exact_tis=True,
+        title="lambertian",
     ),
     "lambertian+abg": ModelFamily(
         "lambertian+abg",
@@ -252,6 +294,7 @@ FAMILIES: dict[str, ModelFamily] = {
         _lambert_abg_log_brdf,
         _lambert_abg_tis,
         exact_tis=False,
+        title="lambertian+abg",
     ),
 }
 REFERENCE_FAMILY = "strumik2024"
@@ -265,7 +308,7 @@ def strumik_family(
     scene's constants.
 
     Its coordinates are empty: its posterior samples the whitened coordinates of
-    :mod:`brdf_infer.posterior` under the scene's ``[priors]``.
+    :mod:`brdf_infer.posterior` under the scene's ``[priors]`` (:attr:`~ModelFamily.as_params`).
     """
 
     def as_params(p: Physical) -> Params:
@@ -287,6 +330,12 @@ def strumik_family(
         lambda ti, t, phi, p: log_brdf_hemisphere(ti, t, phi, as_params(p), fold, constants),
         lambda ti, p: jnp.exp(log_tis(jnp.atleast_1d(ti), as_params(p), fold, constants)[0]),
         exact_tis=False,
+        title="Eqs. (8), (10)",
+        as_params=as_params,
+        fold=fold,
+        constants=constants,
+        log_brdf_inplane=lambda ti, ts, p: log_brdf_inplane(ti, ts, as_params(p), fold, constants),
+        log_tis_draws=lambda theta, p: log_tis(theta, as_params(p), fold, constants),
     )
 
 
@@ -299,6 +348,12 @@ def check_family_name(name: str, *, file: str | Path | None = None, field: str =
             file=file,
             field=field,
         )
+
+
+def run_family_name(attrs) -> str:
+    """The family of a posterior run from its ``posterior`` group's attributes: ``model``;
+    runs written before it was recorded are ``strumik2024``'s."""
+    return str(attrs.get("model", REFERENCE_FAMILY))
 
 
 def family(name: str, fold: bool = False, constants: HemisphereConstants = PAPER_CONSTANTS):

@@ -1,5 +1,5 @@
-"""Credible bands (median, 68 %, 95 %) for the in-plane BRDF, TIS and π·BRDF0 of a
-``strumik2024`` run, and for the in-plane BRDF and TIS of a run of any other family.
+"""Credible bands (median, 68 %, 95 %) for the in-plane BRDF and the TIS of a run of any
+model family, and π·BRDF0 for Eq. (7)'s.
 
 Every band follows the run's one fold switch, the scene's ``[model] fold`` (default false):
 without it the bands are of the physical BRDF, whose TIS is the conservative one for a
@@ -12,8 +12,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from brdf_infer.model import ModelFamily, brdf_inplane, tis
-from brdf_infer.params import HemisphereConstants, Params
+from brdf_infer.model import ModelFamily
+from brdf_infer.params import Params
 
 QUANTILES = {"lo95": 0.025, "lo68": 0.16, "median": 0.5, "hi68": 0.84, "hi95": 0.975}
 TIS_THETA_I_DEG = np.arange(0.0, 90.0, 1.0)  # 0°, 1°, …, 89°
@@ -39,54 +39,6 @@ def interval95(values) -> dict[str, float]:
 def draws_params(sites: dict[str, np.ndarray]) -> Params:
     """All draws (chains flattened) of the six parameters, paper units."""
     return Params(*(np.asarray(sites[name]).reshape(-1) for name in Params._fields))
-
-
-def tis_band(
-    params: Params, theta_i_deg, fold: bool, constants: HemisphereConstants
-) -> dict[str, list]:
-    """TIS(θi) quantiles over all draws, exact 1-D TIS batched over draws × angles."""
-    values = np.asarray(tis(np.asarray(theta_i_deg, float), params, fold, constants))
-    return {"theta_i_deg": np.asarray(theta_i_deg, float).tolist(), **quantile_band(values)}
-
-
-def compute_bands(
-    params: Params,
-    theta_i_deg,
-    fold: bool,
-    constants: HemisphereConstants,
-    with_tis: bool = True,
-) -> dict[str, dict]:
-    """Every band of a posterior run.
-
-    Args:
-        params: parameter draws.
-        theta_i_deg: incidence angles of the BRDF bands [deg].
-        fold: the scene's ``[model] fold``: Eq. (10) in the BRDF and TIS bands (default
-            false, the physical BRDF; the article's Table 3 includes it).
-        constants: out-of-plane and folding constants.
-        with_tis: compute the TIS band (not when the scene has no out-of-plane model).
-
-    Returns:
-        ``{"fold": fold, "tis": …, "brdf_inplane": …, "pi_brdf0": …}`` (no ``"tis"`` without
-        ``with_tis``); the BRDF band holds arrays of shape (len(theta_i_deg), 181) over
-        θs = −90°…90° [sr⁻¹].
-    """
-    theta_i = np.asarray(theta_i_deg, float)
-    grid_i, grid_s = np.meshgrid(theta_i, BRDF_THETA_S_DEG, indexing="ij")
-    batch = Params(*(np.asarray(v)[:, None, None] for v in params))
-    brdf = np.asarray(brdf_inplane(grid_i[None], grid_s[None], batch, fold, constants))
-    bands = {
-        "fold": bool(fold),
-        "brdf_inplane": {
-            "theta_i_deg": theta_i.tolist(),
-            "theta_s_deg": BRDF_THETA_S_DEG.tolist(),
-            **quantile_band(brdf),
-        },
-        "pi_brdf0": quantile_band(np.pi * np.asarray(params.brdf0)),
-    }
-    if with_tis:
-        bands["tis"] = tis_band(params, TIS_THETA_I_DEG, fold, constants)
-    return bands
 
 
 def draws_physical(sites: dict[str, np.ndarray], family: ModelFamily) -> dict[str, np.ndarray]:
@@ -134,38 +86,64 @@ def _signed_program(family: ModelFamily):
     return _program("signed", family, lambda member: member.log_brdf_signed)
 
 
-def family_tis_band(
+def tis_band(
     family: ModelFamily, physical: dict[str, np.ndarray], theta_i_deg, draws: int
 ) -> dict[str, list]:
-    """TIS(θi) quantiles of ``family`` over at most ``draws`` evenly spaced draws."""
-    theta = jnp.asarray(theta_i_deg, float)
+    """TIS(θi) quantiles of ``family``: over every draw where its TIS is Eq. (9) batched (one
+    call), else over at most ``draws`` evenly spaced draws (``"draws"``: how many)."""
+    theta = np.asarray(theta_i_deg, float)
+    if family.log_tis_draws is not None:
+        values = np.asarray(jnp.exp(family.log_tis_draws(theta, physical)))
+        return {"theta_i_deg": theta.tolist(), **quantile_band(values)}
     thinned = {k: jnp.asarray(v, float) for k, v in evenly_spaced(physical, draws).items()}
-    values = np.asarray(_tis_curve_program(family)(thinned, theta))
-    return {
-        "theta_i_deg": np.asarray(theta_i_deg, float).tolist(),
-        "draws": int(values.shape[0]),
-        **quantile_band(values),
-    }
+    values = np.asarray(_tis_curve_program(family)(thinned, jnp.asarray(theta)))
+    return {"theta_i_deg": theta.tolist(), "draws": int(values.shape[0]), **quantile_band(values)}
 
 
-def family_bands(
+def _brdf_inplane_draws(family: ModelFamily, physical: dict[str, np.ndarray], grid_i, grid_s):
+    """The in-plane BRDF of every draw on the grid [sr⁻¹]: the family's closed form directly
+    where it has one (Eq. 7), else its compiled hemisphere BRDF at φ = 180° or 0°."""
+    if family.log_brdf_inplane is not None:
+        batch = {k: np.asarray(v)[:, None, None] for k, v in physical.items()}
+        return np.asarray(jnp.exp(family.log_brdf_inplane(grid_i[None], grid_s[None], batch)))
+    batch = {k: jnp.asarray(v, float)[:, None, None] for k, v in physical.items()}
+    return np.exp(np.asarray(_signed_program(family)(grid_i[None], grid_s[None], batch)))
+
+
+def posterior_bands(
     family: ModelFamily, physical: dict[str, np.ndarray], theta_i_deg, with_tis: bool = True
 ) -> dict[str, dict]:
-    """The bands of a run of ``family``: ``{"fold": False, "brdf_inplane": …, "tis": …}`` as
-    in :func:`compute_bands` (the TIS at :data:`FAMILY_TIS_THETA_I_DEG` over
-    :data:`FAMILY_TIS_DRAWS` draws; no π·BRDF0, a parameter of Eq. 7 only; no Eq. 10 either)."""
+    """Every band of a posterior run of ``family``.
+
+    Args:
+        family: the run's family (its ``fold``: the scene's ``[model] fold``, Eq. 10 in the
+            BRDF and TIS bands; default false, the physical BRDF; the article's Table 3
+            includes it).
+        physical: every draw of its physical parameters.
+        theta_i_deg: incidence angles of the BRDF bands [deg].
+        with_tis: compute the TIS band (not when the scene has no out-of-plane model).
+
+    Returns:
+        ``{"fold": …, "brdf_inplane": …, "pi_brdf0": …, "tis": …}``: the BRDF band holds arrays
+        of shape (len(theta_i_deg), 181) over θs = −90°…90° [sr⁻¹]; π·BRDF0 for Eq. (7)'s
+        family only; the TIS at every 1° over every draw for Eq. (9), else at every 5°
+        (:data:`FAMILY_TIS_THETA_I_DEG`) over :data:`FAMILY_TIS_DRAWS` draws; no ``"tis"``
+        without ``with_tis``.
+    """
     theta_i = np.asarray(theta_i_deg, float)
     grid_i, grid_s = np.meshgrid(theta_i, BRDF_THETA_S_DEG, indexing="ij")
-    batch = {k: jnp.asarray(v, float)[:, None, None] for k, v in physical.items()}
-    brdf = np.exp(np.asarray(_signed_program(family)(grid_i[None], grid_s[None], batch)))
     bands = {
-        "fold": False,
+        "fold": bool(family.fold),
         "brdf_inplane": {
             "theta_i_deg": theta_i.tolist(),
             "theta_s_deg": BRDF_THETA_S_DEG.tolist(),
-            **quantile_band(brdf),
+            **quantile_band(_brdf_inplane_draws(family, physical, grid_i, grid_s)),
         },
     }
+    if family.paper_parameters:
+        bands["pi_brdf0"] = quantile_band(np.pi * np.asarray(physical["brdf0"]))
     if with_tis:
-        bands["tis"] = family_tis_band(family, physical, FAMILY_TIS_THETA_I_DEG, FAMILY_TIS_DRAWS)
+        exact = family.log_tis_draws is not None
+        angles = TIS_THETA_I_DEG if exact else FAMILY_TIS_THETA_I_DEG
+        bands["tis"] = tis_band(family, physical, angles, FAMILY_TIS_DRAWS)
     return bands

@@ -45,9 +45,10 @@ import numpyro.distributions as dist
 
 from brdf_infer.coordinates import ANGLE_SCALE_DEG, from_internal
 from brdf_infer.error_model import NoiseScales, angle_slopes, covariance_factors
+from brdf_infer.errors import BadInputError
 from brdf_infer.measurements import Measurements
-from brdf_infer.model import log_fold
-from brdf_infer.observations import log_reflectance_at, predicted_log_reflectance
+from brdf_infer.model import ModelFamily, Physical, log_fold, strumik_family
+from brdf_infer.observations import family_log_reflectance_at, log_reflectance
 from brdf_infer.params import Params
 from brdf_infer.posterior._likelihood import (
     LikelihoodParts,
@@ -96,12 +97,23 @@ def prior_distribution(prior: Prior, scale: float = 1.0) -> dist.Distribution:
 
 @dataclass(frozen=True)
 class PosteriorModel:
-    """A scene's posterior: a NumPyro model function of :class:`ModelData` and its data.
+    """A scene's posterior under a model family: a NumPyro model function of
+    :class:`ModelData` and its data.
+
+    One model for every family: the same rows, instrument (Eq. 6) and generative error model,
+    one forward path (:func:`brdf_infer.observations.log_reflectance`), so that PSIS-LOO
+    compares the BRDF families and nothing else. A family with Eq. (7)'s parameters
+    (:attr:`~brdf_infer.model.ModelFamily.paper_parameters`) is sampled under the scene's
+    ``[priors]``, its linear coefficients whitened (module docstring); any other family in
+    its internal coordinates under their default priors, its physical parameters as
+    deterministic sites.
 
     Attributes:
         scene: the scene (priors, error model, model components).
+        family: the BRDF family.
         data: the scene's own data (the default argument of the model).
-        whiten: sample the whitened coefficients u instead of c (module docstring).
+        whiten: sample the whitened coefficients u instead of c (module docstring; Eq. 7's
+            family only).
         sample_names: the physical samples, in order of appearance.
         row_samples: the physical sample of each row.
         row_series: index of each row's series (in order of appearance).
@@ -113,6 +125,7 @@ class PosteriorModel:
     """
 
     scene: Scene
+    family: ModelFamily
     data: ModelData
     whiten: bool
     sample_names: tuple[str, ...]
@@ -137,25 +150,36 @@ class PosteriorModel:
         """
         data = self.data if data is None else data
         scales = sample_noise_scales(self.errors, data.noise)
-        params = self._parameters(data, scales, whiten=self.whiten and mode != "simulate")
+        physical = self._physical(data, scales, whiten=self.whiten and mode != "simulate")
         rows = data.rows
         if self.errors.angles_on and self.errors.angle_method == "latent":
             theta_i, theta_s = self._latent_angles(data, scales)
+            member = self.family
             mean = (
-                log_reflectance_at(theta_i, theta_s, params, *self._components, rows)
-                - log_reflectance_at(
-                    rows.theta_i_deg, rows.theta_s_deg, params, *self._components, rows
+                family_log_reflectance_at(member, theta_i, theta_s, physical, rows)
+                - family_log_reflectance_at(
+                    member, rows.theta_i_deg, rows.theta_s_deg, physical, rows
                 )
-                + predicted_log_reflectance(params, rows, *self._components)
+                + log_reflectance(member, physical, rows)
             )
-            parts = self.likelihood_parts(params, scales, data, mean=mean, angles=False)
+            parts = self.likelihood_parts(physical, scales, data, mean=mean, angles=False)
         else:
-            parts = self.likelihood_parts(params, scales, data)
+            parts = self.likelihood_parts(physical, scales, data)
         observe(parts, data, mode, self.sigma_scale, spread=self.errors.model == "spread")
 
-    @property
-    def _components(self) -> tuple:
-        return self.scene.model.fold, self.scene.model.constants
+    def _physical(self, data: ModelData, scales: NoiseScales, whiten: bool) -> Physical:
+        """The family's physical parameters of one draw, sampled (class docstring)."""
+        if self.family.paper_parameters:
+            return self._parameters(data, scales, whiten)._asdict()
+        internal = {
+            c.site: numpyro.sample(c.site, prior_distribution(c.prior))
+            for c in self.family.coordinates
+        }
+        physical = self.family.to_physical(internal)
+        for name in self.family.parameters:
+            if name not in internal:  # a coordinate that is its own parameter (g, S)
+                numpyro.deterministic(name, physical[name])
+        return physical
 
     def _parameters(self, data: ModelData, scales: NoiseScales, whiten: bool) -> Params:
         priors = self.scene.priors
@@ -193,7 +217,7 @@ class PosteriorModel:
             [priors[name].value if priors[name].fixed else 0.0 for name in LINEAR]
         )
         design = linear_design(rows, alpha, t_s0)
-        fold, constants = self._components
+        fold, constants = self.family.fold, self.family.constants
         offset = rows.log_aperture + design @ fixed_values
         if fold:
             offset = offset + jnp.where(
@@ -255,17 +279,17 @@ class PosteriorModel:
 
     def likelihood_parts(
         self,
-        params: Params,
+        physical: Physical,
         scales: NoiseScales,
         data: ModelData | None = None,
         *,
         mean: jnp.ndarray | None = None,
         angles: bool = True,
     ) -> LikelihoodParts:
-        """Mean and covariance factors of the rows' ln R for one draw.
+        """Mean and covariance factors of the rows' ln R for one draw (Eq. 6 in log space).
 
         Args:
-            params: the draw's parameters.
+            physical: the draw's physical parameters.
             scales: the draw's noise scales.
             data: the rows (default: the scene's).
             mean: the mean, if already computed (latent angles).
@@ -274,10 +298,10 @@ class PosteriorModel:
         data = self.data if data is None else data
         rows, noise = data.rows, data.noise
         if mean is None:
-            mean = predicted_log_reflectance(params, rows, *self._components)
+            mean = log_reflectance(self.family, physical, rows)
         if angles and self.errors.angles_on:
             g_rot, g_cam = angle_slopes(
-                lambda ti, ts: log_reflectance_at(ti, ts, params, *self._components, rows),
+                lambda ti, ts: family_log_reflectance_at(self.family, ti, ts, physical, rows),
                 rows.theta_i_deg,
                 rows.theta_s_deg,
                 noise.theta_s_per_rotation,
@@ -289,27 +313,47 @@ class PosteriorModel:
 
     def draw_parts(self, sites: dict) -> LikelihoodParts:
         """:meth:`likelihood_parts` of every draw (leading axis) of a posterior's sites."""
-        params = Params(*(jnp.asarray(sites[name]) for name in Params._fields))
-        scales = drawn_noise_scales(self.errors, self.data.noise, sites, params.brdf0.shape[0])
+        physical = {name: jnp.asarray(sites[name]) for name in self.family.parameters}
+        count = next(iter(physical.values())).shape[0]
+        scales = drawn_noise_scales(self.errors, self.data.noise, sites, count)
         # the data as an argument, not a constant: one compilation serves every data set
         parts = jax.jit(jax.vmap(lambda p, s, d: self.likelihood_parts(p, s, d), (0, 0, None)))
-        return parts(params, scales, self.data)
+        return parts(physical, scales, self.data)
 
 
 def build_posterior_model(
-    scene: Scene, measurements: Measurements, *, reparametrise: bool = True
+    scene: Scene,
+    measurements: Measurements,
+    member: ModelFamily | None = None,
+    *,
+    reparametrise: bool = True,
 ) -> PosteriorModel:
-    """The posterior model of ``scene`` on ``measurements``.
+    """The posterior model of ``scene`` on ``measurements`` under the family ``member``.
 
     Args:
         scene: priors, error model, components.
         measurements: every row, each sample separately.
+        member: the BRDF family (default: Eq. 7 with the scene's fold and constants).
         reparametrise: sample whitened coefficients (off: the coefficients themselves).
+
+    Raises:
+        BadInputError: the scene asks for latent angles under a family without Eq. (7)'s
+            parameters.
     """
+    if member is None:
+        member = strumik_family(scene.model.fold, scene.model.constants)
+    latent = scene.errors.angles_on and scene.errors.angle_method == "latent"
+    if latent and not member.paper_parameters:
+        raise BadInputError(
+            f"angle_method = 'latent' is available for strumik2024 only, not {member.name}",
+            file=scene.path,
+            field="errors.angle_method",
+        )
     return PosteriorModel(
         scene=scene,
+        family=member,
         data=build_model_data(scene, measurements),
-        whiten=reparametrise,
+        whiten=reparametrise and member.paper_parameters,
         **row_labels(measurements),
     )
 

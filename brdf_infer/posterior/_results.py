@@ -18,7 +18,7 @@ from brdf_infer._arviz import az
 from brdf_infer._atomic import atomic_write_bytes, atomic_write_json
 from brdf_infer._outlock import require_complete
 from brdf_infer.errors import BadInputError
-from brdf_infer.model import REFERENCE_FAMILY, ModelFamily, family
+from brdf_infer.model import ModelFamily, family, run_family_name
 from brdf_infer.params import PARAM_NAMES
 from brdf_infer.posterior._likelihood import disjoint_columns
 from brdf_infer.posterior._loo import pointwise_loo_terms
@@ -128,7 +128,7 @@ def inference_data(
     idata.posterior.attrs.update(
         {
             "scene": scene.name,
-            "model": getattr(getattr(model, "family", None), "name", REFERENCE_FAMILY),
+            "model": model.family.name,
             "instrument": scene.instrument.model,
             "scene_file": str(scene.path.resolve()),  # readers may run anywhere
             "scene_toml": scene.path.read_text(),
@@ -267,28 +267,6 @@ def run_fold(posterior) -> bool:
     return bool(int(posterior.attrs.get("fold", 0)))
 
 
-def load_run_draws(run: Path):
-    """(Params of every draw, the run's fold switch, constants) of a ``strumik2024`` posterior
-    run directory; the fold switch is the scene's ``[model] fold`` (:func:`run_fold`).
-
-    Raises:
-        BadInputError: no readable posterior.nc in ``run``, or a run of another family
-            (:func:`load_run_family` reads any).
-    """
-    from brdf_infer.params import HemisphereConstants, Params
-
-    posterior, path = _run_posterior_group(run)
-    name = posterior.attrs.get("model", REFERENCE_FAMILY)
-    if name != REFERENCE_FAMILY:
-        raise BadInputError(f"a run of {name}, not of {REFERENCE_FAMILY}", file=path)
-    missing = [name for name in PARAM_NAMES if name not in posterior]
-    if missing:
-        raise BadInputError(f"posterior lacks {', '.join(missing)}", file=path)
-    params = Params(*(np.asarray(posterior[name]).reshape(-1) for name in PARAM_NAMES))
-    constants = HemisphereConstants(**json.loads(posterior.attrs["constants"]))
-    return params, run_fold(posterior), constants
-
-
 def load_run_family(
     run: Path, fold: bool | None = None
 ) -> tuple[ModelFamily, dict[str, np.ndarray]]:
@@ -315,7 +293,7 @@ def family_draws(
     """
     from brdf_infer.params import HemisphereConstants
 
-    name = posterior.attrs.get("model", REFERENCE_FAMILY)
+    name = run_family_name(posterior.attrs)
     fold = run_fold(posterior) if fold is None else fold
     try:
         constants = HemisphereConstants(**json.loads(posterior.attrs["constants"]))

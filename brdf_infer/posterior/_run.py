@@ -19,16 +19,12 @@ from brdf_infer._outlock import writing
 from brdf_infer.error_model import ERROR_MODELS
 from brdf_infer.errors import BadInputError
 from brdf_infer.measurements import Measurements
-from brdf_infer.model import REFERENCE_FAMILY, check_family_name, family
-from brdf_infer.params import PARAM_NAMES
+from brdf_infer.model import check_family_name, family
 from brdf_infer.posterior._bands import (
-    compute_bands,
-    draws_params,
     draws_physical,
-    family_bands,
     interval95,
+    posterior_bands,
 )
-from brdf_infer.posterior._family_model import FamilyPosteriorModel, build_family_model
 from brdf_infer.posterior._loo import loo_pit, uniformity_p_value
 from brdf_infer.posterior._model import NOISE_SITES, PosteriorModel, build_posterior_model
 from brdf_infer.posterior._potential import FlatPotential
@@ -71,9 +67,9 @@ def with_error_model(scene: Scene, error_model: str | None) -> Scene:
 
 def build_model(
     scene: Scene, measurements: Measurements, name: str | None = None
-) -> PosteriorModel | FamilyPosteriorModel:
+) -> PosteriorModel:
     """The posterior model of ``scene`` under the family ``name`` (default: the scene's
-    ``[model] family``).
+    ``[model] family``), with the scene's fold and constants.
 
     Raises:
         BadInputError: an unknown family (field ``model``), or latent angles with a family
@@ -81,14 +77,13 @@ def build_model(
     """
     name = scene.model.family if name is None else name
     check_family_name(name)
-    if name == REFERENCE_FAMILY:
-        return build_posterior_model(scene, measurements)
-    return build_family_model(scene, measurements, family(name))
+    member = family(name, scene.model.fold, scene.model.constants)
+    return build_posterior_model(scene, measurements, member)
 
 
-def model_name(model: PosteriorModel | FamilyPosteriorModel) -> str:
+def model_name(model: PosteriorModel) -> str:
     """The family a posterior model samples."""
-    return model.family.name if isinstance(model, FamilyPosteriorModel) else REFERENCE_FAMILY
+    return model.family.name
 
 
 def run_fingerprint(model: PosteriorModel, measurements: Measurements) -> dict[str, str]:
@@ -324,7 +319,7 @@ class _StepClock:
 
 
 def complete_run(
-    model: PosteriorModel | FamilyPosteriorModel,
+    model: PosteriorModel,
     measurements: Measurements,
     result: Draws,
     seed: int,
@@ -337,31 +332,26 @@ def complete_run(
     diagnostics, the summary and its verdict (:mod:`brdf_infer.verdict`; ``forced``: the
     plausibility checks the run went past), written to ``out`` (when given) atomically;
     ``started``: the ``time.perf_counter()`` at the start of the run (its total time)."""
-    scene, name = model.scene, model_name(model)
+    scene, name = model.scene, model.family.name
     clock = _StepClock()
     log_lik, cdf = loo_terms(model, result.sites)  # once: for PSIS-LOO and the LOO-PIT
     clock.lap("loo_terms")
     idata = inference_data(model, result, seed, log_lik)
     clock.lap("inference_data")
     theta_i_band = scene.band_theta_i_deg(measurements)
-    if name == REFERENCE_FAMILY:
-        params = draws_params(result.sites)
-        bands = compute_bands(
-            params, theta_i_band, scene.model.fold, scene.model.constants, scene.makes_tis
-        )
-        parameters, fixed = (
-            PARAM_NAMES,
-            tuple(n for n in PARAM_NAMES if n not in scene.free_parameters),
-        )
-        medians = {n: float(np.median(getattr(params, n))) for n in PARAM_NAMES}
-        units = dict(zip(PARAM_NAMES, family(name).units.values(), strict=True))
+    member = model.family
+    physical = draws_physical(result.sites, member)
+    # [model] out_of_plane (Eq. 8) is Eq. (7)'s switch; the other families are hemispheric
+    with_tis = scene.makes_tis or not member.paper_parameters
+    bands = posterior_bands(member, physical, theta_i_band, with_tis)
+    parameters = member.parameters
+    # the scene's [priors] (which may fix a parameter) are Eq. (7)'s; other families use their own
+    fixed = tuple(n for n in parameters if n not in scene.free_parameters)
+    fixed = fixed if member.paper_parameters else ()
+    medians = {n: float(np.median(v)) for n, v in physical.items()}
+    pi_brdf0 = None
+    if "pi_brdf0" in bands:
         pi_brdf0 = {key: bands["pi_brdf0"][key] for key in ("median", "lo95", "hi95")}
-    else:
-        physical = draws_physical(result.sites, model.family)
-        bands = family_bands(model.family, physical, theta_i_band)
-        parameters, fixed = model.family.parameters, ()
-        medians = {n: float(np.median(v)) for n, v in physical.items()}
-        units, pi_brdf0 = dict(model.family.units), None
     clock.lap("bands")
     checks = diagnostics(idata, result, parameters, fixed)
     clock.lap("diagnostics")
@@ -380,7 +370,7 @@ def complete_run(
         "n_points": len(measurements),
         "fold": bands["fold"],  # Eq. (10) in the bands and TIS (the scene's [model] fold)
         "median": medians,
-        "units": units,
+        "units": dict(member.units),
         "noise": {
             site: interval95(result.sites[site]) for site in NOISE_SITES if site in result.sites
         },

@@ -13,7 +13,7 @@ from brdf_infer.scene import Scene
 
 def _payload(scene: Scene, result: RaytraceResult, params: Params, source: str, draws) -> dict:
     return {
-        **result.to_json(),
+        **result.as_json(),
         "series": scene.raytrace.series,
         "params": params_to_dict(params),
         "params_source": source,

@@ -52,7 +52,7 @@ BAND_QUANTILES = {"lo95": 0.025, "median": 0.5, "hi95": 0.975}
 
 @dataclass(frozen=True)
 class RaytraceResult:
-    """A ray-traced series: one row per configuration (see :meth:`to_json`)."""
+    """A ray-traced series: one row per configuration (see :meth:`as_json`)."""
 
     rows: list[dict]
     rays: int
@@ -62,7 +62,7 @@ class RaytraceResult:
     seconds: float
     compile_seconds: float
 
-    def to_json(self) -> dict:
+    def as_json(self) -> dict:
         return {
             "rows": self.rows,
             "rays": self.rays,

@@ -12,7 +12,7 @@ from brdf_infer._arviz import az
 from brdf_infer._atomic import atomic_write_bytes
 from brdf_infer._outlock import require_complete, writing
 from brdf_infer.errors import BadInputError
-from brdf_infer.model import REFERENCE_FAMILY, fold_statement
+from brdf_infer.model import fold_statement
 from brdf_infer.posterior import (
     BANDS_FILE,
     POSTERIOR_FILE,
@@ -20,7 +20,6 @@ from brdf_infer.posterior import (
     THRESHOLDS,
     draws_params,
     family_draws,
-    run_fold,
 )
 from brdf_infer.report import _figures, _html, _noise
 from brdf_infer.report._compare import compare_section
@@ -91,7 +90,6 @@ def _write_report(run: Path, loaded, started: float, progress) -> tuple[Path, Ve
     attrs = idata.posterior.attrs
     scene = load_scene(attrs["scene_file"])
     member, physical = family_draws(idata.posterior)
-    reference_model = member.name == REFERENCE_FAMILY
     rows = scene.load_measurements()
     with warnings.catch_warnings():  # high Pareto k are reported in the verdict instead
         warnings.simplefilter("ignore", UserWarning)
@@ -106,7 +104,7 @@ def _write_report(run: Path, loaded, started: float, progress) -> tuple[Path, Ve
     _fit_figures(add, run, idata, summary, bands, scene, rows, loo)
     _product_figures(add, idata, bands, scene, member, physical)
     exports = load_exports(run)
-    _export_figure(add, exports, idata, scene, reference_model)
+    _export_figure(add, exports, idata, scene, member.paper_parameters)
     traces = load_traces(run)
     _raytrace_figures(add, traces, scene, rows)
     for name, _, png in figures:
@@ -176,7 +174,6 @@ def _fit_figures(add: AddFigure, run: Path, idata, summary, bands, scene, rows, 
 
 def _product_figures(add: AddFigure, idata, bands, scene, member, physical) -> None:
     """The TIS band and the hemisphere maps, where the run has them."""
-    reference_model = member.name == REFERENCE_FAMILY
     if "tis" in bands:
         add(
             "tis_band",
@@ -185,20 +182,22 @@ def _product_figures(add: AddFigure, idata, bands, scene, member, physical) -> N
             + f"; {fold_statement(tis_fold(bands))}.",
             lambda: _figures.tis_band(bands, scene.load_tis_reference()),
         )
-    if scene.outputs.maps and (scene.model.out_of_plane or not reference_model):
+    # [model] out_of_plane (Eq. 8) is Eq. (7)'s switch; the other families are hemispheric
+    if scene.outputs.maps and (scene.model.out_of_plane or not member.paper_parameters):
         add(
             "hemisphere",
             "Hemisphere maps (cf. Fig. 9): posterior median BRDF on one logarithmic colour scale "
             "(top) and the relative width of its 95 % band (bottom); "
-            f"{fold_statement(reference_model and run_fold(idata.posterior))}.",
+            f"{fold_statement(member.fold)}.",
             lambda: _figures.hemisphere_maps(member, physical),
         )
 
 
-def _export_figure(add: AddFigure, exports: list[dict], idata, scene, reference_model) -> None:
-    """The last .BSDF export of the run read back, against the model (reference family only)."""
+def _export_figure(add: AddFigure, exports: list[dict], idata, scene, eq7: bool) -> None:
+    """The last .BSDF export of the run read back, against the model (``eq7``: a run of
+    Eq. (7)'s family; the figure evaluates Eq. 7 directly)."""
     shown = next((e for e in reversed(exports) if e["format"] == "zemax-bsdf"), None)
-    if shown is not None and reference_model:
+    if shown is not None and eq7:
         tables = {f["kind"]: Path(f["path"]) for f in shown["files"] if f["kind"] != "draw"}
         fold = shown.get("fold", True)  # exports before the "fold" key folded by default
         add(
@@ -245,7 +244,7 @@ def _answer(run: Path, verdict, summary, bands, scene, rows, member, figures) ->
             f"emcee ≥ {THRESHOLDS['tau_multiple']} autocorrelation times."
         )
         + "</p>",
-        result_box(summary, bands, tis_angles(scene, rows), member.name),
+        result_box(summary, bands, tis_angles(scene, rows), member),
         fold_note(bands) if "tis" in bands else "",
         *_shown(figures, "brdf_bands"),
         _studies_line(run),

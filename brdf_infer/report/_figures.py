@@ -9,7 +9,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from brdf_infer._arviz import az
-from brdf_infer.model import REFERENCE_FAMILY, ModelFamily, brdf_inplane, family
+from brdf_infer.model import ModelFamily, brdf_inplane, family, run_family_name
 from brdf_infer.params import PARAM_NAMES, PARAMETER_SETS
 from brdf_infer.scene import Scene
 
@@ -47,17 +47,16 @@ COORDINATE_NOTE = (
 )
 
 
-def _family(idata: az.InferenceData):
-    """The run's model family (``None``: ``strumik2024``, sampled in its whitened coordinates)."""
-    name = idata.posterior.attrs.get("model", REFERENCE_FAMILY)
-    return None if name == REFERENCE_FAMILY else family(name)
+def _family(idata: az.InferenceData) -> ModelFamily:
+    """The run's model family."""
+    return family(run_family_name(idata.posterior.attrs))
 
 
 def sampled_coordinates(idata: az.InferenceData) -> list[str]:
     """The run's free coordinates (also a chain that never moved is shown)."""
     member = _family(idata)
     noise = [name for name in ("sample_sd", "repeatability") if name in idata.posterior]
-    if member is not None:
+    if not member.paper_parameters:  # sampled in its own coordinates
         return [c.site for c in member.coordinates] + noise
     free = json.loads(idata.posterior.attrs.get("free_parameters", json.dumps(PARAM_NAMES)))
     return [
@@ -71,7 +70,7 @@ def coordinate_labels(idata: az.InferenceData, short: bool = False) -> dict[str,
     """Axis label of each sampled coordinate (the family's descriptions for other families)."""
     member = _family(idata)
     labels = dict(SHORT_NAMES if short else SAMPLER_COORDINATES)
-    if member is not None:
+    if not member.paper_parameters:
         labels.update({c.site: c.site if short else c.description for c in member.coordinates})
     return labels
 
@@ -79,7 +78,7 @@ def coordinate_labels(idata: az.InferenceData, short: bool = False) -> dict[str,
 def coordinate_note(idata: az.InferenceData) -> str:
     """What the pair plot's coordinates are, in words with units."""
     member = _family(idata)
-    if member is None:
+    if member.paper_parameters:  # its whitened coordinates
         return COORDINATE_NOTE
     return "; ".join(f"{c.site}: {c.description}" for c in member.coordinates)
 
@@ -344,7 +343,7 @@ def hemisphere_maps(member: ModelFamily, physical: dict, draws: int = 400) -> pl
             axis.tick_params(labelsize=7)
             axis.set_title(f"θi = {angle:g}°" if row == 0 else "", pad=10)
         figure.colorbar(mesh, ax=axes[row, :].tolist(), shrink=0.8, label=label)
-    model = "Eqs. (8), (10)" if member.name == REFERENCE_FAMILY else member.name
+    model = member.title
     figure.suptitle(
         f"Full-hemisphere BRDF, {model}: radius θ [deg], angle φ [deg] "
         "(forward side at φ = 180°); one colour scale per row"

@@ -5,13 +5,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from brdf_infer.model import REFERENCE_FAMILY, fold_statement
+from brdf_infer.model import ModelFamily, fold_statement
 from brdf_infer.report import _html
 
 
-def result_box(summary: dict, bands: dict, angles, model: str = REFERENCE_FAMILY) -> str:
+def result_box(summary: dict, bands: dict, angles, member: ModelFamily) -> str:
     """The answer first: TIS at ``angles`` (the scene's incidence angles and the article's 70°)
-    and π·BRDF0 (``strumik2024``), 95 % intervals."""
+    and π·BRDF0 (Eq. 7's family), 95 % intervals; another family is named in the heading."""
     rows = []
     if "tis" in bands:
         grid = np.asarray(bands["tis"]["theta_i_deg"])
@@ -35,7 +35,7 @@ def result_box(summary: dict, bands: dict, angles, model: str = REFERENCE_FAMILY
         )
     return (
         '<div class="result"><h2>Result'
-        + ("" if model == REFERENCE_FAMILY else f" ({_html.escape(model)})")
+        + ("" if member.paper_parameters else f" ({_html.escape(member.name)})")
         + "</h2>"
         + _html.table(["quantity", "posterior median", "95 % credible interval"], rows)
         + "</div>"

@@ -6,8 +6,7 @@ from __future__ import annotations
 import json
 
 from brdf_infer._arviz import az
-from brdf_infer.model import REFERENCE_FAMILY, fold_statement
-from brdf_infer.posterior import run_fold
+from brdf_infer.model import fold_statement
 from brdf_infer.report import _html
 from brdf_infer.report._instruments import MEANINGS
 
@@ -57,13 +56,13 @@ def run_table(scene, rows, idata, summary: dict, member) -> str:
     """The run's settings: scene, model, instrument, measurements, sampler, seed, options, the
     Eq. (10) folding, versions and wall time [s]."""
     attrs = idata.posterior.attrs
-    reference_model = member.name == REFERENCE_FAMILY
     return _html.table(
         ["item", "value"],
         [
             ["scene", f"{scene.name}: {scene.description}"],
             ["scene file", attrs["scene_file"]],
-            ["model", member.name + ("" if reference_model else f" ({units(member)})")],
+            # Eq. (7)'s units are in its priors table (the scene's [priors])
+            ["model", member.name + ("" if member.paper_parameters else f" ({units(member)})")],
             [
                 "instrument",
                 f"{attrs.get('instrument', 'point')}: "
@@ -75,7 +74,7 @@ def run_table(scene, rows, idata, summary: dict, member) -> str:
             ["options", json.dumps(summary.get("options", {}))],
             [
                 "Eq. (10) folding (the scene's [model] fold)",
-                fold_statement(reference_model and run_fold(idata.posterior)),
+                fold_statement(member.fold),
             ],
             ["versions", attrs["versions"]],
             [
@@ -129,7 +128,7 @@ def run_section(scene, rows, idata, summary: dict, member) -> list[str]:
         run_table(scene, rows, idata, summary, member),
         "<h3>Priors</h3>",
         "<p>Each prior is on the coordinate named (the sampler's well-conditioned one).</p>",
-        priors_table(scene) if member.name == REFERENCE_FAMILY else family_priors_table(member),
+        priors_table(scene) if member.paper_parameters else family_priors_table(member),
         "<h3>Data</h3>",
         data_table(rows),
     ]
