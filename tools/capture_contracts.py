@@ -24,6 +24,7 @@ from pathlib import Path
 
 SCRATCH = Path(os.environ.get("CONTRACTS_SCRATCH", "/tmp/brdf_infer_contracts"))
 SMALL = ["--chains", "2", "--draws", "150", "--warmup", "150"]
+SBC_SMALL = ["--replicates", "8", "--draws", "40", "--warmup", "100"]
 SCENE = "data/lya.scene.toml"
 COMMANDS: dict[str, list[str]] = {
     "run": ["run", "--out", "{o}/run", *SMALL, "--json"],
@@ -93,32 +94,8 @@ COMMANDS: dict[str, list[str]] = {
         "{o}/batch",
         "--json",
     ],
-    "sbc": [
-        "sbc",
-        "--replicates",
-        "8",
-        "--draws",
-        "40",
-        "--warmup",
-        "100",
-        "--out",
-        "{o}/sbc",
-        "--json",
-    ],
-    "sbc-abg": [
-        "sbc",
-        "--model",
-        "abg",
-        "--replicates",
-        "8",
-        "--draws",
-        "40",
-        "--warmup",
-        "100",
-        "--out",
-        "{o}/sbc-abg",
-        "--json",
-    ],
+    "sbc": ["sbc", *SBC_SMALL, "--out", "{o}/sbc", "--json"],
+    "sbc-abg": ["sbc", "--model", "abg", *SBC_SMALL, "--out", "{o}/sbc-abg", "--json"],
     "report": ["report", "{o}/post-labg", "--json"],
 }
 POSITIONAL_SCENE = {"run", "fit", "posterior", "predict", "compare", "sbc"}
