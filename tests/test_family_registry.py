@@ -16,8 +16,17 @@ ROOT = Path(__file__).resolve().parent.parent
 REGISTRY = {"brdf_infer/model/_families.py", "brdf_infer/model/__init__.py"}
 
 
+def _compares_with_the_name(node: ast.AST) -> bool:
+    """``x == "strumik2024"`` (or ``!=``, ``in``, …): a branch on the family's name."""
+    if not isinstance(node, ast.Compare):
+        return False
+    operands = [node.left, *node.comparators]
+    return any(isinstance(o, ast.Constant) and o.value == "strumik2024" for o in operands)
+
+
 def reference_family_uses(root: Path) -> list[str]:
-    """``file:line`` of every use of the name ``REFERENCE_FAMILY`` outside the registry."""
+    """``file:line`` of every use of the name ``REFERENCE_FAMILY``, and of every comparison
+    with the string ``"strumik2024"``, outside the registry."""
     found = []
     for path in sorted((root / "brdf_infer").rglob("*.py")):
         relative = path.relative_to(root).as_posix()
@@ -27,9 +36,9 @@ def reference_family_uses(root: Path) -> list[str]:
             named = (isinstance(node, ast.Name) and node.id == "REFERENCE_FAMILY") or (
                 isinstance(node, ast.alias) and node.name == "REFERENCE_FAMILY"
             )
-            if named:
-                found.append(f"{relative}:{node.lineno}")
-    return found
+            if named or _compares_with_the_name(node):
+                found.append((relative, node.lineno))
+    return [f"{path}:{line}" for path, line in sorted(set(found))]
 
 
 def test_no_module_outside_the_registry_names_the_reference_family():
@@ -42,11 +51,13 @@ def test_the_check_finds_a_planted_branch(tmp_path):
     package.mkdir(parents=True)
     (package / "_planted.py").write_text(
         "from brdf_infer.model import REFERENCE_FAMILY\n\n\n"
-        "def label(name):\n    return '' if name == REFERENCE_FAMILY else name\n"
+        "def label(name):\n    return '' if name == REFERENCE_FAMILY else name\n\n\n"
+        "def other(attrs):\n    return attrs.get('model') != 'strumik2024'\n"
     )
     assert reference_family_uses(tmp_path) == [
         "brdf_infer/report/_planted.py:1",
         "brdf_infer/report/_planted.py:5",
+        "brdf_infer/report/_planted.py:9",
     ]
 
 

@@ -41,7 +41,7 @@ from brdf_infer.error_model import (
 )
 from brdf_infer.errors import BadInputError
 from brdf_infer.measurements import Measurements
-from brdf_infer.model import log_brdf_inplane, tis
+from brdf_infer.model import family, log_brdf_inplane, run_family_name, tis
 from brdf_infer.observations import (
     build_observation_model,
     log_reflectance_at,
@@ -90,8 +90,9 @@ def load_design_run(run: str | Path, scene: Scene | str | None = None) -> Design
     except (OSError, ValueError) as error:
         raise BadInputError(f"cannot read: {error}", file=path) from None
     attrs = idata.posterior.attrs
-    if attrs.get("model", "strumik2024") != "strumik2024":
-        raise BadInputError(f"a run of {attrs['model']}, not of strumik2024", file=path)
+    name = run_family_name(attrs)
+    if not family(name).paper_parameters:  # the design's targets are Eq. (7)'s
+        raise BadInputError(f"a run of {name}, not of strumik2024", file=path)
     if scene is None:
         scene = load_scene(attrs.get("scene_file", "lya"))
     elif isinstance(scene, str):
