@@ -407,3 +407,20 @@ def test_chains_side_by_side_give_the_draws_of_chains_one_after_another(lya):
     cancel.set()
     with pytest.raises(Cancelled):
         program.run(model.data, keys, 20, workers=2, cancel=cancel)
+
+
+def test_a_run_remembers_its_scene_with_the_run_s_instrument_and_error_model(nuts_run):
+    """``run_scene``: the scene text recorded with the run, with the run's instrument and error
+    model (which ``--instrument`` and ``--error-model`` may have changed), not the scene file."""
+    from brdf_infer.posterior import run_scene
+
+    attrs = dict(nuts_run.idata.posterior.attrs)
+    scene = run_scene(attrs)
+    assert scene.name == "lya" and scene.instrument.model == attrs["instrument"]
+    text = attrs["scene_toml"].replace('description = "', 'description = "RECORDED ', 1)
+    errors = json.loads(attrs["error_model"]) | {"model": "spread"}
+    changed = run_scene(
+        attrs | {"scene_toml": text, "instrument": "aperture", "error_model": json.dumps(errors)}
+    )
+    assert changed.description.startswith("RECORDED ")
+    assert changed.instrument.model == "aperture" and changed.errors.model == "spread"

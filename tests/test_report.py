@@ -191,6 +191,10 @@ def test_a_run_started_with_a_relative_scene_path_is_read_from_any_directory(
     argv = ["--chains", "1", "--warmup", "500", "--draws", "20", "--out", "run"]
     code, _, err = run_cli("posterior", "lya.scene.toml", *argv, capsys=capsys)
     assert code == 0, err
+    scene_path = data / "lya.scene.toml"  # edited after the run: the report is of the run's
+    scene_path.write_text(
+        scene_path.read_text().replace('description = "', 'description = "EDITED LATER ', 1)
+    )
     elsewhere = tmp_path / "elsewhere"
     elsewhere.mkdir()
     monkeypatch.chdir(elsewhere)
@@ -198,6 +202,8 @@ def test_a_run_started_with_a_relative_scene_path_is_read_from_any_directory(
     code, out, err = run_cli("report", str(run), capsys=capsys)
     assert code == 0, err
     assert out.startswith("verdict: ") and (run / "report.html").is_file()
+    page = (run / "report.html").read_text()
+    assert "Acktar Magic Black" in page and "EDITED LATER" not in page
     code, out, err = run_cli("tis", "--run", str(run), "--theta-i", "70", "--json", capsys=capsys)
     assert code == 0, err
     assert 0 < json.loads(out)["median"][0] < 1

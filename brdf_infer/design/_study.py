@@ -48,7 +48,7 @@ from brdf_infer.observations import (
     predicted_log_reflectance,
 )
 from brdf_infer.params import PARAM_NAMES, Params
-from brdf_infer.posterior import POSTERIOR_FILE, build_posterior_model, interval95
+from brdf_infer.posterior import POSTERIOR_FILE, build_posterior_model, interval95, run_scene
 from brdf_infer.scene import Scene, load_scene
 from brdf_infer.settings import DesignOptions
 
@@ -94,7 +94,7 @@ def load_design_run(run: str | Path, scene: Scene | str | None = None) -> Design
     if not family(name).paper_parameters:  # the design's targets are Eq. (7)'s
         raise BadInputError(f"a run of {name}, not of strumik2024", file=path)
     if scene is None:
-        scene = load_scene(attrs.get("scene_file", "lya"))
+        scene = run_scene(attrs)
     elif isinstance(scene, str):
         scene = load_scene(scene)
     if attrs.get("scene") != scene.name:

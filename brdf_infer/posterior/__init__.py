@@ -44,6 +44,7 @@ from brdf_infer.posterior._run import (
     model_name,
     run_fingerprint,
     run_posterior,
+    run_scene,
 )
 from brdf_infer.posterior._samplers import Draws, nuts_draws, run_emcee, run_nuts
 
@@ -93,6 +94,7 @@ __all__ = [
     "run_fold",
     "run_nuts",
     "run_posterior",
+    "run_scene",
     "stack_data",
     "tis_band",
 ]

@@ -7,6 +7,7 @@ import dataclasses
 import hashlib
 import json
 import time
+import tomllib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -36,7 +37,7 @@ from brdf_infer.posterior._samplers import (
     run_emcee,
     run_nuts,
 )
-from brdf_infer.scene import Scene
+from brdf_infer.scene import Scene, check_instrument, load_scene, parse_scene
 from brdf_infer.settings import PosteriorSettings
 from brdf_infer.verdict import PARETO_K_LIMIT, posterior_verdict
 
@@ -63,6 +64,32 @@ def with_error_model(scene: Scene, error_model: str | None) -> Scene:
             field="error_model",
         )
     return dataclasses.replace(scene, errors=dataclasses.replace(scene.errors, model=error_model))
+
+
+def run_scene(attrs) -> Scene:
+    """The scene a posterior run sampled, from its ``posterior`` group's attributes: the scene
+    text recorded with the run (``scene_toml``; a run without it: the scene file as it is now),
+    read as if from its file (relative paths as there), with the run's instrument model and
+    error model (``--instrument``, ``--error-model`` may have changed them).
+
+    Raises:
+        BadInputError: the recorded text or a file it names no longer reads as a scene.
+    """
+    path = Path(str(attrs.get("scene_file", "lya")))
+    if "scene_toml" not in attrs:
+        scene = load_scene(path)
+    else:
+        try:
+            document = tomllib.loads(str(attrs["scene_toml"]))
+        except tomllib.TOMLDecodeError as error:
+            raise BadInputError(f"the run's scene text: invalid TOML: {error}", file=path) from None
+        scene = parse_scene(document, path)
+        scene.check_files()
+    instrument = str(attrs.get("instrument", scene.instrument.model))
+    if instrument != scene.instrument.model:
+        scene = check_instrument(scene, instrument, field="instrument")
+    errors = json.loads(attrs.get("error_model", "{}"))
+    return with_error_model(scene, errors.get("model"))
 
 
 def build_model(

@@ -20,6 +20,7 @@ from brdf_infer.posterior import (
     THRESHOLDS,
     draws_params,
     family_draws,
+    run_scene,
 )
 from brdf_infer.report import _figures, _html, _noise
 from brdf_infer.report._compare import compare_section
@@ -37,7 +38,6 @@ from brdf_infer.report._results import fold_note, result_box, tis_fold, tis_tabl
 from brdf_infer.report._run_tables import run_section, summary_table
 from brdf_infer.report._sensitivity import sensitivity_section
 from brdf_infer.report._traces import detector_images, load_traces, raytrace_table
-from brdf_infer.scene import load_scene
 from brdf_infer.sensitivity import tis_angles
 from brdf_infer.verdict import PARETO_K_LIMIT, Verdict
 
@@ -88,7 +88,7 @@ AddFigure = Callable[[str, str, Callable[[], object]], None]  # name, caption, m
 def _write_report(run: Path, loaded, started: float, progress) -> tuple[Path, Verdict]:
     idata, summary, bands = loaded
     attrs = idata.posterior.attrs
-    scene = load_scene(attrs["scene_file"])
+    scene = run_scene(attrs)  # what the run sampled, not the scene file as it is now
     member, physical = family_draws(idata.posterior)
     rows = scene.load_measurements()
     with warnings.catch_warnings():  # high Pareto k are reported in the verdict instead
