@@ -85,7 +85,6 @@ class BatchInterrupted(Exception):
         super().__init__(f"batch interrupted: {result.complete} scene(s) complete")
         self.result = result
         self.signum = signum
-        self.hard = False  # the batch's threads still run: end the process with os._exit
 
     @property
     def exit_code(self) -> int:

@@ -73,7 +73,6 @@ def run_batch_until_signalled(
     if worker.is_alive():  # did not stop in time: stop it from here
         interrupted = BatchInterrupted(batch.write_summary(interrupted=True), received[0][0])
         batch.abandon()  # last, so that the process ends right after (a writer may still run)
-        interrupted.hard = True
         raise interrupted
     error = outcome.get("error")
     if isinstance(error, BatchInterrupted) or (error is None and received):

@@ -24,8 +24,6 @@ from brdf_infer.errors import BadInputError
 from brdf_infer.measurements import Measurements
 from brdf_infer.scene import DesignSettings, Scene
 
-CANDIDATE_COLUMNS = ("series", "theta_i_deg", "theta_s_deg", "phi_s_deg")
-
 
 @dataclass(frozen=True)
 class Candidates:
