@@ -1,7 +1,8 @@
 """Model comparison by PSIS-LOO: is Eq. (7) better than the ray tracers' own scatter models?
 
 Every family is sampled by NUTS on the same rows, under the same instrument (Eq. 6) and the
-same generative error model; only the BRDF differs (:mod:`brdf_infer.posterior._family_model`).
+same generative error model; only the BRDF differs (one
+:class:`brdf_infer.posterior.PosteriorModel` for every family).
 Each row's pointwise log predictive density is that of its leave-one-out conditional
 p(yᵢ | y₋ᵢ, θ) (the rows are correlated through the sample, calibration and angle effects;
 :mod:`brdf_infer.posterior._loo`), and ArviZ's ``loo``/``compare`` rank the families: elpd_loo

@@ -150,7 +150,7 @@ def test_a_lambertian_run_has_the_exact_tis_of_its_draws(tmp_path, capsys):
     assert payload["hi95"] == pytest.approx([np.quantile(values, 0.975)] * 2, rel=1e-12)
 
 
-def test_family_bands_are_quantiles_of_the_family_brdf_over_draws():
+def test_posterior_bands_of_a_family_are_quantiles_of_its_brdf_over_draws():
     values = np.linspace(0.01, 0.05, 101)
     bands = posterior_bands(family("lambertian"), {"tis": values}, [30.0])
     brdf = np.asarray(bands["brdf_inplane"]["median"])
