@@ -429,13 +429,11 @@ def _posterior(job: Job, options: dict[str, Any], forced: list[str]):
 
 def _raytrace_study(job: Job, posterior) -> None:
     """Study: ray traces of the posterior (Sec. 6)."""
-    from brdf_infer._atomic import atomic_write_json
+    from brdf_infer.raytrace import write_traces
 
     scene = job.scene
     job.step(f"ray tracing series {scene.raytrace.series} (Sec. 6)")
-    atomic_write_json(
-        job.out / "raytrace.json", {"traces": run_traces(scene, job.measurements, posterior)}
-    )
+    write_traces(job.out, scene, job.measurements, run_traces(scene, job.measurements, posterior))
 
 
 def _report(job: Job, example: Path | None) -> tuple[Path, Verdict]:

@@ -224,6 +224,19 @@ def test_cli_writes_figures_and_warns_when_no_ray_arrives(tmp_path, capsys):
     assert json.loads((tmp_path / "raytrace.json").read_text())["traces"][0]["rays"] == 200
     for name in ("raytrace.png", "detector_images.png"):
         assert (tmp_path / name).stat().st_size > 10_000
+    # the images the report draws are the ones simulated, read back from the folder
+    from brdf_infer.params import UV_PAPER
+    from brdf_infer.raytrace import load_detector_images, simulate_images
+    from brdf_infer.scene import load_scene
+
+    scene = load_scene("lya")
+    expected = simulate_images(scene, scene.load_measurements(), UV_PAPER, seed=0)
+    stored = load_detector_images(tmp_path)
+    assert stored["theta_i_deg"] == expected["theta_i_deg"]
+    assert stored["theta_s_deg"] == [float(t) for t in expected["theta_s_deg"]]
+    for name in ("scattered", "reference", "x_edges_mm", "y_edges_mm", "signal_half_size_mm"):
+        np.testing.assert_array_equal(stored[name], expected[name])
+    assert load_detector_images(tmp_path / "nowhere") is None
 
 
 @pytest.mark.parametrize(

@@ -45,17 +45,21 @@ def parse(path):
 @pytest.fixture(scope="module")
 def good_report(nuts_run, lya):
     """The report of the reduced run, with ray traces as ``brdf-infer run`` writes them."""
-    from brdf_infer._atomic import atomic_write_json
     from brdf_infer.params import UV_PAPER
     from brdf_infer.posterior import draws_params
-    from brdf_infer.raytrace import raytrace_payload, raytrace_posterior_payload, thin_draws
+    from brdf_infer.raytrace import (
+        raytrace_payload,
+        raytrace_posterior_payload,
+        thin_draws,
+        write_traces,
+    )
 
     draws = thin_draws(draws_params(nuts_run.idata.posterior), 8)
     traces = [
         raytrace_posterior_payload(*lya, draws, "posterior", rays=2048),
         raytrace_payload(*lya, UV_PAPER, "uv-paper", rays=2**14),
     ]
-    atomic_write_json(nuts_run.out / "raytrace.json", {"traces": traces})
+    write_traces(nuts_run.out, *lya, traces)
     return write_report(nuts_run.out, progress=lambda message: None)
 
 

@@ -116,18 +116,17 @@ def _payload(args: argparse.Namespace, scene, measurements) -> dict:
 
 
 def _write_raytrace(out: Path, scene, measurements, payload: dict) -> None:
-    from brdf_infer._atomic import atomic_write_bytes, atomic_write_json
-    from brdf_infer.params import Params
-    from brdf_infer.raytrace import simulate_images
+    from brdf_infer._atomic import atomic_write_bytes
+    from brdf_infer.raytrace import write_traces
     from brdf_infer.report import figure_png, plot_detector_images, plot_raytrace
 
     out.mkdir(parents=True, exist_ok=True)
-    atomic_write_json(out / "raytrace.json", {"traces": [payload]})
+    images = write_traces(out, scene, measurements, [payload])
     atomic_write_bytes(out / "raytrace.png", figure_png(plot_raytrace([payload])))
-    params = Params(**payload["params"])
-    images = simulate_images(scene, measurements, params, seed=payload["seed"])
     atomic_write_bytes(out / "detector_images.png", figure_png(plot_detector_images(images)))
-    progress(f"wrote raytrace.json, raytrace.png and detector_images.png in {out}")
+    progress(
+        f"wrote raytrace.json, detector_images.npz, raytrace.png and detector_images.png in {out}"
+    )
 
 
 def _print_raytrace(payload: dict) -> None:

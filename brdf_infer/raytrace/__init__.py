@@ -1,5 +1,12 @@
 """Ray-tracing validation of the series II measurement setup (Sec. 6, Figs. 12–14)."""
 
+from brdf_infer.raytrace._files import (
+    DETECTOR_IMAGES_FILE,
+    RAYTRACE_FILE,
+    load_detector_images,
+    load_traces,
+    write_traces,
+)
 from brdf_infer.raytrace._images import simulate_images
 from brdf_infer.raytrace._payload import raytrace_payload, raytrace_posterior_payload
 from brdf_infer.raytrace._series import (
@@ -20,7 +27,9 @@ from brdf_infer.raytrace._trace import ESTIMATORS, TALLIES, Setup
 
 __all__ = [
     "CHUNK_RAYS",
+    "DETECTOR_IMAGES_FILE",
     "ESTIMATORS",
+    "RAYTRACE_FILE",
     "TALLIES",
     "Configuration",
     "Estimate",
@@ -29,6 +38,8 @@ __all__ = [
     "build_setup",
     "compile_tallies",
     "configurations",
+    "load_detector_images",
+    "load_traces",
     "point_estimate",
     "raytrace_payload",
     "raytrace_posterior",
@@ -38,4 +49,5 @@ __all__ = [
     "thin_draws",
     "trace_configuration",
     "with_aperture",
+    "write_traces",
 ]

@@ -22,6 +22,7 @@ from brdf_infer.posterior import (
     family_draws,
     run_scene,
 )
+from brdf_infer.raytrace import load_detector_images, load_traces
 from brdf_infer.report import _figures, _html, _noise
 from brdf_infer.report._compare import compare_section
 from brdf_infer.report._design import design_section
@@ -37,7 +38,7 @@ from brdf_infer.report._raytrace import figure_png, plot_detector_images, plot_r
 from brdf_infer.report._results import fold_note, result_box, tis_fold, tis_table
 from brdf_infer.report._run_tables import run_section, summary_table
 from brdf_infer.report._sensitivity import sensitivity_section
-from brdf_infer.report._traces import detector_images, load_traces, raytrace_table
+from brdf_infer.report._traces import raytrace_table
 from brdf_infer.sensitivity import tis_angles
 from brdf_infer.verdict import PARETO_K_LIMIT, Verdict
 
@@ -106,7 +107,7 @@ def _write_report(run: Path, loaded, started: float, progress) -> tuple[Path, Ve
     exports = load_exports(run)
     _export_figure(add, exports, idata, scene, member.paper_parameters)
     traces = load_traces(run)
-    _raytrace_figures(add, traces, scene, rows)
+    _raytrace_figures(add, traces, load_detector_images(run))
     for name, _, png in figures:
         atomic_write_bytes(run / FIGURE_DIR / f"{name}.png", png)
 
@@ -209,8 +210,9 @@ def _export_figure(add: AddFigure, exports: list[dict], idata, scene, eq7: bool)
         )
 
 
-def _raytrace_figures(add: AddFigure, traces: list[dict], scene, rows) -> None:
-    """The ray traces against the measurements (Fig. 14) and the detector images (Fig. 13)."""
+def _raytrace_figures(add: AddFigure, traces: list[dict], images: dict | None) -> None:
+    """The ray traces against the measurements (Fig. 14) and the detector images (Fig. 13),
+    as the run wrote them."""
     if traces:
         add(
             "raytrace",
@@ -220,11 +222,12 @@ def _raytrace_figures(add: AddFigure, traces: list[dict], scene, rows) -> None:
             "ratio over the signal square (small squares).",
             lambda: plot_raytrace(traces),
         )
+    if traces and images is not None:
         add(
             "detector_images",
             f"Simulated detector images for {traces[0]['params_source']} (cf. Fig. 13); the "
             "cyan square is the signal region of the image ratio.",
-            lambda: plot_detector_images(detector_images(scene, rows, traces[0])),
+            lambda: plot_detector_images(images),
         )
 
 

@@ -1,33 +1,9 @@
-"""The report's Ray-tracing validation section (Sec. 6): the traces a run wrote
-(``raytrace.json``), their table, and the detector images of the first one (Fig. 13)."""
+"""The report's table of the ray traces a run wrote (Sec. 6; read by
+:func:`brdf_infer.raytrace.load_traces`)."""
 
 from __future__ import annotations
 
-import json
-from pathlib import Path
-
-from brdf_infer.errors import BadInputError
 from brdf_infer.report import _html
-
-RAYTRACE_FILE = "raytrace.json"
-
-
-def load_traces(run: Path) -> list[dict]:
-    """The ray traces a run wrote (``raytrace.json``), possibly none."""
-    path = run / RAYTRACE_FILE
-    if not path.is_file():
-        return []
-    try:
-        return json.loads(path.read_text())["traces"]
-    except (OSError, ValueError, KeyError) as error:
-        raise BadInputError(f"cannot read the ray traces: {error}", file=path) from None
-
-
-def detector_images(scene, rows, trace: dict) -> dict:
-    from brdf_infer.params import Params
-    from brdf_infer.raytrace import simulate_images
-
-    return simulate_images(scene, rows, Params(**trace["params"]), seed=trace["seed"])
 
 
 def raytrace_table(traces: list[dict]) -> str:
