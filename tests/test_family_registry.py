@@ -92,3 +92,15 @@ def test_other_families_have_no_eq7_capabilities(name):
     assert member.with_fold(False) is member
     with pytest.raises(ValueError, match=r"no Eq\. \(10\)"):
         member.with_fold(True)
+
+
+def test_a_posterior_model_refuses_an_eq7_family_folded_otherwise_than_its_scene(lya):
+    """The run records the scene's fold and constants; the likelihood must use the same."""
+    from brdf_infer.posterior import build_posterior_model
+
+    scene, rows = lya
+    other = family("strumik2024", not scene.model.fold, scene.model.constants)
+    with pytest.raises(ValueError, match="fold and constants"):
+        build_posterior_model(scene, rows, other)
+    same = family("strumik2024", scene.model.fold, scene.model.constants)
+    assert build_posterior_model(scene, rows, same).family.fold == scene.model.fold

@@ -85,6 +85,17 @@ def test_tis_of_a_family_run_is_its_own_quadrature_over_its_draws(abg_run, capsy
     assert value == pytest.approx(expected, rel=1e-7)
 
 
+def test_readers_written_for_eq7_refuse_a_family_run_naming_its_file(abg_run, capsys):
+    """``tis --run --fold`` (no Eq. 10 in ABg) and ``raytrace --run`` (the ray tracer traces
+    Eq. 7): one line, exit 2, the run's file named."""
+    out, _ = abg_run
+    code, text, err = run_cli("tis", "--run", str(out), "--fold", capsys=capsys)
+    assert code == 2 and text == "" and "a run of abg has no Eq. (10)" in err
+    code, text, err = run_cli("raytrace", "--run", str(out), "--rays", "64", capsys=capsys)
+    assert code == 2 and text == "" and len(err.strip().splitlines()) == 1
+    assert "a run of abg, not of strumik2024" in err and "posterior.nc" in err
+
+
 def test_export_of_a_family_run_reads_back_and_its_tis_lines_are_the_band(
     abg_run, tmp_path, capsys
 ):

@@ -87,8 +87,8 @@ def _payload(args: argparse.Namespace, scene, measurements) -> dict:
         member, physical = load_run_family(Path(args.run))
         if not member.paper_parameters:
             raise BadInputError(
-                f"a run of {member.name}: the ray tracer traces Eq. (7)'s BRDF (strumik2024)",
-                field="--run",
+                f"a run of {member.name}, not of strumik2024: the ray tracer traces Eq. (7)",
+                file=Path(args.run) / "posterior.nc",
             )
         all_draws = draws_params(physical)
         return raytrace_posterior_payload(

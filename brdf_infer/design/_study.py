@@ -41,7 +41,13 @@ from brdf_infer.error_model import (
 )
 from brdf_infer.errors import BadInputError
 from brdf_infer.measurements import Measurements
-from brdf_infer.model import family, log_brdf_inplane, run_family_name, tis
+from brdf_infer.model import (
+    check_family_name,
+    family,
+    log_brdf_inplane,
+    run_family_name,
+    tis,
+)
 from brdf_infer.observations import (
     build_observation_model,
     log_reflectance_at,
@@ -91,6 +97,7 @@ def load_design_run(run: str | Path, scene: Scene | str | None = None) -> Design
         raise BadInputError(f"cannot read: {error}", file=path) from None
     attrs = idata.posterior.attrs
     name = run_family_name(attrs)
+    check_family_name(name, file=path)
     if not family(name).paper_parameters:  # the design's targets are Eq. (7)'s
         raise BadInputError(f"a run of {name}, not of strumik2024", file=path)
     if scene is None:

@@ -289,7 +289,7 @@ class PosteriorModel:
         """Mean and covariance factors of the rows' ln R for one draw (Eq. 6 in log space).
 
         Args:
-            physical: the draw's physical parameters.
+            physical: the draw's physical parameters (for Eq. 7 also a :class:`Params`).
             scales: the draw's noise scales.
             data: the rows (default: the scene's).
             mean: the mean, if already computed (latent angles).
@@ -297,6 +297,8 @@ class PosteriorModel:
         """
         data = self.data if data is None else data
         rows, noise = data.rows, data.noise
+        if isinstance(physical, Params):  # Eq. (7)'s parameters as a record
+            physical = physical._asdict()
         if mean is None:
             mean = log_reflectance(self.family, physical, rows)
         if angles and self.errors.angles_on:
@@ -342,6 +344,10 @@ def build_posterior_model(
     """
     if member is None:
         member = strumik_family(scene.model.fold, scene.model.constants)
+    elif member.paper_parameters and (
+        member.fold != scene.model.fold or member.constants != scene.model.constants
+    ):  # the run records the scene's; the likelihood must use the same
+        raise ValueError(f"{member.name}'s fold and constants differ from the scene's")
     latent = scene.errors.angles_on and scene.errors.angle_method == "latent"
     if latent and not member.paper_parameters:
         raise BadInputError(
