@@ -43,7 +43,10 @@ def add_parser(commands) -> argparse.ArgumentParser:
     parser.add_argument(
         "--draws", type=int, default=RUN_TRACE_DRAWS, help="--run: draws in the band"
     )
-    parser.add_argument("--out", help="also write raytrace.json and figures here")
+    parser.add_argument(
+        "--out",
+        help="also write raytrace.json, the detector images (detector_images.npz) and figures here",
+    )
     parser.set_defaults(handler=main)
     return parser
 
