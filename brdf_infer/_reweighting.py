@@ -1,14 +1,14 @@
-"""The per-row σ of least squares (:mod:`brdf_infer.lsq`), reweighted after each solve: the
-angle terms at the current parameters and, where the repeatability is learned, σ_rep by the
-Paule–Mandel condition."""
+"""The per-row σ of least squares (:mod:`brdf_infer.lsq`) of any family, reweighted after each
+solve: the angle terms at the current parameters and, where the repeatability is learned, σ_rep
+by the Paule–Mandel condition."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from brdf_infer.error_model import angle_slopes, theta_s_per_rotation
-from brdf_infer.observations import log_reflectance_at, predicted_log_reflectance
-from brdf_infer.params import Params
+from brdf_infer.model import ModelFamily, Physical
+from brdf_infer.observations import family_log_reflectance_at, log_reflectance
 from brdf_infer.scene import Scene
 
 REWEIGHT_TOLERANCE = 1e-6  # relative change of every σ_i that ends the reweighting
@@ -18,9 +18,9 @@ class Reweighting:
     """The per-row σ of least squares, updated after each solve (:mod:`brdf_infer.lsq`'s
     docstring)."""
 
-    def __init__(self, scene: Scene, model, n_free: int):
+    def __init__(self, scene: Scene, model, member: ModelFamily, n_free: int):
         errors = scene.errors
-        self.model, self.errors = model, errors
+        self.model, self.member, self.errors = model, member, errors
         self.value_variance = np.asarray(model.data.sigma) ** 2
         self.generative = errors.model == "generative"
         self.dof = model.n_points - n_free
@@ -38,17 +38,16 @@ class Reweighting:
     def _sigma(self) -> np.ndarray:
         return np.sqrt(self.value_variance + self.repeatability**2 + self.angle_variance)
 
-    def update(self, params: Params) -> bool:
-        """Recompute σ at ``params``; True when it changed enough to solve again."""
+    def update(self, physical: Physical) -> bool:
+        """Recompute σ at the family's parameters ``physical``; True when it changed enough to
+        solve again."""
         self.solves += 1
         if not self.generative:
             return False
         data, errors = self.model.data, self.errors
         if errors.angles_on:
             g_rot, g_cam = angle_slopes(
-                lambda ti, ts: log_reflectance_at(
-                    ti, ts, params, self.model.fold, self.model.constants, data
-                ),
+                lambda ti, ts: family_log_reflectance_at(self.member, ti, ts, physical, data),
                 data.theta_i_deg,
                 data.theta_s_deg,
                 theta_s_per_rotation(errors, len(self.value_variance)),
@@ -58,8 +57,7 @@ class Reweighting:
             )
         if self.learned:
             residuals = np.asarray(
-                predicted_log_reflectance(params, data, self.model.fold, self.model.constants)
-                - data.log_reflectance
+                log_reflectance(self.member, physical, data) - data.log_reflectance
             )
             self.repeatability = paule_mandel(
                 residuals, self.value_variance + self.angle_variance, self.dof

@@ -10,6 +10,14 @@ when both
   chance of a small dof (for the 36 dof of the bundled scene χ²/dof = 2 has p = 3·10⁻⁴; for
   5 dof it has p = 0.075 and is not called poor).
 
+Where the error model learns the repeatability, least squares sets σ_rep so that χ²/dof = 1
+(Paule–Mandel, :mod:`brdf_infer.lsq`), and the χ² test says nothing; the misfit shows in σ_rep
+instead. The fit is then called **poor** when σ_rep lies in the far tail of the scene's own
+prior on it (half-normal with scale ``errors.repeatability_sd_prior``): P(σ ≥ σ_rep) below
+:data:`POOR_P_VALUE`, i.e. σ_rep above 3.29 times the scale (0.33 in ln R for the default 0.1).
+A model that needs that much scatter beyond the rows' own σ leaves structure the error model
+does not expect (ABg on the bundled data learns ≈ 1 in ln R, Eq. (7) ≈ 0.07).
+
 Every fit also gives its 1σ scaled by √(χ²/dof) (the Birge ratio), the uncertainty the
 parameters would have if the misfit were noise the σᵢ left out. A poor fit's scaled 1σ is
 still a statement about a model that does not describe the data: a comparison by the data
@@ -23,6 +31,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from scipy.stats import chi2 as chi2_distribution
+from scipy.stats import halfnorm
 
 POOR_CHI2_DOF = 2.0
 POOR_P_VALUE = 1e-3
@@ -37,11 +46,14 @@ class FitQuality:
         dof: degrees of freedom, rows − free parameters.
         learned_repeatability: σ_rep [ln R] when it was set so that χ²/dof = 1 (Paule–Mandel;
             :mod:`brdf_infer.lsq`), else None.
+        repeatability_prior_scale: the scale of the half-normal prior on σ_rep [ln R] that a
+            learned σ_rep is judged against (None: not judged).
     """
 
     chi2: float
     dof: int
     learned_repeatability: float | None = None
+    repeatability_prior_scale: float | None = None
 
     @property
     def chi2_dof(self) -> float:
@@ -58,7 +70,17 @@ class FitQuality:
         return math.sqrt(self.chi2_dof) if self.dof > 0 and self.chi2 > 0 else 1.0
 
     @property
+    def repeatability_p_value(self) -> float | None:
+        """P(σ ≥ the learned σ_rep) under its half-normal prior (None: not judged)."""
+        if self.learned_repeatability is None or not self.repeatability_prior_scale:
+            return None
+        return float(halfnorm.sf(self.learned_repeatability, scale=self.repeatability_prior_scale))
+
+    @property
     def poor(self) -> bool:
+        if self.learned_repeatability is not None:
+            tail = self.repeatability_p_value
+            return tail is not None and tail < POOR_P_VALUE
         return bool(self.chi2_dof > POOR_CHI2_DOF and self.p_value < POOR_P_VALUE)
 
     @property
@@ -68,17 +90,27 @@ class FitQuality:
             return "undefined: no degrees of freedom left (as many parameters as rows)"
         p = f"p = {self.p_value:.2g}" if self.p_value > 0 else "p < 1e-300"
         measured = f"χ²/dof = {self.chi2_dof:.3g} for {self.dof} dof ({p})"
+        if self.learned_repeatability is not None:
+            learned = f"the learned repeatability {self.learned_repeatability:.3g} (in ln R)"
+            if self.poor:
+                tail = self.repeatability_p_value
+                tail_text = f"p = {tail:.2g}" if tail > 0 else "p < 1e-300"
+                return (
+                    f"poor: {measured}, by construction; but {learned} is "
+                    f"{self.learned_repeatability / self.repeatability_prior_scale:.3g} times "
+                    f"the scale of its prior ({self.repeatability_prior_scale:.3g}; {tail_text}): "
+                    "the model leaves scatter the error model does not expect, and its 1σ "
+                    "belong to a model the data reject"
+                )
+            return (
+                f"ok: {measured}, by construction: {learned} holds every scatter beyond the "
+                "rows' own σ"
+            )
         if self.poor:
             return (
                 f"poor: {measured}: the model does not describe the data within their σ; the "
                 f"unscaled 1σ understates the uncertainty by a factor {self.sigma_factor:.3g}, "
                 "and even the scaled one belongs to a model the data reject"
-            )
-        if self.learned_repeatability is not None:
-            return (
-                f"ok: {measured}, by construction: the learned repeatability "
-                f"{self.learned_repeatability:.3g} (in ln R) holds every scatter beyond the "
-                "rows' own σ"
             )
         return f"ok: {measured}"
 

@@ -1,8 +1,9 @@
-"""Least-squares fit of Eq. (7) with optimistix: multi-start, batched, with covariance.
+"""Least squares of any model family with optimistix: multi-start, batched, with covariance.
 
-The residuals are the ln R residuals of :mod:`brdf_infer.observations`, each divided by the
-row's σ under the scene's error model (:mod:`brdf_infer.error_model`) *without its random
-effects*: least squares treats the rows as independent, so
+The residuals are the ln R residuals of :func:`brdf_infer.observations.log_reflectance` (the
+family, the instrument, Eq. 6), each divided by the row's σ under the scene's error model
+(:mod:`brdf_infer.error_model`) *without its random effects*: least squares treats the rows as
+independent, so
 
     σ_i² = σ_value,i² + σ_rep² + (g_rot,i σ_rot)² + (g_cam,i σ_cam)²,
 
@@ -11,12 +12,14 @@ ln R at the current parameters. The sample and calibration effects, which correl
 are left out; where the repeatability is learned, σ_rep is instead set so that the reduced χ²
 is 1 (the Paule–Mandel condition), which folds every unmodelled scatter into it. The angle
 terms and σ_rep are updated after each solve until they settle (iteratively reweighted least
-squares). The ``spread`` error model keeps its fixed σ_i.
+squares). The ``spread`` error model keeps its fixed σ_i. Every family is weighted alike, so
+that their χ² and learned repeatabilities compare.
 
-The solver works on the free parameters' internal coordinates (:mod:`brdf_infer.coordinates`),
-with α and θs0 mapped through a logistic transform onto their bounds. The covariance is the
-Gauss–Newton (JᵀJ)⁻¹ in the internal coordinates, not scaled by the reduced χ² unless asked,
-carried to paper units by the delta method.
+The solver works on the free internal coordinates of the family (:mod:`brdf_infer._fit_space`:
+Eq. (7)'s whitened coordinates with the scene's fixed parameters and bounds, or another
+family's own), bounded ones mapped through smooth maps of the real line. The covariance is
+the Gauss–Newton (JᵀJ)⁻¹ in the internal coordinates, not scaled by the reduced χ² unless
+asked, carried to the physical parameters by the delta method.
 """
 
 from __future__ import annotations
@@ -31,18 +34,18 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
+from brdf_infer._fit_space import FitSpace, FreeTransform, physical_of
+from brdf_infer._fit_space import fit_space as fit_space
+from brdf_infer._fit_space import internal_bounds as internal_bounds
+from brdf_infer._fit_space import start_points as start_points
 from brdf_infer._reweighting import REWEIGHT_TOLERANCE as REWEIGHT_TOLERANCE
 from brdf_infer._reweighting import Reweighting
 from brdf_infer._reweighting import paule_mandel as paule_mandel
-from brdf_infer.coordinates import ANGLE_SCALE_DEG, INTERNAL_NAMES, from_internal, to_internal
 from brdf_infer.errors import BadInputError
 from brdf_infer.measurements import Measurements
-from brdf_infer.observations import (
-    build_observation_model,
-    standardized_residuals,
-)
-from brdf_infer.params import PARAM_NAMES, Params
-from brdf_infer.priors import DEFAULT_BOUNDS
+from brdf_infer.model import ModelFamily, family
+from brdf_infer.observations import Observations, build_observation_model, log_reflectance
+from brdf_infer.params import Params
 from brdf_infer.scene import Scene
 from brdf_infer.settings import LSQ_STARTS
 
@@ -69,18 +72,20 @@ STATUS_NAMES: tuple[str, ...] = (
 
 @dataclass(frozen=True)
 class LsqResult:
-    """Outcome of :func:`fit_lsq`; every number in paper units unless named otherwise.
+    """Outcome of :func:`fit_lsq`; every number in the family's units unless named otherwise.
 
     Attributes:
-        params: best-fit parameters.
+        family: the family fitted.
+        physical: best-fit physical parameters, by name, in the family's order.
         cost: χ² = Σ ((ln R_pred − ln R_obs)/σ)² at the optimum.
         reduced_chi2: χ² / (n_points − n_free).
-        sigma: 1σ per parameter (0 for fixed ones), linearised: for a2 and a3 it is only
-            meaningful when α is well determined, since a2 = b2·90^−(1+α) (see
+        sigma: 1σ per parameter (0 for fixed ones), linearised: for Eq. (7)'s a2 and a3 it is
+            only meaningful when α is well determined, since a2 = b2·90^−(1+α) (see
             ``sigma_internal``).
-        internal: the optimum in internal coordinates (:mod:`brdf_infer.coordinates`).
+        internal: the optimum in internal coordinates (:mod:`brdf_infer._fit_space`).
         sigma_internal: 1σ in internal coordinates, where the linearisation holds better.
-        correlation: 6×6 correlation matrix (identity rows for fixed parameters).
+        correlation: correlation matrix of the physical parameters (identity rows for fixed
+            parameters).
         condition_number: of the Jacobian in the internal coordinates.
         covariance_scaled: whether the covariance was multiplied by the reduced χ².
         n_points: number of residuals.
@@ -98,7 +103,8 @@ class LsqResult:
         warnings: identifiability and convergence warnings, in words.
     """
 
-    params: Params
+    family: str
+    physical: dict[str, float]
     cost: float
     reduced_chi2: float
     sigma: dict[str, float]
@@ -121,78 +127,44 @@ class LsqResult:
     reweightings: int
     warnings: list[str] = field(default_factory=list)
 
+    @property
+    def params(self) -> Params:
+        """The optimum as Eq. (7)'s six parameters (its family only).
 
-def internal_bounds(scene: Scene, name: str) -> tuple[float, float] | None:
-    """Internal-coordinate bounds of a bounded parameter (α, θs0), else None."""
-    if name not in DEFAULT_BOUNDS:
-        return None
-    prior = scene.priors[name]
-    lower, upper = prior.lower, prior.upper
-    default = DEFAULT_BOUNDS[name]
-    lower = lower if np.isfinite(lower) else default[0]
-    upper = upper if np.isfinite(upper) else default[1]
-    scale = ANGLE_SCALE_DEG if name == "theta_s0" else 1.0
-    return lower / scale, upper / scale
-
-
-class FreeTransform(NamedTuple):
-    """Free unconstrained vector u ↔ full internal vector z (fixed entries filled in).
-
-    A pytree of arrays, so that one compiled solver serves every dataset of the same shape.
-    """
-
-    base: jnp.ndarray  # full internal vector holding the fixed values
-    lower: jnp.ndarray  # bounds of the free entries (unused where not bounded)
-    upper: jnp.ndarray
-    bounded: jnp.ndarray
-
-    def free_to_full(self, z_free: jnp.ndarray, free_index: tuple[int, ...]) -> jnp.ndarray:
-        return self.base.at[np.array(free_index, int)].set(z_free)
-
-    def to_free(self, u: jnp.ndarray) -> jnp.ndarray:
-        squashed = self.lower + (self.upper - self.lower) * jax.nn.sigmoid(u)
-        return jnp.where(self.bounded, squashed, u)
-
-    def from_free(self, z_free: np.ndarray) -> np.ndarray:
-        lower, upper = np.asarray(self.lower), np.asarray(self.upper)
-        fraction = np.clip((z_free - lower) / (upper - lower), 1e-9, 1 - 1e-9)
-        return np.where(np.asarray(self.bounded), np.log(fraction) - np.log1p(-fraction), z_free)
+        Raises:
+            ValueError: another family's fit.
+        """
+        try:
+            return Params(**self.physical)
+        except TypeError:
+            raise ValueError(f"{self.family} has no Eq. (7) parameters") from None
 
 
-def free_transform(scene: Scene) -> FreeTransform:
-    """The scene's map between the solver's free vector and the internal vector z: its fixed
-    parameters filled in, α and θs0 squashed into their bounds (:func:`internal_bounds`)."""
-    fixed_params = Params(
-        *(scene.priors[name].value if scene.priors[name].fixed else 1.0 for name in PARAM_NAMES)
-    )
-    bounds = [internal_bounds(scene, name) for name in scene.free_parameters]
-    return FreeTransform(
-        base=to_internal(fixed_params),
-        lower=jnp.array([b[0] if b else 0.0 for b in bounds]),
-        upper=jnp.array([b[1] if b else 1.0 for b in bounds]),
-        bounded=jnp.array([b is not None for b in bounds]),
-    )
-
-
-def free_indices(scene: Scene) -> tuple[int, ...]:
-    """Positions of the scene's free parameters in the internal vector z."""
-    return tuple(PARAM_NAMES.index(name) for name in scene.free_parameters)
-
-
-def _residuals_free(z_free, data, transform, free_index, fold, constants):
-    params = from_internal(transform.free_to_full(z_free, free_index))
-    return standardized_residuals(params, data, fold, constants)
+def fit_residuals(
+    member: ModelFamily,
+    z_free: jnp.ndarray,
+    data: Observations,
+    transform: FreeTransform,
+    free_index: tuple[int, ...],
+) -> jnp.ndarray:
+    """(ln R_pred − ln R_obs)/σ of every row at the free internal coordinates ``z_free``."""
+    physical = physical_of(member, transform.free_to_full(z_free, free_index))
+    return (log_reflectance(member, physical, data) - data.log_reflectance) / data.sigma
 
 
 @functools.cache
-def _batched_solver(solver: str, rtol: float, atol: float, max_steps: int, free_index, fold):
-    """Compiled-once solver: (u0 batch, data, transform, constants) → (z_free, cost, status)."""
+def _batched_solver(
+    solver: str, rtol: float, atol: float, max_steps: int, free_index, name: str, fold: bool
+):
+    """Compiled-once solver of the family ``name``: (u0 batch, data, transform, constants) →
+    (z_free, cost, status); Eq. (10)'s constants are an argument, not part of the program."""
     method = SOLVERS[solver](rtol=rtol, atol=atol)
 
     def solve_one(u0, data, transform, constants):
+        member = family(name, fold, constants)
+
         def residuals(u, _args):
-            z_free = transform.to_free(u)
-            return _residuals_free(z_free, data, transform, free_index, fold, constants)
+            return fit_residuals(member, transform.to_free(u), data, transform, free_index)
 
         solution = optx.least_squares(residuals, method, u0, max_steps=max_steps, throw=False)
         cost = jnp.sum(residuals(solution.value, None) ** 2)
@@ -203,31 +175,10 @@ def _batched_solver(solver: str, rtol: float, atol: float, max_steps: int, free_
     return jax.jit(jax.vmap(solve_one, in_axes=(0, None, None, None)))
 
 
-def start_points(
-    scene: Scene, transform: FreeTransform, starts: int, seed: int, init
-) -> np.ndarray:
-    """Starting internal free vectors drawn uniformly from the priors' start ranges."""
-    rng = np.random.default_rng(seed)
-    columns = []
-    for position, name in enumerate(scene.free_parameters):
-        low, high = scene.priors[name].start_range()
-        if name == "theta_s0":
-            low, high = low / ANGLE_SCALE_DEG, high / ANGLE_SCALE_DEG
-        if transform.bounded[position]:
-            low = max(low, transform.lower[position])
-            high = min(high, transform.upper[position])
-            span = high - low
-            low, high = low + 0.02 * span, high - 0.02 * span
-        columns.append(rng.uniform(low, high, starts))
-    points = np.stack(columns, 1)
-    if init is not None:
-        points[0] = np.asarray(to_internal(init))[list(free_indices(scene))]
-    return points
-
-
 def fit_lsq(
     scene: Scene,
     measurements: Measurements,
+    member: ModelFamily | None = None,
     *,
     starts: int = LSQ_STARTS,
     solver: str = "lm",
@@ -238,15 +189,16 @@ def fit_lsq(
     atol: float = 1e-10,
     max_steps: int = 1000,
 ) -> LsqResult:
-    """Multi-start least-squares fit of the scene's free parameters.
+    """Multi-start least-squares fit of a family's free parameters.
 
     Args:
-        scene: error model, priors (start ranges, bounds, fixed values), model components.
+        scene: error model, priors (start ranges, bounds, fixed values of Eq. 7), model.
         measurements: the rows to fit (every sample individually).
+        member: the family (default: the scene's, with its folding and constants).
         starts: number of starting points, solved together in one compiled, vmapped call.
         solver: ``lm`` (Levenberg–Marquardt), ``gauss-newton`` or ``dogleg``.
         seed: seed of the starting points.
-        init: if given, the first start (the others stay random).
+        init: Eq. (7)'s family only: if given, the first start (the others stay random).
         scale_covariance: multiply the covariance by the reduced χ² (not done when χ² ≈ 0).
         rtol, atol: solver tolerances.
         max_steps: solver step limit per start.
@@ -255,30 +207,25 @@ def fit_lsq(
         BadInputError: unknown solver, fewer than one start, or fewer points than free
             parameters.
     """
-    model = _checked_model(scene, measurements, solver, starts)
-    free = scene.free_parameters
-    transform = free_transform(scene)
-    free_index = free_indices(scene)
-    z0 = start_points(scene, transform, starts, seed, init)
+    if member is None:
+        member = family(scene.model.family, scene.model.fold, scene.model.constants)
+    space = fit_space(scene, member)
+    model = _checked_model(scene, measurements, space, solver, starts)
+    transform = space.transform
+    z0 = start_points(scene, space, starts, seed, init)
     u0 = jnp.asarray(np.stack([transform.from_free(z) for z in z0]))
-    solve = _batched_solver(solver, rtol, atol, max_steps, free_index, model.fold)
-    reweight = Reweighting(scene, model, len(free))
+    solve = _batched_solver(
+        solver, rtol, atol, max_steps, space.free_index, member.name, member.fold
+    )
+    reweight = Reweighting(scene, model, member, len(space.free))
     model = model.with_sigma(reweight.sigma)
-    solved = _solve_reweighted(solve, u0, model, transform, free_index, reweight)
+    solved = _solve_reweighted(solve, u0, model, space, reweight)
     return _lsq_result(
-        scene,
-        measurements,
-        solved,
-        transform,
-        free_index,
-        reweight,
-        starts,
-        solver,
-        scale_covariance,
+        scene, measurements, solved, space, reweight, starts, solver, scale_covariance
     )
 
 
-def _checked_model(scene: Scene, measurements: Measurements, solver: str, starts: int):
+def _checked_model(scene: Scene, measurements: Measurements, space: FitSpace, solver, starts):
     """The observation model of the rows, once the solver, the starts and the number of points
     are checked (:func:`fit_lsq` Raises)."""
     if solver not in SOLVERS:
@@ -288,11 +235,11 @@ def _checked_model(scene: Scene, measurements: Measurements, solver: str, starts
     if starts < 1:
         raise BadInputError(f"need at least one start, got {starts}", field="starts")
     model = build_observation_model(scene, measurements)
-    free = scene.free_parameters
-    if model.n_points < len(free):
+    if model.n_points < len(space.free):
+        fix = " (fix some in the scene's [priors])" if space.member.paper_parameters else ""
         raise BadInputError(
-            f"{model.n_points} measurements cannot constrain {len(free)} free parameters "
-            "(fix some in the scene's [priors])",
+            f"{model.n_points} measurements cannot constrain {len(space.free)} free "
+            f"parameters{fix}",
             file=measurements.path,
         )
     return model
@@ -310,10 +257,11 @@ class _Solved(NamedTuple):
     compile_seconds: float
 
 
-def _solve_reweighted(solve, u0, model, transform, free_index, reweight: Reweighting) -> _Solved:
+def _solve_reweighted(solve, u0, model, space: FitSpace, reweight: Reweighting) -> _Solved:
     """Compile the batched solver once and solve from every start, reweighting the rows and
     solving again until the weights settle (at most ``REWEIGHT_ITERATIONS`` solves)."""
-    arguments = (model.data, transform, model.constants)
+    transform, constants = space.transform, space.member.constants
+    arguments = (model.data, transform, constants)
     clock = time.perf_counter()
     compiled = solve.lower(u0, *arguments).compile()
     compile_seconds = time.perf_counter() - clock
@@ -322,13 +270,13 @@ def _solve_reweighted(solve, u0, model, transform, free_index, reweight: Reweigh
     while not settled:
         z_free, costs, status = jax.block_until_ready(compiled(u0, *arguments))
         best_index = int(np.argmin(np.where(np.isfinite(costs), costs, np.inf)))
-        best = transform.free_to_full(z_free[best_index], free_index)
-        settled = not reweight.update(from_internal(best))
+        best = transform.free_to_full(z_free[best_index], space.free_index)
+        settled = not reweight.update(physical_of(space.member, best))
         if not settled and reweight.solves >= REWEIGHT_ITERATIONS:
             break
         if not settled:
             model = model.with_sigma(reweight.sigma)
-            arguments = (model.data, transform, model.constants)
+            arguments = (model.data, transform, constants)
             u0 = u0.at[0].set(jnp.asarray(transform.from_free(np.asarray(z_free[best_index]))))
     seconds = time.perf_counter() - clock
     return _Solved(model, z_free, costs, status, settled, seconds, compile_seconds)
@@ -338,8 +286,7 @@ def _lsq_result(
     scene: Scene,
     measurements: Measurements,
     solved: _Solved,
-    transform,
-    free_index,
+    space: FitSpace,
     reweight: Reweighting,
     starts: int,
     solver: str,
@@ -347,7 +294,7 @@ def _lsq_result(
 ) -> LsqResult:
     """The best start of the last solve, its covariance and the fit's warnings."""
     model, z_free, status, settled = solved.model, solved.z_free, solved.status, solved.settled
-    free = scene.free_parameters
+    member, transform, free_index = space.member, space.transform, space.free_index
     costs = np.where(np.isfinite(solved.costs), np.asarray(solved.costs), np.inf)
     best_index = int(np.argmin(costs))
     best_cost = float(costs[best_index])
@@ -355,29 +302,29 @@ def _lsq_result(
     converged = int(np.sum(np.abs(costs - best_cost) <= tolerance))
     z_best = np.asarray(z_free[best_index])
     z_full = transform.free_to_full(jnp.asarray(z_best), free_index)
-    params = Params(*(float(v) for v in from_internal(z_full)))
+    physical = {n: float(v) for n, v in physical_of(member, z_full).items()}
 
-    dof = model.n_points - len(free)
+    dof = model.n_points - len(space.free)
     reduced = best_cost / dof if dof > 0 else float("nan")
 
-    def residuals_free(z_free):
-        return _residuals_free(
-            z_free, model.data, transform, free_index, model.fold, model.constants
-        )
+    def residuals_free(z):
+        return fit_residuals(member, z, model.data, transform, free_index)
 
-    def free_to_paper(z_free):
-        return jnp.stack(from_internal(transform.free_to_full(z_free, free_index)))
+    def free_to_physical(z):
+        values = physical_of(member, transform.free_to_full(z, free_index))
+        return jnp.stack([jnp.asarray(values[n], float) for n in member.parameters])
 
     covariance_free, condition, warnings = _internal_covariance(
         residuals_free, z_best, reduced if scale_covariance else None
     )
-    jacobian_paper = np.asarray(jax.jacfwd(free_to_paper)(jnp.asarray(z_best)))
-    covariance = jacobian_paper @ covariance_free @ jacobian_paper.T
-    sigma_internal = np.zeros(6)
+    jacobian_physical = np.asarray(jax.jacfwd(free_to_physical)(jnp.asarray(z_best)))
+    covariance = jacobian_physical @ covariance_free @ jacobian_physical.T
+    sigma_internal = np.zeros(len(space.names))
     sigma_internal[list(free_index)] = np.sqrt(np.clip(np.diag(covariance_free), 0.0, None))
     sigma = np.sqrt(np.clip(np.diag(covariance), 0.0, None))
+    sigma_of = dict(zip(member.parameters, map(float, sigma), strict=True))
     warnings += _identifiability_warnings(
-        scene, measurements, params, sigma, condition, transform, z_best
+        measurements, physical, sigma_of, condition, space, z_best
     )
     if not settled:
         warnings.append(
@@ -388,17 +335,18 @@ def _lsq_result(
             f"only {converged} of {starts} starts reached the best cost {best_cost:.6g}"
         )
     return LsqResult(
-        params=params,
+        family=member.name,
+        physical=physical,
         cost=best_cost,
         reduced_chi2=reduced,
-        sigma=dict(zip(PARAM_NAMES, map(float, sigma), strict=True)),
-        internal=dict(zip(INTERNAL_NAMES, map(float, z_full), strict=True)),
-        sigma_internal=dict(zip(INTERNAL_NAMES, map(float, sigma_internal), strict=True)),
+        sigma=sigma_of,
+        internal=dict(zip(space.names, map(float, z_full), strict=True)),
+        sigma_internal=dict(zip(space.names, map(float, sigma_internal), strict=True)),
         correlation=_correlation(covariance, sigma),
         condition_number=condition,
         covariance_scaled=bool(scale_covariance and "zero residual" not in " ".join(warnings)),
         n_points=model.n_points,
-        free=free,
+        free=space.free,
         starts=starts,
         starts_converged=converged,
         start_costs=costs,
@@ -442,25 +390,28 @@ def _correlation(covariance: np.ndarray, sigma: np.ndarray) -> np.ndarray:
     return np.clip(correlation, -1.0, 1.0)
 
 
-def _identifiability_warnings(scene, measurements, params, sigma, condition, transform, z_best):
+def _identifiability_warnings(measurements, physical, sigma, condition, space, z_best):
     warnings = []
     if condition > ILL_CONDITIONED:
         warnings.append(
             f"ill-conditioned Jacobian (condition number {condition:.2g}): the data do not "
             "identify every parameter combination; see the correlation matrix"
         )
-    if "theta_s0" in scene.free_parameters and np.min(measurements.theta_s_deg) > params.theta_s0:
+    lowest = float(np.min(measurements.theta_s_deg))
+    if space.member.paper_parameters and "theta_s0" in space.free and lowest > physical["theta_s0"]:
         warnings.append(
             f"theta_s0 is not identified directly: no measurement lies below theta_s0 = "
-            f"{params.theta_s0:.3g} deg (lowest theta_s = {np.min(measurements.theta_s_deg):.3g} "
+            f"{physical['theta_s0']:.3g} deg (lowest theta_s = {lowest:.3g} "
             f"deg); it is constrained only through the curve's shape above it "
-            f"(1 sigma = {sigma[5]:.3g} deg)"
+            f"(1 sigma = {sigma['theta_s0']:.3g} deg)"
         )
-    for position, name in enumerate(scene.free_parameters):
+    transform = space.transform
+    for position, name in enumerate(space.names[k] for k in space.free_index):
         if not transform.bounded[position]:
             continue
         value = z_best[position]
         lower, upper = float(transform.lower[position]), float(transform.upper[position])
         if min(value - lower, upper - value) < 1e-3 * (upper - lower):
-            warnings.append(f"{name} ended at a bound of its range: the optimum may lie beyond it")
+            label = space.free[position] if space.member.paper_parameters else name
+            warnings.append(f"{label} ended at a bound of its range: the optimum may lie beyond it")
     return warnings

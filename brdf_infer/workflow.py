@@ -168,6 +168,7 @@ def paper_fit_summary(
 def lsq_summary(
     scene: Scene,
     measurements: Measurements,
+    member=None,
     *,
     starts: int = LSQ_STARTS,
     solver: str = "lm",
@@ -176,21 +177,23 @@ def lsq_summary(
     progress: Callable[[str], None] = _silent,
     paper: dict[str, float] | None = None,
 ) -> dict[str, Any]:
-    """The least-squares fit as the JSON of ``fit --method lsq`` (warnings also to
-    ``progress``): ``sigma`` is the 1σ as asked (scaled by √(χ²/dof) with
-    ``scale_covariance``), ``sigma_scaled`` always the scaled one, next to ``chi2_dof`` and
-    the ``fit_quality`` statement (:mod:`brdf_infer.fit_quality`); ``paper_fit_cost``: the χ²
-    of the paper fit's parameters ``paper`` under the same weights (None: fitted here)."""
+    """The least-squares fit of ``member`` (default: the scene's family) as the JSON of
+    ``fit --method lsq`` (warnings also to ``progress``): ``sigma`` is the 1σ as asked (scaled
+    by √(χ²/dof) with ``scale_covariance``), ``sigma_scaled`` always the scaled one, next to
+    ``chi2_dof`` and the ``fit_quality`` statement (:mod:`brdf_infer.fit_quality`); for Eq. (7)'s
+    family ``paper_fit_cost``: the χ² of the paper fit's parameters ``paper`` under the same
+    weights (None: fitted here)."""
     from brdf_infer.fit_quality import FitQuality, scaled_sigma
     from brdf_infer.lsq import fit_lsq
-    from brdf_infer.observations import build_observation_model
-    from brdf_infer.paper_fit import paper_fit
-    from brdf_infer.params import PARAM_NAMES, Params, params_to_dict
+    from brdf_infer.model import family
 
-    progress(f"least squares: {starts} starts, solver {solver} ...")
+    if member is None:
+        member = family(scene.model.family, scene.model.fold, scene.model.constants)
+    progress(f"least squares of {member.name}: {starts} starts, solver {solver} ...")
     result = fit_lsq(
         scene,
         measurements,
+        member,
         starts=starts,
         solver=solver,
         seed=seed,
@@ -200,24 +203,30 @@ def lsq_summary(
         progress(f"warning: {warning}")
     dof = result.n_points - len(result.free)
     learned = scene.errors.model == "generative" and scene.errors.learns_repeatability
-    quality = FitQuality(result.cost, dof, result.repeatability if learned and dof > 0 else None)
-    model = build_observation_model(scene, measurements).with_sigma(result.row_sigma)
-    paper_params = paper_fit(scene, measurements).params if paper is None else Params(**paper)
-    paper_cost = float(model.chi2(paper_params))
-    return {
+    quality = FitQuality(
+        result.cost,
+        dof,
+        result.repeatability if learned and dof > 0 else None,
+        scene.errors.repeatability_sd_prior,
+    )
+    summary = {
         "method": "lsq",
+        "model": member.name,
         "scene": scene.name,
-        "params": params_to_dict(result.params),
+        "params": result.physical,
         "cost": result.cost,
         "reduced_chi2": result.reduced_chi2,
         **quality.as_json(),
-        "paper_fit_cost": paper_cost,
+    }
+    if member.paper_parameters:
+        summary["paper_fit_cost"] = _paper_fit_cost(scene, measurements, result, paper)
+    return summary | {
         "sigma": result.sigma,
         "sigma_scaled": result.sigma
         if result.covariance_scaled
         else scaled_sigma(result.sigma, quality.sigma_factor),
         "correlation": result.correlation.tolist(),
-        "correlation_names": list(PARAM_NAMES),
+        "correlation_names": list(member.parameters),
         "internal": result.internal,
         "sigma_internal": result.sigma_internal,
         "condition_number": result.condition_number,
@@ -236,6 +245,18 @@ def lsq_summary(
         "reweightings": result.reweightings,
         "warnings": result.warnings,
     }
+
+
+def _paper_fit_cost(scene: Scene, measurements: Measurements, result, paper) -> float:
+    """χ² of the paper fit's parameters (``paper``; None: fitted here) under the row weights
+    least squares settled on."""
+    from brdf_infer.observations import build_observation_model
+    from brdf_infer.paper_fit import paper_fit
+    from brdf_infer.params import Params
+
+    model = build_observation_model(scene, measurements).with_sigma(result.row_sigma)
+    paper_params = paper_fit(scene, measurements).params if paper is None else Params(**paper)
+    return float(model.chi2(paper_params))
 
 
 def run_traces(scene: Scene, measurements: Measurements, posterior_run) -> list[dict]:
@@ -376,24 +397,19 @@ def _least_squares(
 ) -> dict[str, Any]:
     """Step 2: the least-squares fit of every free parameter (its checks added to
     ``implausible``; ``paper``: step 1's fit, whose χ² it reports)."""
+    from brdf_infer.model import family
+
     scene, measurements, settings, name = job.scene, job.measurements, job.settings, job.name
     job.step(f"least-squares fit of all free parameters of {name}")
-    if job.paper_parameters:
-        lsq = lsq_summary(
-            scene,
-            measurements,
-            starts=settings.lsq_starts,
-            seed=settings.seed,
-            progress=job.progress,
-            paper=paper["params"],
-        )
-    else:
-        from brdf_infer.family_fit import fit_family_lsq
-        from brdf_infer.model import family
-
-        lsq = fit_family_lsq(
-            scene, measurements, family(name), starts=settings.lsq_starts, seed=settings.seed
-        ).as_json(scene.name)
+    lsq = lsq_summary(
+        scene,
+        measurements,
+        family(name, scene.model.fold, scene.model.constants),
+        starts=settings.lsq_starts,
+        seed=settings.seed,
+        progress=job.progress,
+        paper=None if paper is None else paper["params"],
+    )
     implausible += fit_checks(scene, measurements, lsq)
     return lsq
 

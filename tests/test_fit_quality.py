@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from brdf_infer.fit_quality import POOR_P_VALUE, FitQuality, scaled_sigma
+from brdf_infer.lsq import paule_mandel
 
 
 def chi2_survival_even_dof(x: float, dof: int) -> float:
@@ -55,3 +56,37 @@ def test_statements_say_what_they_measured():
     assert undefined.statement.startswith("undefined") and not undefined.poor
     assert undefined.sigma_factor == 1.0
     assert set(poor.as_json()) == {"chi2_dof", "dof", "chi2_p_value", "poor_fit", "fit_quality"}
+
+
+def test_a_learned_repeatability_is_judged_against_its_prior():
+    """With σ_rep learned, χ²/dof is 1 by construction; the fit is poor when the Paule–Mandel
+    σ_rep lies beyond its half-normal prior's tail at POOR_P_VALUE (3.29 scales). Simulated
+    on 36 rows (36 dof, the parameters known) with rows' own σ of 0.02: σ_rep drawn from the
+    prior (scale 0.1) is called poor at about the prior's tail rate (1.35e-3 measured on
+    20,000: the estimate's own scatter, ≈ 1/√72 = 12 % relative, widens the tail a little;
+    bound 2e-3, 2.5 binomial sd above), and a planted σ_rep of 5 scales always."""
+    rng = np.random.default_rng(3)
+    variance = 0.02**2
+
+    def learned(residuals: np.ndarray) -> float:
+        """Paule–Mandel with equal variances in closed form: s² = Σr²/dof − v."""
+        return math.sqrt(max(float(np.sum(residuals**2)) / 36 - variance, 0.0))
+
+    def quality(true_sd: float) -> FitQuality:
+        residuals = rng.normal(0.0, math.sqrt(variance + true_sd**2), 36)
+        s = learned(residuals)
+        chi2 = float(np.sum(residuals**2 / (variance + s**2)))
+        return FitQuality(chi2, 36, s, repeatability_prior_scale=0.1)
+
+    residuals = rng.normal(0.0, 0.1, 36)  # the closed form is the bisection's answer
+    assert paule_mandel(residuals, np.full(36, variance), 36) == pytest.approx(learned(residuals))
+    right = [quality(abs(rng.normal(0.0, 0.1))) for _ in range(20_000)]
+    rate = np.mean([q.poor for q in right])
+    assert 0 < rate <= 2 * POOR_P_VALUE
+    assert all(q.chi2_dof == pytest.approx(1.0) for q in right if q.learned_repeatability > 0)
+    planted = [quality(0.5) for _ in range(200)]
+    assert all(q.poor and q.statement.startswith("poor: χ²/dof = 1 for 36 dof") for q in planted)
+    assert "times the scale of its prior (0.1" in planted[0].statement
+    assert planted[0].repeatability_p_value < POOR_P_VALUE
+    assert FitQuality(36.0, 36, 0.2, repeatability_prior_scale=0.1).statement.startswith("ok:")
+    assert FitQuality(36.0, 36, 0.2).repeatability_p_value is None  # no prior: not judged

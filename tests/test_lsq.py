@@ -10,6 +10,7 @@ from scipy import stats
 from brdf_infer.coordinates import INTERNAL_NAMES, from_internal, to_internal
 from brdf_infer.errors import BadInputError
 from brdf_infer.lsq import fit_lsq
+from brdf_infer.model import family
 from brdf_infer.observations import build_observation_model
 from brdf_infer.paper_fit import paper_fit
 from brdf_infer.params import PARAM_NAMES, UV_PAPER, VIS_PAPER
@@ -92,6 +93,30 @@ def test_learned_scatter_meets_the_paule_mandel_condition(lya, lya_fit):
     assert lya_fit.repeatability > 0.02
     assert lya_fit.reduced_chi2 == pytest.approx(1.0, abs=1e-6)
     assert np.all(lya_fit.row_sigma >= lya_fit.repeatability)
+
+
+def test_the_scene_family_given_explicitly_is_the_default_fit(lya, lya_fit):
+    scene, measurements = lya
+    member = family(scene.model.family, scene.model.fold, scene.model.constants)
+    explicit = fit_lsq(scene, measurements, member)
+    assert explicit.family == lya_fit.family == "strumik2024"
+    assert explicit.cost == lya_fit.cost and explicit.physical == lya_fit.physical
+    assert explicit.params == lya_fit.params
+
+
+def test_another_family_is_weighted_as_eq7_is(lya, lya_fit):
+    """One least squares for every family: the same row σ (the value's own, Paule–Mandel σ_rep
+    where learned, the angle terms), so χ²/dof is 1 for ABg too and its misfit shows as a
+    larger learned repeatability; its parameters are its own, not Eq. (7)'s."""
+    scene, measurements = lya
+    abg = fit_lsq(scene, measurements, family("abg"), starts=4)
+    assert abg.family == "abg" and list(abg.physical) == ["A", "B", "g"]
+    assert abg.reduced_chi2 == pytest.approx(1.0, abs=1e-6) and abg.free == ("A", "B", "g")
+    assert abg.repeatability > 10 * lya_fit.repeatability
+    assert np.all(abg.row_sigma >= abg.repeatability) and abg.correlation.shape == (3, 3)
+    assert list(abg.internal) == ["log_peak", "log_knee", "g"]
+    with pytest.raises(ValueError, match="abg has no Eq"):
+        _ = abg.params
 
 
 def test_zero_residual_with_scaled_covariance_is_handled(lya):

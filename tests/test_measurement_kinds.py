@@ -11,7 +11,6 @@ import pytest
 
 from brdf_infer.compare import CompareSettings, fit_family
 from brdf_infer.errors import BadInputError
-from brdf_infer.family_fit import fit_family_lsq
 from brdf_infer.lsq import fit_lsq
 from brdf_infer.model import brdf_hemisphere, family
 from brdf_infer.params import UV_PAPER
@@ -114,10 +113,10 @@ def test_every_family_is_recovered_from_out_of_plane_brdf_rows_by_lsq_and_nuts(t
         tmp_path, np.exp(np.asarray(member.log_brdf(theta_i, theta, phi, physical)))
     )
     rows = scene.load_measurements()
-    fit = fit_family_lsq(scene, rows, member, starts=8)
+    fit = fit_lsq(scene, rows, member, starts=8)
     for parameter, value in truth.items():
-        error = fit.params[parameter] - value
-        assert abs(error) < 4.0 * fit.sigma[parameter], (parameter, fit.params, fit.sigma)
+        error = fit.physical[parameter] - value
+        assert abs(error) < 4.0 * fit.sigma[parameter], (parameter, fit.physical, fit.sigma)
     result = fit_family(scene, rows, name, CompareSettings(chains=2, warmup=300, draws=300))
     posterior = result.idata.posterior
     for parameter, value in truth.items():
@@ -256,9 +255,9 @@ def test_a_bsdf_table_of_another_family_is_fitted_and_sampled_back(tmp_path, nam
     )
     scene = load_scene(tmp_path / "s.toml")
     rows = scene.load_measurements()
-    fit = fit_family_lsq(scene, rows, member, starts=8)
+    fit = fit_lsq(scene, rows, member, starts=8)
     for parameter, value in truth.items():
-        assert fit.params[parameter] == pytest.approx(value, rel=1e-4), parameter
+        assert fit.physical[parameter] == pytest.approx(value, rel=1e-4), parameter
     result = fit_family(scene, rows, name, CompareSettings(chains=1, warmup=200, draws=200))
     for parameter, value in truth.items():
         low, high = np.quantile(np.asarray(result.idata.posterior[parameter]), [0.001, 0.999])

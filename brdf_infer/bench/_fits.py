@@ -12,8 +12,9 @@ from scipy.optimize import least_squares
 
 from brdf_infer.bench._timing import timed
 from brdf_infer.coordinates import from_internal
-from brdf_infer.lsq import fit_lsq, free_indices, free_transform, internal_bounds, start_points
+from brdf_infer.lsq import fit_lsq, fit_space, internal_bounds, start_points
 from brdf_infer.measurements import Measurements
+from brdf_infer.model import family
 from brdf_infer.observations import build_observation_model
 from brdf_infer.paper_fit import paper_fit
 from brdf_infer.params import UV_PAPER, VIS_PAPER
@@ -36,8 +37,8 @@ def _scipy_rows(
 ) -> FitRow:
     """SciPy's trust-region-reflective least_squares, the same residuals, weights and starts."""
     model = build_observation_model(scene, data).with_sigma(row_sigma)
-    transform = free_transform(scene)
-    free_index = free_indices(scene)
+    space = fit_space(scene, family(scene.model.family, scene.model.fold, scene.model.constants))
+    transform, free_index = space.transform, space.free_index
 
     def residuals(z_free):
         return model.residuals(from_internal(transform.free_to_full(z_free, free_index)))
@@ -46,7 +47,7 @@ def _scipy_rows(
     jacobian_fn = jax.jit(jax.jacfwd(residuals))
     bounds = [internal_bounds(scene, name) or (-np.inf, np.inf) for name in scene.free_parameters]
     lower, upper = np.array([b[0] for b in bounds]), np.array([b[1] for b in bounds])
-    points = start_points(scene, transform, starts, 0, None)
+    points = start_points(scene, space, starts, 0)
     clock = time.perf_counter()
     jax.block_until_ready(
         (residual_fn(jnp.asarray(points[0])), jacobian_fn(jnp.asarray(points[0])))

@@ -1,5 +1,5 @@
 """``brdf-infer fit``: the paper's regression (Sec. 4.2), its grid search over (α, θs0), or
-least squares over all six parameters (or another family's)."""
+least squares of any model family over its free parameters (:mod:`brdf_infer.lsq`)."""
 
 from __future__ import annotations
 
@@ -36,7 +36,7 @@ def add_parser(commands) -> argparse.ArgumentParser:
     parser = scene_command_parser(
         commands,
         "fit",
-        "fit Eq. (7): the paper's regression or least squares over all six parameters",
+        "fit the paper's regression of Eq. (7), or least squares of any model family",
     )
     parser.add_argument("--method", choices=["paper", "lsq"], default="paper", help="fit method")
     add_model_argument(parser)
@@ -80,14 +80,6 @@ def main(args: argparse.Namespace) -> int:
         progress(f"warning: forced past a plausibility check: {found.record}")
     if args.json:
         emit_json(payload)
-    elif not member.paper_parameters:
-        print(f"least-squares fit of {model} to scene '{scene.name}'")
-        print(_sigma_table(payload, digits=6))
-        print(
-            f"chi2 = {payload['cost']:.2f} for {payload['n_points']} points "
-            f"({payload['dof']} dof) in {payload['seconds']:.1f} s"
-        )
-        print(f"fit quality: {payload['fit_quality']}")
     elif args.method == "lsq":
         _print_lsq(payload)
         print(f"fit quality: {payload['fit_quality']}")
@@ -97,21 +89,15 @@ def main(args: argparse.Namespace) -> int:
 
 
 def _fit(args: argparse.Namespace, scene, measurements, member) -> dict[str, Any]:
-    """The fit's JSON: the family's least squares, or for Eq. (7) the paper's regression or
-    least squares over its six parameters (with fixed ones, reweighting and a grid)."""
-    if not member.paper_parameters:
-        from brdf_infer.family_fit import fit_family_lsq
-
-        progress(f"least squares of {member.name}: {args.starts} starts ...")
-        return fit_family_lsq(
-            scene, measurements, member, starts=args.starts, seed=args.seed
-        ).as_json(scene.name)
+    """The fit's JSON: the family's least squares, or for Eq. (7) the paper's regression (or
+    its grid search)."""
     if args.method == "lsq":
         from brdf_infer.workflow import lsq_summary
 
         return lsq_summary(
             scene,
             measurements,
+            member,
             starts=args.starts,
             solver=args.solver,
             seed=args.seed,
@@ -125,13 +111,13 @@ def _fit(args: argparse.Namespace, scene, measurements, member) -> dict[str, Any
     return paper_fit_summary(scene, measurements, args.selection)
 
 
-def _sigma_table(payload: dict[str, Any], digits: int = 4) -> str:
+def _sigma_table(payload: dict[str, Any]) -> str:
     """Parameters with the unscaled 1σ and the 1σ scaled by sqrt(chi2/dof), side by side."""
     factor = math.sqrt(payload["chi2_dof"]) if payload.get("covariance_scaled") else 1.0
     rows = [
         [
             name,
-            f"{value:.{digits}g}",
+            f"{value:.4g}",
             f"{payload['sigma'][name] / factor:.2g}",
             f"{payload['sigma_scaled'][name]:.2g}",
         ]
@@ -141,16 +127,29 @@ def _sigma_table(payload: dict[str, Any], digits: int = 4) -> str:
 
 
 def _print_lsq(payload: dict[str, Any]) -> None:
-    print(f"least-squares fit of scene '{payload['scene']}' ({payload['solver']})")
+    print(
+        f"least-squares fit of {payload['model']} to scene '{payload['scene']}' "
+        f"({payload['solver']})"
+    )
     print(_sigma_table(payload))
+    paper = "paper_fit_cost" in payload  # Eq. (7)'s family: the paper fit's χ² beside
     print(
         table(
-            ["points", "chi2", "chi2 (paper fit)", "cond(J)", "starts at best", "time [s]"],
+            [
+                "points",
+                "dof",
+                "chi2",
+                *(["chi2 (paper fit)"] if paper else []),
+                "cond(J)",
+                "starts at best",
+                "time [s]",
+            ],
             [
                 [
                     str(payload["n_points"]),
+                    str(payload["dof"]),
                     f"{payload['cost']:.4f}",
-                    f"{payload['paper_fit_cost']:.4f}",
+                    *([f"{payload['paper_fit_cost']:.4f}"] if paper else []),
                     f"{payload['condition_number']:.2g}",
                     f"{payload['starts_converged']}/{payload['starts']}",
                     f"{payload['seconds']:.3f} (+{payload['compile_seconds']:.1f} compile)",
