@@ -65,8 +65,9 @@ def _checked_options(args: argparse.Namespace) -> None:
 
 def _source(args: argparse.Namespace, scene_name: str):
     from brdf_infer.export import Source
-    from brdf_infer.params import resolve_params
-    from brdf_infer.posterior import draws_params, load_run_family
+    from brdf_infer.model import strumik_family
+    from brdf_infer.params import params_to_dict, resolve_params
+    from brdf_infer.posterior import load_run_family
 
     if args.run is not None:
         run = Path(args.run)
@@ -74,27 +75,19 @@ def _source(args: argparse.Namespace, scene_name: str):
         member = folded_family(member, args.fold)
         with contextlib.suppress(OSError, ValueError, KeyError):
             scene_name = json.loads((run / "summary.json").read_text())["scene"]
-        if member.paper_parameters:
-            params = draws_params(physical)
-            return Source(str(run), params, True, member.fold, member.constants, scene_name)
-        if args.format == "abg" and member.name != "abg":
+        if args.format == "abg" and not member.paper_parameters and member.name != "abg":
             raise BadInputError(
                 f"ABg rows are fitted to Eq. (7) or read from an abg run, not a run of "
                 f"{member.name} (export it with --format zemax-bsdf)",
                 field="--format",
             )
-        return Source(str(run), None, True, False, None, scene_name, member, physical)
+        return Source(str(run), member, physical, True, scene_name)
     from brdf_infer.scene import load_scene
 
     scene = load_scene(scene_name)
-    return Source(
-        args.params,
-        resolve_params(args.params),
-        False,
-        chosen_fold(args.fold, scene.model.fold),
-        scene.model.constants,
-        scene.name,
-    )
+    member = strumik_family(chosen_fold(args.fold, scene.model.fold), scene.model.constants)
+    physical = params_to_dict(resolve_params(args.params))
+    return Source(args.params, member, physical, False, scene.name)
 
 
 def main(args: argparse.Namespace) -> int:

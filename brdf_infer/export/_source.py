@@ -8,43 +8,49 @@ from dataclasses import dataclass
 import numpy as np
 
 from brdf_infer.model import ModelFamily
-from brdf_infer.params import HemisphereConstants, Params
+from brdf_infer.params import PARAM_NAMES, HemisphereConstants, Params
 
 _BAND_QUANTILES = {"lower95": 0.025, "median": 0.5, "upper95": 0.975}
 
 
 @dataclass(frozen=True)
 class Source:
-    """Where the exported BRDF comes from.
+    """Where the exported BRDF comes from: one parameter set or every draw of a posterior run,
+    of any model family.
 
     Attributes:
         label: the parameter set's name or the run folder, for the file comments.
-        params: one parameter set (scalar fields) or every posterior draw (1-D fields).
-        from_run: ``params`` holds posterior draws.
-        fold: the hemisphere BRDF includes Eq. (10) (the article's Table 3 does; False: the
-            physical BRDF; always False with ``family``).
-        constants: Δφ and folding constants (None with ``family``).
+        family: the model family; its ``fold`` (Eq. 10 in the BRDF: the article's Table 3 has
+            it; False: the physical BRDF) and ``constants`` (Δφ, folding) are the export's.
+        physical: the family's physical parameters: scalars (one parameter set) or 1-D arrays
+            (every posterior draw).
+        from_run: ``physical`` holds posterior draws.
         scene: the scene's name, for the file comments.
-        family: a posterior run of another model family (``params`` is then None and
-            ``physical`` holds the draws of its physical parameters).
-        physical: the draws of ``family``'s parameters.
     """
 
     label: str
-    params: Params | None
+    family: ModelFamily
+    physical: dict[str, np.ndarray]
     from_run: bool
-    fold: bool
-    constants: HemisphereConstants | None
     scene: str
-    family: ModelFamily | None = None
-    physical: dict[str, np.ndarray] | None = None
+
+    @property
+    def fold(self) -> bool:
+        return self.family.fold
+
+    @property
+    def constants(self) -> HemisphereConstants:
+        return self.family.constants
+
+    @property
+    def params(self) -> Params:
+        """The physical parameters as Eq. (7)'s six (its family only)."""
+        return Params(*(np.asarray(self.physical[name], float) for name in PARAM_NAMES))
 
     @property
     def count(self) -> int:
         """Number of parameter sets (posterior draws; 1 for a parameter set)."""
-        if self.family is not None:
-            return int(np.size(next(iter(self.physical.values()))))
-        return int(np.size(self.params.brdf0))
+        return int(np.size(next(iter(self.physical.values()))))
 
 
 def planned_files(source: Source, export_format: str, draws: int) -> list[str]:

@@ -13,10 +13,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from brdf_infer.bsdf_file import BSDF_SOURCE, BsdfFile, specular_frame_to_model, write_bsdf
-from brdf_infer.export._grid import ScatterGrid, brdf_table, table_integral
+from brdf_infer.export._grid import ScatterGrid, table_integral
 from brdf_infer.export._source import _BAND_QUANTILES, Source, draw_indices
-from brdf_infer.model import ModelFamily, fold_statement, strumik_family, tis
-from brdf_infer.params import Params, params_to_dict
+from brdf_infer.model import ModelFamily, Physical, fold_statement
 from brdf_infer.posterior import FAMILY_TIS_DRAWS, tis_band
 
 _MEANING = {
@@ -34,13 +33,14 @@ _MEANING = {
 _TIS_KEYS = {"lower95": "lo95", "median": "median", "upper95": "hi95"}
 
 
-def _parameter_text(params: Params) -> str:
-    return ", ".join(f"{name}={value:.10g}" for name, value in params_to_dict(params).items())
+def _parameter_text(physical: dict[str, float]) -> str:
+    return ", ".join(f"{name}={value:.10g}" for name, value in physical.items())
 
 
 def _comments(source: Source, kind: str, grid: ScatterGrid, extra: list[str]) -> list[str]:
     from brdf_infer import __version__
 
+    member = source.family
     lines = [
         f"brdf_infer {__version__} export, {dt.datetime.now(dt.UTC).isoformat(timespec='seconds')}",
         f"scene: {source.scene}",
@@ -48,18 +48,17 @@ def _comments(source: Source, kind: str, grid: ScatterGrid, extra: list[str]) ->
         f"file: {kind}: "
         + (
             _MEANING[kind]
-            if source.family is None
-            else _MEANING[kind].replace("exact Eq. (9)", f"{source.family.name}")
+            if member.paper_parameters
+            else _MEANING[kind].replace("exact Eq. (9)", f"{member.name}")
         ),
         (
             "model: Strumik et al. 2024 Eqs. (7), (8)"
             + (", (10)" if source.fold else "")
             + f"; constants {dict(source.constants._asdict())}"
-            if source.family is None
-            else f"model: {source.family.name} ("
+            if member.paper_parameters
+            else f"model: {member.name} ("
             + ", ".join(
-                f"{n} [{source.family.units[n].replace('sr⁻¹', '1/sr')}]"
-                for n in source.family.parameters
+                f"{n} [{member.units[n].replace('sr⁻¹', '1/sr')}]" for n in member.parameters
             )
             + ")"
         ),
@@ -115,25 +114,6 @@ def _write_table_file(
     }
 
 
-def _tables(grid: ScatterGrid, params: Params, source: Source) -> np.ndarray:
-    """BRDF tables of one parameter set at every θi: (n_aoi, n_azimuth, n_radial)."""
-    return np.stack(
-        [
-            np.asarray(
-                brdf_table(
-                    float(t),
-                    grid.azimuth_deg,
-                    grid.radial_deg,
-                    params,
-                    source.fold,
-                    source.constants,
-                )
-            )
-            for t in grid.theta_i_deg
-        ]
-    )
-
-
 def export_zemax(
     source: Source,
     grid: ScatterGrid,
@@ -141,17 +121,15 @@ def export_zemax(
     draws: int = 0,
     progress: Callable[[str], None] = lambda message: None,
 ) -> list[dict]:
-    """Write the .BSDF files of ``source`` (module docstring) into ``out``.
+    """Write the .BSDF files of ``source`` (module docstring) into ``out``, for every family.
 
     Returns:
         One entry per file: path, kind, theta_i_deg, tis, table_integral.
     """
-    theta_i = grid.theta_i_deg
-    if source.family is not None:
-        return _export_family_zemax(source, grid, out, draws, progress)
+    member, theta_i = source.family, grid.theta_i_deg
+    tables = _table_program(member)
     if not source.from_run:
-        tables = _tables(grid, source.params, source)
-        tis_lines = np.asarray(tis(theta_i, source.params, source.fold, source.constants))
+        one = {name: float(value) for name, value in source.physical.items()}
         return [
             _write_table_file(
                 out,
@@ -159,36 +137,26 @@ def export_zemax(
                 "params",
                 source,
                 grid,
-                tables,
-                tis_lines,
-                [f"parameters: {_parameter_text(source.params)}"],
+                _family_tables(tables, grid, one),
+                _tis_lines(member, theta_i, one),
+                [f"parameters: {_parameter_text(one)}"],
             )
         ]
-    member = strumik_family(source.fold, source.constants)
-    band = tis_band(member, source.params._asdict(), theta_i, FAMILY_TIS_DRAWS)
+    progress(f"TIS band of {member.name} over the draws")
+    band = tis_band(member, source.physical, theta_i, FAMILY_TIS_DRAWS)
     quantiles = np.empty(
         (len(_BAND_QUANTILES), theta_i.size, grid.azimuth_deg.size, grid.radial_deg.size)
     )
     for k, t in enumerate(theta_i):
         progress(f"posterior quantiles of the tables at theta_i = {t:g} deg")
-        table = np.asarray(
-            brdf_table(
-                float(t),
-                grid.azimuth_deg,
-                grid.radial_deg,
-                source.params,
-                source.fold,
-                source.constants,
-            )
-        )
+        one_angle = ScatterGrid(np.array([t]), grid.azimuth_deg, grid.radial_deg)
+        table = _family_tables(tables, one_angle, source.physical)[:, 0]
         quantiles[:, k] = np.quantile(table, list(_BAND_QUANTILES.values()), axis=0)
-    count = source.count
-    files = _band_files(out, source, grid, quantiles, band, "")
-    for k, index in enumerate(draw_indices(count, draws) if draws else []):
-        one = Params(*(float(np.asarray(v)[index]) for v in source.params))
-        tables = _tables(grid, one, source)
+    thinned = f" (TIS over {band['draws']})" if "draws" in band else ""  # not every draw
+    files = _band_files(out, source, grid, quantiles, band, thinned)
+    for k, index in enumerate(draw_indices(source.count, draws) if draws else []):
+        one = {name: float(np.asarray(values)[index]) for name, values in source.physical.items()}
         progress(f"draw {k + 1} of {draws}")
-        tis_lines = np.asarray(tis(theta_i, one, source.fold, source.constants))
         files.append(
             _write_table_file(
                 out,
@@ -196,12 +164,20 @@ def export_zemax(
                 "draw",
                 source,
                 grid,
-                tables,
-                tis_lines,
-                [f"posterior draw {index} of {count}: {_parameter_text(one)}"],
+                _family_tables(tables, grid, one),
+                _tis_lines(member, theta_i, one),
+                [f"posterior draw {index} of {source.count}: {_parameter_text(one)}"],
             )
         )
     return files
+
+
+def _tis_lines(member: ModelFamily, theta_i: np.ndarray, one: dict[str, float]) -> np.ndarray:
+    """TIS(θi) of one parameter set: Eq. (9) at every θi in one call where the family has it
+    batched, else the family's TIS per θi."""
+    if member.log_tis_draws is not None:
+        return np.exp(np.asarray(member.log_tis_draws(np.asarray(theta_i, float), one)))
+    return np.array([float(member.tis(float(t), one)) for t in theta_i])
 
 
 def _band_files(
@@ -224,50 +200,23 @@ def _band_files(
     ]
 
 
-def _family_tables(member: ModelFamily, grid: ScatterGrid, physical: dict) -> np.ndarray:
-    """BRDF tables of ``member`` at every θi, shape (draws..., n_aoi, n_azimuth, n_radial)."""
+def _family_tables(one_angle, grid: ScatterGrid, physical: Physical) -> np.ndarray:
+    """BRDF tables at every θi by ``one_angle`` (:func:`_table_program`), shape (draws...,
+    n_aoi, n_azimuth, n_radial)."""
     psi, r = np.meshgrid(grid.azimuth_deg, grid.radial_deg, indexing="ij")
     batch = {k: jnp.asarray(v, float)[..., None, None] for k, v in physical.items()}
+    return np.stack(
+        [np.asarray(one_angle(float(t), psi, r, batch)) for t in grid.theta_i_deg], axis=-3
+    )
+
+
+def _table_program(member: ModelFamily):
+    """The compiled BRDF table of ``member`` at one θi (angle and parameters arguments: one
+    compilation per shape serves every draw and angle of an export)."""
 
     @jax.jit
-    def one_angle(theta_i_deg):
+    def one_angle(theta_i_deg, psi, r, batch):
         theta, phi, z = specular_frame_to_model(theta_i_deg, psi, r)
         return jnp.where(z > 0.0, jnp.exp(member.log_brdf(theta_i_deg, theta, phi, batch)), 0.0)
 
-    return np.stack([np.asarray(one_angle(float(t))) for t in grid.theta_i_deg], axis=-3)
-
-
-def _export_family_zemax(
-    source: Source, grid: ScatterGrid, out: Path, draws: int, progress: Callable[[str], None]
-) -> list[dict]:
-    """:func:`export_zemax` for a run of another model family (module docstring)."""
-    member, theta_i = source.family, grid.theta_i_deg
-    progress(f"TIS band of {member.name} over at most {FAMILY_TIS_DRAWS} draws")
-    band = tis_band(member, source.physical, theta_i, FAMILY_TIS_DRAWS)
-    quantiles = np.empty(
-        (len(_BAND_QUANTILES), theta_i.size, grid.azimuth_deg.size, grid.radial_deg.size)
-    )
-    for k, t in enumerate(theta_i):
-        progress(f"posterior quantiles of the tables at theta_i = {t:g} deg")
-        one = ScatterGrid(np.array([t]), grid.azimuth_deg, grid.radial_deg)
-        table = _family_tables(member, one, source.physical)[:, 0]
-        quantiles[:, k] = np.quantile(table, list(_BAND_QUANTILES.values()), axis=0)
-    files = _band_files(out, source, grid, quantiles, band, f" (TIS over {band['draws']})")
-    for k, index in enumerate(draw_indices(source.count, draws) if draws else []):
-        one = {name: float(values[index]) for name, values in source.physical.items()}
-        progress(f"draw {k + 1} of {draws}")
-        tis_lines = np.array([float(member.tis(float(t), one)) for t in theta_i])
-        text = ", ".join(f"{name}={value:.10g}" for name, value in one.items())
-        files.append(
-            _write_table_file(
-                out,
-                f"draw_{k:03d}.bsdf",
-                "draw",
-                source,
-                grid,
-                _family_tables(member, grid, one),
-                tis_lines,
-                [f"posterior draw {index} of {source.count}: {text}"],
-            )
-        )
-    return files
+    return one_angle
