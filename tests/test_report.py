@@ -283,3 +283,28 @@ def test_report_shows_a_model_comparison_written_into_its_run(nuts_run, tmp_path
     assert "<td>1.040</td><td>124</td>" in text and "<td>1.002</td><td>1800</td>" in text
     assert text.count("rank not to be trusted") == 1
     assert "R-hat 1.040 &gt; 1.01, bulk ESS 124 &lt; 400" in text
+
+
+def test_report_draws_the_pareto_k_its_run_recorded_and_computes_none(nuts_run, tmp_path):
+    """The run records every row's Pareto k (equal to ArviZ's PSIS-LOO recomputed here); the
+    report reads it, and a run written before it was recorded is reported without the figure."""
+    import shutil
+
+    import numpy as np
+
+    from brdf_infer._arviz import az
+    from brdf_infer.verdict import PARETO_K_LIMIT
+
+    loo = nuts_run.summary["predictive"]
+    k = np.asarray(az.loo(nuts_run.idata, pointwise=True).pareto_k)
+    assert loo["pareto_k"] == pytest.approx(k.tolist(), rel=1e-12)
+    assert loo["pareto_k_high"] == int(np.sum(k > PARETO_K_LIMIT))
+    run = tmp_path / "run"
+    shutil.copytree(nuts_run.out, run, ignore=shutil.ignore_patterns("figures", "report.html"))
+    summary = json.loads((run / "summary.json").read_text())
+    del summary["predictive"]["pareto_k"]
+    (run / "summary.json").write_text(json.dumps(summary))
+    write_report(run, progress=lambda message: None)
+    text = (run / "report.html").read_text()
+    assert f"{loo['elpd_loo']:.2f} ± {loo['se']:.2f}" in text
+    assert not (run / "figures" / "pareto_k.png").exists()

@@ -148,8 +148,8 @@ def run_fingerprint(model: PosteriorModel, measurements: Measurements) -> dict[s
 
 
 def predictive_checks(idata: az.InferenceData, log_lik: np.ndarray, cdf: np.ndarray) -> dict:
-    """PSIS-LOO (elpd with its standard error, p_loo, largest Pareto k and the number of rows
-    above :data:`~brdf_infer.verdict.PARETO_K_LIMIT`) and the LOO-PIT of
+    """PSIS-LOO (elpd with its standard error, p_loo, every row's Pareto k, the largest and the
+    number of rows above :data:`~brdf_infer.verdict.PARETO_K_LIMIT`) and the LOO-PIT of
     every row with a Kolmogorov–Smirnov test of its uniformity, from the leave-one-out terms
     of :func:`loo_terms` (``idata`` holds the same ``log_lik``)."""
     import warnings
@@ -164,6 +164,7 @@ def predictive_checks(idata: az.InferenceData, log_lik: np.ndarray, cdf: np.ndar
         "p_loo": float(loo.p_loo),
         "pareto_k_max": float(np.max(loo.pareto_k)),
         "pareto_k_high": int(np.sum(np.asarray(loo.pareto_k) > PARETO_K_LIMIT)),
+        "pareto_k": np.asarray(loo.pareto_k, float).tolist(),  # per row, for the report
         "loo_pit": pit.tolist(),
         "loo_pit_ks_p": uniformity_p_value(pit),
     }

@@ -6,8 +6,6 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import numpy as np
-
 from brdf_infer._arviz import az
 from brdf_infer.posterior import POSTERIOR_FILE, SUMMARY_FILE
 from brdf_infer.report import _html
@@ -129,16 +127,14 @@ def variants_comparison(run: Path, idata) -> str:
     )
 
 
-def loo_table(loo) -> str:
-    """PSIS-LOO of the run: elpd_loo ± se, p_loo and the points with a high Pareto k."""
+def loo_table(loo: dict) -> str:
+    """PSIS-LOO of the run (``summary.json``'s ``predictive``): elpd_loo ± se, p_loo and the
+    points with a high Pareto k."""
     return _html.table(
         ["PSIS-LOO", "value"],
         [
-            ["elpd_loo", f"{loo.elpd_loo:.2f} ± {loo.se:.2f}"],
-            ["p_loo", f"{loo.p_loo:.2f}"],
-            [
-                f"points with k > {PARETO_K_LIMIT}",
-                int(np.sum(np.asarray(loo.pareto_k) > PARETO_K_LIMIT)),
-            ],
+            ["elpd_loo", f"{loo['elpd_loo']:.2f} ± {loo['se']:.2f}"],
+            ["p_loo", f"{loo['p_loo']:.2f}"],
+            [f"points with k > {PARETO_K_LIMIT}", int(loo["pareto_k_high"])],
         ],
     )

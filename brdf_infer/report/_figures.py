@@ -198,14 +198,15 @@ def posterior_predictive(idata: az.InferenceData, series: np.ndarray):
     return figure
 
 
-def pareto_k(loo) -> plt.Figure:
+def pareto_k(loo: dict) -> plt.Figure:
+    """Every row's Pareto k of a run's PSIS-LOO (``summary.json``'s ``predictive``)."""
     figure, axis = plt.subplots(figsize=(7, 3.6))
-    k = np.asarray(loo.pareto_k)
+    k = np.asarray(loo["pareto_k"])
     axis.scatter(np.arange(k.size), k, s=14, c=np.where(k > 0.7, "crimson", "tab:blue"))
     axis.axhline(0.7, color="crimson", ls=":", label="k = 0.7")
     axis.set_xlabel("measurement row [-]")
     axis.set_ylabel("Pareto k [-]")
-    axis.set_title(f"PSIS-LOO: elpd = {loo.elpd_loo:.1f} ± {loo.se:.1f}")
+    axis.set_title(f"PSIS-LOO: elpd = {loo['elpd_loo']:.1f} ± {loo['se']:.1f}")
     axis.legend()
     figure.tight_layout()
     return figure
