@@ -162,23 +162,19 @@ def start_points(
     scene: Scene, space: FitSpace, starts: int, seed: int, init: Params | None = None
 ) -> np.ndarray:
     """Starting internal free vectors (starts × free), module docstring; ``init`` (Eq. 7's
-    family only): the first start."""
+    family only): the first start.
+
+    Raises:
+        ValueError: ``init`` for another family.
+    """
     rng = np.random.default_rng(seed)
     if not space.member.paper_parameters:
         if init is not None:
             raise ValueError(f"a start for {space.member.name} is drawn from its priors")
         priors = [c.prior for c in space.member.coordinates]
-        return np.array(
-            [
-                [
-                    float(np.clip(rng.normal(p.loc, p.scale), p.lower, p.upper))
-                    if p.kind != "uniform"
-                    else float(rng.uniform(p.lower, p.upper))
-                    for p in priors
-                ]
-                for _ in range(starts)
-            ]
-        ).reshape(starts, len(priors))
+        return np.array([[_prior_start(rng, p) for p in priors] for _ in range(starts)]).reshape(
+            starts, len(priors)
+        )
     transform = space.transform
     columns = []
     for position, name in enumerate(space.free):
@@ -195,3 +191,14 @@ def start_points(
     if init is not None:
         points[0] = np.asarray(to_internal(init))[list(space.free_index)]
     return points
+
+
+def _prior_start(rng: np.random.Generator, prior) -> float:
+    """A start drawn from a coordinate's prior, kept 2 % of its scale (or span) inside its
+    bounds: a start on a bound would sit where its map to the real line is flat."""
+    if prior.kind == "uniform":
+        return float(rng.uniform(prior.lower, prior.upper))
+    margin = 0.02 * prior.scale
+    return float(
+        np.clip(rng.normal(prior.loc, prior.scale), prior.lower + margin, prior.upper - margin)
+    )

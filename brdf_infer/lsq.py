@@ -16,7 +16,7 @@ squares). The ``spread`` error model keeps its fixed σ_i. Every family is weigh
 that their χ² and learned repeatabilities compare.
 
 The solver works on the free internal coordinates of the family (:mod:`brdf_infer._fit_space`:
-Eq. (7)'s whitened coordinates with the scene's fixed parameters and bounds, or another
+Eq. (7)'s scaled internal coordinates with the scene's fixed parameters and bounds, or another
 family's own), bounded ones mapped through smooth maps of the real line. The covariance is
 the Gauss–Newton (JᵀJ)⁻¹ in the internal coordinates, not scaled by the reduced χ² unless
 asked, carried to the physical parameters by the delta method.
@@ -39,11 +39,12 @@ from brdf_infer._fit_space import fit_space as fit_space
 from brdf_infer._fit_space import internal_bounds as internal_bounds
 from brdf_infer._fit_space import start_points as start_points
 from brdf_infer._reweighting import REWEIGHT_TOLERANCE as REWEIGHT_TOLERANCE
-from brdf_infer._reweighting import Reweighting
+from brdf_infer._reweighting import Reweighting, repeatability_tail
 from brdf_infer._reweighting import paule_mandel as paule_mandel
+from brdf_infer.error_model import noise_layout
 from brdf_infer.errors import BadInputError
 from brdf_infer.measurements import Measurements
-from brdf_infer.model import ModelFamily, family
+from brdf_infer.model import FAMILY_NAMES, ModelFamily, family
 from brdf_infer.observations import Observations, build_observation_model, log_reflectance
 from brdf_infer.params import Params
 from brdf_infer.scene import Scene
@@ -99,6 +100,9 @@ class LsqResult:
         compile_seconds: compilation time.
         row_sigma: the σ_i that weighted each row at the end [ln R].
         repeatability: σ_rep used (estimated by Paule–Mandel when learned) [ln R].
+        repeatability_p_value: where it is learned, P(σ̂_rep ≥ ``repeatability``) for data the
+            scene's error model gives (:func:`brdf_infer._reweighting.repeatability_tail`);
+            else None.
         reweightings: solves of the reweighting loop.
         warnings: identifiability and convergence warnings, in words.
     """
@@ -124,6 +128,7 @@ class LsqResult:
     compile_seconds: float
     row_sigma: np.ndarray
     repeatability: float
+    repeatability_p_value: float | None
     reweightings: int
     warnings: list[str] = field(default_factory=list)
 
@@ -206,9 +211,13 @@ def fit_lsq(
     Raises:
         BadInputError: unknown solver, fewer than one start, or fewer points than free
             parameters.
+        ValueError: a family outside the registry, or ``init`` for another family than
+            Eq. (7)'s.
     """
     if member is None:
         member = family(scene.model.family, scene.model.fold, scene.model.constants)
+    elif member.name not in FAMILY_NAMES:  # the solver rebuilds it from the registry
+        raise ValueError(f"{member.name!r} is not a registered model family")
     space = fit_space(scene, member)
     model = _checked_model(scene, measurements, space, solver, starts)
     transform = space.transform
@@ -314,7 +323,7 @@ def _lsq_result(
         values = physical_of(member, transform.free_to_full(z, free_index))
         return jnp.stack([jnp.asarray(values[n], float) for n in member.parameters])
 
-    covariance_free, condition, warnings = _internal_covariance(
+    covariance_free, condition, warnings, projector = _internal_covariance(
         residuals_free, z_best, reduced if scale_covariance else None
     )
     jacobian_physical = np.asarray(jax.jacfwd(free_to_physical)(jnp.asarray(z_best)))
@@ -356,22 +365,36 @@ def _lsq_result(
         compile_seconds=solved.compile_seconds,
         row_sigma=np.asarray(model.data.sigma),
         repeatability=reweight.repeatability,
+        repeatability_p_value=_repeatability_p_value(scene, measurements, reweight, projector),
         reweightings=reweight.solves,
         warnings=warnings,
     )
 
 
+def _repeatability_p_value(scene, measurements, reweight: Reweighting, projector):
+    """The prior predictive p-value of a learned repeatability (None: not learned)."""
+    if not reweight.learned:
+        return None
+    layout = noise_layout(scene.errors, measurements)
+    variances = reweight.value_variance + reweight.angle_variance
+    return repeatability_tail(
+        scene.errors, layout, variances, projector, reweight.repeatability, reweight.dof
+    )
+
+
 def _internal_covariance(residuals_free, z_best, reduced_chi2):
-    """(JᵀJ)⁻¹ in the free internal coordinates (pseudo-inverse), and cond(J)."""
+    """(JᵀJ)⁻¹ in the free internal coordinates (pseudo-inverse), cond(J), the warnings and
+    I − J(JᵀJ)⁺Jᵀ, what of the weighted residuals the fitted parameters cannot absorb."""
     warnings = []
     jacobian = np.asarray(jax.jacfwd(residuals_free)(jnp.asarray(z_best)))
     singular_values = np.linalg.svd(jacobian, compute_uv=False)
     condition = (
         float(singular_values[0] / singular_values[-1]) if singular_values[-1] > 0 else np.inf
     )
-    _, s, vt = np.linalg.svd(jacobian, full_matrices=False)
+    u, s, vt = np.linalg.svd(jacobian, full_matrices=False)
     keep = s > s[0] * 1e-14
     covariance_free = (vt[keep].T / s[keep] ** 2) @ vt[keep]
+    projector = np.eye(len(jacobian)) - u[:, keep] @ u[:, keep].T
     if not keep.all():
         warnings.append("the Jacobian is singular: some parameter combinations are not determined")
     if reduced_chi2 is not None:
@@ -379,7 +402,7 @@ def _internal_covariance(residuals_free, z_best, reduced_chi2):
             covariance_free = covariance_free * reduced_chi2
         else:
             warnings.append("zero residual: covariance left unscaled by the reduced chi2")
-    return covariance_free, condition, warnings
+    return covariance_free, condition, warnings, projector
 
 
 def _correlation(covariance: np.ndarray, sigma: np.ndarray) -> np.ndarray:

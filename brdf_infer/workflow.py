@@ -128,7 +128,7 @@ class RunResult:
 
 def fit_checks(scene: Scene, measurements: Measurements, fit: dict[str, Any]) -> list[Implausible]:
     """The plausibility checks (:mod:`brdf_infer.plausibility`) of a fit summary
-    (:func:`paper_fit_summary`, :func:`lsq_summary` or a family's ``as_json``): π·BRDF0 and
+    (:func:`paper_fit_summary` or :func:`lsq_summary`): π·BRDF0 and
     the TIS at the scene's incidence angles."""
     from brdf_infer import plausibility
     from brdf_infer.model import family, run_family_name
@@ -183,7 +183,7 @@ def lsq_summary(
     ``chi2_dof`` and the ``fit_quality`` statement (:mod:`brdf_infer.fit_quality`); for Eq. (7)'s
     family ``paper_fit_cost``: the χ² of the paper fit's parameters ``paper`` under the same
     weights (None: fitted here)."""
-    from brdf_infer.fit_quality import FitQuality, scaled_sigma
+    from brdf_infer.fit_quality import FitQuality
     from brdf_infer.lsq import fit_lsq
     from brdf_infer.model import family
 
@@ -207,7 +207,7 @@ def lsq_summary(
         result.cost,
         dof,
         result.repeatability if learned and dof > 0 else None,
-        scene.errors.repeatability_sd_prior,
+        result.repeatability_p_value,
     )
     summary = {
         "method": "lsq",
@@ -220,13 +220,21 @@ def lsq_summary(
     }
     if member.paper_parameters:
         summary["paper_fit_cost"] = _paper_fit_cost(scene, measurements, result, paper)
-    return summary | {
+    return summary | _lsq_details(result, quality, member.parameters)
+
+
+def _lsq_details(result, quality, names) -> dict[str, Any]:
+    """The keys of the least-squares JSON after its parameters and quality (1σ, correlations,
+    starts, row weights, warnings)."""
+    from brdf_infer.fit_quality import scaled_sigma
+
+    return {
         "sigma": result.sigma,
         "sigma_scaled": result.sigma
         if result.covariance_scaled
         else scaled_sigma(result.sigma, quality.sigma_factor),
         "correlation": result.correlation.tolist(),
-        "correlation_names": list(member.parameters),
+        "correlation_names": list(names),
         "internal": result.internal,
         "sigma_internal": result.sigma_internal,
         "condition_number": result.condition_number,
@@ -242,6 +250,7 @@ def lsq_summary(
         "compile_seconds": result.compile_seconds,
         "row_sigma": result.row_sigma.tolist(),
         "repeatability": result.repeatability,
+        "repeatability_p_value": result.repeatability_p_value,
         "reweightings": result.reweightings,
         "warnings": result.warnings,
     }

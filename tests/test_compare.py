@@ -291,11 +291,12 @@ def test_fit_lsq_of_another_family_gives_its_parameters_in_json(capsys):
     assert payload["n_points"] == 42
     # every family is weighted alike: the learned repeatability makes χ²/dof 1 (Paule–Mandel),
     # and ABg, with one value at specular for every θi while the data grow 100-fold there,
-    # needs σ_rep far in the tail of its half-normal prior (scale 0.1): the fit says so
+    # needs a σ_rep no data of the scene's error model give (prior predictive p < 0.001)
     assert payload["dof"] == 39 and payload["chi2_dof"] == pytest.approx(1.0, abs=1e-6)
     assert payload["repeatability"] > 1.0 and payload["poor_fit"]
+    assert payload["repeatability_p_value"] < 1e-3
     assert payload["fit_quality"].startswith("poor: χ²/dof = 1 for 39 dof")
-    assert "times the scale of its prior (0.1" in payload["fit_quality"]
+    assert "more than the scene's error model gives its data" in payload["fit_quality"]
     assert np.array(payload["correlation"]).shape == (3, 3)
     assert payload["correlation_names"] == ["A", "B", "g"] and "paper_fit_cost" not in payload
     assert payload["sigma_scaled"] == pytest.approx(payload["sigma"], rel=1e-6)

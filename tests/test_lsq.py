@@ -236,6 +236,7 @@ def test_cli_lsq_json_contract(capsys):
     assert payload["dof"] == 42 - 6 and payload["chi2_dof"] == pytest.approx(1.0, abs=1e-6)
     assert not payload["poor_fit"] and payload["fit_quality"].startswith("ok:")
     assert "by construction" in payload["fit_quality"] and payload["implausible"] == []
+    assert payload["repeatability_p_value"] > 0.05  # Eq. (7)'s scatter: what the scene expects
     assert payload["sigma_scaled"] == pytest.approx(payload["sigma"], rel=1e-6)
 
 

@@ -152,7 +152,7 @@ def export_abg(
         (files, rows).
     """
     theta_i = np.asarray(theta_i_deg, float)
-    if not source.family.paper_parameters:  # ABg rows fitted to Eq. (7), or an abg run's own
+    if not source.family.paper_parameters:  # an abg run's own rows (others are refused)
         rows, details = _abg_of_abg_run(source, theta_i)
     elif not source.from_run:
         progress("fitting ABg")

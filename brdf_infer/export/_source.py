@@ -44,7 +44,13 @@ class Source:
 
     @property
     def params(self) -> Params:
-        """The physical parameters as Eq. (7)'s six (its family only)."""
+        """The physical parameters as Eq. (7)'s six (its family only).
+
+        Raises:
+            ValueError: a source of another family.
+        """
+        if not self.family.paper_parameters:
+            raise ValueError(f"{self.family.name} has no Eq. (7) parameters")
         return Params(*(np.asarray(self.physical[name], float) for name in PARAM_NAMES))
 
     @property

@@ -15,7 +15,7 @@ import numpy as np
 from brdf_infer.bsdf_file import BSDF_SOURCE, BsdfFile, specular_frame_to_model, write_bsdf
 from brdf_infer.export._grid import ScatterGrid, table_integral
 from brdf_infer.export._source import _BAND_QUANTILES, Source, draw_indices
-from brdf_infer.model import ModelFamily, Physical, fold_statement
+from brdf_infer.model import ModelFamily, Physical, family, fold_statement
 from brdf_infer.posterior import FAMILY_TIS_DRAWS, tis_band
 
 _MEANING = {
@@ -176,7 +176,7 @@ def _tis_lines(member: ModelFamily, theta_i: np.ndarray, one: dict[str, float]) 
     """TIS(θi) of one parameter set: Eq. (9) at every θi in one call where the family has it
     batched, else the family's TIS per θi."""
     if member.log_tis_draws is not None:
-        return np.exp(np.asarray(member.log_tis_draws(np.asarray(theta_i, float), one)))
+        return np.asarray(jnp.exp(member.log_tis_draws(np.asarray(theta_i, float), one)))
     return np.array([float(member.tis(float(t), one)) for t in theta_i])
 
 
@@ -211,12 +211,17 @@ def _family_tables(one_angle, grid: ScatterGrid, physical: Physical) -> np.ndarr
 
 
 def _table_program(member: ModelFamily):
-    """The compiled BRDF table of ``member`` at one θi (angle and parameters arguments: one
-    compilation per shape serves every draw and angle of an export)."""
+    """The compiled BRDF table of ``member`` at one θi (angle, parameters and Eq. (10)'s
+    constants arguments: one compilation per shape serves every draw and angle of an
+    export)."""
+    name, fold = member.name, member.fold
 
     @jax.jit
-    def one_angle(theta_i_deg, psi, r, batch):
+    def one_angle(theta_i_deg, psi, r, batch, constants):
+        inner = family(name, fold, constants)
         theta, phi, z = specular_frame_to_model(theta_i_deg, psi, r)
-        return jnp.where(z > 0.0, jnp.exp(member.log_brdf(theta_i_deg, theta, phi, batch)), 0.0)
+        return jnp.where(z > 0.0, jnp.exp(inner.log_brdf(theta_i_deg, theta, phi, batch)), 0.0)
 
-    return one_angle
+    return lambda theta_i_deg, psi, r, batch: one_angle(
+        theta_i_deg, psi, r, batch, member.constants
+    )
