@@ -21,6 +21,7 @@ from brdf_infer.errors import BadInputError
 from brdf_infer.instrument import INSTRUMENT_MODELS
 from brdf_infer.measurements import Measurements
 from brdf_infer.posterior import interval95
+from brdf_infer.run_records import PosteriorSummary
 from brdf_infer.scene import Scene, check_instrument
 
 INSTRUMENT_FILE = "instruments.json"
@@ -41,7 +42,9 @@ def supported_instruments(scene: Scene) -> list[str]:
     return supported
 
 
-def instrument_entry(name: str, run_dir: Path, idata: az.InferenceData, summary: dict) -> dict:
+def instrument_entry(
+    name: str, run_dir: Path, idata: az.InferenceData, summary: PosteriorSummary
+) -> dict:
     """One row of the side-by-side table from a ``strumik2024`` posterior run."""
     posterior = idata.posterior
     loo = az.loo(idata)

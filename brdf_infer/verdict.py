@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from brdf_infer.plausibility import answer_checks
+from brdf_infer.run_records import Bands, PosteriorSummary
 
 PARETO_K_LIMIT = 0.7
 ALL_PASS = "every diagnostic passes"
@@ -61,8 +62,8 @@ class Verdict:
 
 
 def posterior_verdict(
-    summary: dict[str, Any],
-    bands: dict[str, Any],
+    summary: PosteriorSummary,
+    bands: Bands,
     theta_i_deg: Sequence[float],
     forced: Sequence[str] = (),
 ) -> Verdict:

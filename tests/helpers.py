@@ -159,3 +159,45 @@ def run_on_forced_cpu_devices(
         env=env,
     )
     assert done.returncode == 0, done.stderr[-2000:]
+
+
+def record_mismatches(value, record_type, path: str = "") -> list[str]:
+    """Where a JSON value departs from a typed record (``TypedDict``, nested; the records of
+    ``brdf_infer.posterior``): a required key missing, a key not declared, a value of another
+    type (``float`` takes an int, not a bool)."""
+    import types
+    import typing
+
+    origin, args = typing.get_origin(record_type), typing.get_args(record_type)
+    if typing.is_typeddict(record_type):
+        if not isinstance(value, dict):
+            return [f"{path}: not an object"]
+        hints = typing.get_type_hints(record_type)
+        found = [f"{path}.{key}: missing" for key in record_type.__required_keys__ - set(value)]
+        found += [f"{path}.{key}: not declared" for key in value if key not in hints]
+        for key, item in value.items():
+            if key in hints:
+                found += record_mismatches(item, hints[key], f"{path}.{key}")
+        return found
+    if origin in (typing.Union, types.UnionType):
+        results = [record_mismatches(value, arg, path) for arg in args]
+        return [] if any(not r for r in results) else results[0]
+    if record_type is typing.Any:
+        return []
+    if record_type is type(None):
+        return [] if value is None else [f"{path}: not null"]
+    if record_type is float:
+        ok = isinstance(value, int | float) and not isinstance(value, bool)
+        return [] if ok else [f"{path}: not a number"]
+    if record_type in (int, str, bool):
+        ok = isinstance(value, record_type) and (record_type is bool or not isinstance(value, bool))
+        return [] if ok else [f"{path}: not {record_type.__name__}"]
+    if (origin or record_type) is list:
+        if not isinstance(value, list):
+            return [f"{path}: not a list"]
+        return [m for item in value for m in record_mismatches(item, args[0], path)] if args else []
+    if (origin or record_type) is dict:
+        if not isinstance(value, dict):
+            return [f"{path}: not an object"]
+        return [m for k, v in value.items() for m in record_mismatches(v, args[1], f"{path}.{k}")]
+    raise TypeError(f"{path}: no check for {record_type!r}")

@@ -246,3 +246,13 @@ def test_family_sbc_with_a_planted_sigma_fault_fails_the_same_check():
     replicates, sample_sd in four)."""
     result = _family_sbc(sigma_scale=3.0)
     assert "repeatability" in extreme_quantities(result), result.ranks
+
+
+def test_another_familys_run_files_are_the_posterior_records(abg_run):
+    from brdf_infer.posterior import Bands, PosteriorSummary
+    from tests.helpers import record_mismatches
+
+    out, summary = abg_run
+    assert record_mismatches(summary, PosteriorSummary) == [] and summary["pi_brdf0"] is None
+    bands = json.loads((out / "bands.json").read_text())
+    assert record_mismatches(bands, Bands) == [] and "draws" in bands["tis"]

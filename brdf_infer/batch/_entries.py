@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from brdf_infer.run_records import Bands, PosteriorSummary
 from brdf_infer.scene import Scene
 
 BATCH_FILE = "batch.json"
@@ -25,7 +26,7 @@ class SceneEntry:
     source: str
     scene: Scene | None = None
     out: Path | None = None
-    summary: dict[str, Any] | None = None
+    summary: PosteriorSummary | None = None
     tis: dict[str, list] | None = None
     error: str | None = None
     done: bool = False
@@ -101,7 +102,7 @@ class BatchInterrupted(Exception):
         )
 
 
-def _tis_entry(bands: dict) -> dict[str, list] | None:
+def _tis_entry(bands: Bands) -> dict[str, list] | None:
     """The TIS band of a run's bands, as a batch entry lists it."""
     band = bands.get("tis")
     return None if band is None else {k: band[k] for k in ("theta_i_deg", "median", "lo95", "hi95")}

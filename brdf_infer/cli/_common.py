@@ -14,6 +14,7 @@ from typing import Any, NoReturn, TypeVar
 from brdf_infer._device import DEVICES
 from brdf_infer._outdir import claim_output_dir
 from brdf_infer.errors import BadInputError
+from brdf_infer.run_records import PosteriorSummary
 
 EXIT_BAD_INPUT = 2
 T = TypeVar("T")
@@ -149,7 +150,7 @@ def print_verdict(verdict: dict[str, Any]) -> None:
     print(f"verdict: {verdict['text']}")
 
 
-def print_posterior_summary(summary: dict[str, Any], out: Path) -> None:
+def print_posterior_summary(summary: PosteriorSummary, out: Path) -> None:
     """A posterior run's parameters with their diagnostics, TIS(70°) and times."""
     diagnostics = summary["diagnostics"]
     rows = [

@@ -47,6 +47,15 @@ from brdf_infer.posterior._run import (
     run_scene,
 )
 from brdf_infer.posterior._samplers import Draws, nuts_draws, run_emcee, run_nuts
+from brdf_infer.run_records import (
+    Band,
+    Bands,
+    Diagnostics,
+    Interval,
+    PosteriorSummary,
+    Predictive,
+    VerdictRecord,
+)
 
 __all__ = [
     "BANDS_FILE",
@@ -58,13 +67,20 @@ __all__ = [
     "QUANTILES",
     "SUMMARY_FILE",
     "THRESHOLDS",
+    "Band",
+    "Bands",
     "Cancelled",
+    "Diagnostics",
     "Draws",
     "FlatPotential",
+    "Interval",
     "ModelData",
     "NutsProgram",
     "PosteriorModel",
     "PosteriorRun",
+    "PosteriorSummary",
+    "Predictive",
+    "VerdictRecord",
     "build_model",
     "build_model_data",
     "build_posterior_model",

@@ -14,6 +14,7 @@ import numpy as np
 
 from brdf_infer.model import ModelFamily
 from brdf_infer.params import Params
+from brdf_infer.run_records import Bands
 
 QUANTILES = {"lo95": 0.025, "lo68": 0.16, "median": 0.5, "hi68": 0.84, "hi95": 0.975}
 TIS_THETA_I_DEG = np.arange(0.0, 90.0, 1.0)  # 0°, 1°, …, 89°
@@ -112,7 +113,7 @@ def _brdf_inplane_draws(family: ModelFamily, physical: dict[str, np.ndarray], gr
 
 def posterior_bands(
     family: ModelFamily, physical: dict[str, np.ndarray], theta_i_deg, with_tis: bool = True
-) -> dict[str, dict]:
+) -> Bands:
     """Every band of a posterior run of ``family``.
 
     Args:

@@ -24,6 +24,7 @@ from brdf_infer.posterior._likelihood import disjoint_columns
 from brdf_infer.posterior._loo import pointwise_loo_terms
 from brdf_infer.posterior._model import NOISE_SITES, PosteriorModel
 from brdf_infer.posterior._samplers import Draws
+from brdf_infer.run_records import Bands, PosteriorSummary
 
 POSTERIOR_FILE, SUMMARY_FILE, BANDS_FILE = "posterior.nc", "summary.json", "bands.json"
 THRESHOLDS = {"r_hat": 1.01, "ess": 400, "bfmi": 0.3, "tau_multiple": 50}
@@ -242,7 +243,9 @@ def write_inference_data(idata: az.InferenceData, path: Path) -> None:
     atomic_write_bytes(path, netcdf_bytes(idata))
 
 
-def write_results(out: Path, idata: az.InferenceData, summary: dict, bands: dict) -> None:
+def write_results(
+    out: Path, idata: az.InferenceData, summary: PosteriorSummary, bands: Bands
+) -> None:
     """posterior.nc, summary.json and bands.json into ``out``, each atomically."""
     out.mkdir(parents=True, exist_ok=True)
     write_inference_data(idata, out / POSTERIOR_FILE)

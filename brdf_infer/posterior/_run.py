@@ -11,7 +11,6 @@ import tomllib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -37,6 +36,7 @@ from brdf_infer.posterior._samplers import (
     run_emcee,
     run_nuts,
 )
+from brdf_infer.run_records import Bands, PosteriorSummary
 from brdf_infer.scene import Scene, check_instrument, load_scene, parse_scene
 from brdf_infer.settings import PosteriorSettings
 from brdf_infer.verdict import PARETO_K_LIMIT, posterior_verdict
@@ -49,8 +49,8 @@ class PosteriorRun:
     """Everything a posterior run produced (also written to ``out``)."""
 
     idata: az.InferenceData
-    summary: dict[str, Any]
-    bands: dict[str, Any]
+    summary: PosteriorSummary  # summary.json
+    bands: Bands  # bands.json
     out: Path | None
 
 

@@ -9,12 +9,13 @@ from pathlib import Path
 from brdf_infer._arviz import az
 from brdf_infer.posterior import POSTERIOR_FILE, SUMMARY_FILE
 from brdf_infer.report import _html
+from brdf_infer.run_records import PosteriorSummary
 from brdf_infer.verdict import PARETO_K_LIMIT
 
 SPREAD_VARIANT = "spread"
 
 
-def loo_pits(run: Path, summary: dict) -> dict[str, tuple[list, float]]:
+def loo_pits(run: Path, summary: PosteriorSummary) -> dict[str, tuple[list, float]]:
     """Error model name → (LOO-PIT values, KS p) of this run and of its spread variant."""
     pits = {}
     if "predictive" in summary:
@@ -33,7 +34,7 @@ def loo_pits(run: Path, summary: dict) -> dict[str, tuple[list, float]]:
     return pits
 
 
-def error_model_table(summary: dict) -> str:
+def error_model_table(summary: PosteriorSummary) -> str:
     """The noise sources of the run's error model with their sizes."""
     errors = summary.get("error_model")
     if not errors:

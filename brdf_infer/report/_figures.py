@@ -11,6 +11,7 @@ import numpy as np
 from brdf_infer._arviz import az
 from brdf_infer.model import ModelFamily, brdf_inplane, family, run_family_name
 from brdf_infer.params import PARAM_NAMES, PARAMETER_SETS
+from brdf_infer.run_records import Bands
 from brdf_infer.scene import Scene
 
 MAP_THETA_I_DEG = (5.0, 30.0, 50.0, 70.0)
@@ -212,7 +213,7 @@ def pareto_k(loo: dict) -> plt.Figure:
     return figure
 
 
-def brdf_bands(bands: dict, scene: Scene, rows) -> plt.Figure:
+def brdf_bands(bands: Bands, scene: Scene, rows) -> plt.Figure:
     """In-plane BRDF median and bands per θi on a log axis, data and paper curve (Fig. 11)."""
     band = bands["brdf_inplane"]
     theta_s = np.asarray(band["theta_s_deg"])
@@ -265,7 +266,7 @@ def brdf_bands(bands: dict, scene: Scene, rows) -> plt.Figure:
     return figure
 
 
-def tis_band(bands: dict, reference: list[tuple[float, float, str]] = ()) -> plt.Figure:
+def tis_band(bands: Bands, reference: list[tuple[float, float, str]] = ()) -> plt.Figure:
     """TIS median and bands against θi, with the scene's reference points (e.g. Table 3)."""
     band = bands["tis"]
     theta = np.asarray(band["theta_i_deg"])

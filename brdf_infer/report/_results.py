@@ -7,9 +7,10 @@ import numpy as np
 
 from brdf_infer.model import ModelFamily, fold_statement
 from brdf_infer.report import _html
+from brdf_infer.run_records import Bands, PosteriorSummary
 
 
-def result_box(summary: dict, bands: dict, angles, member: ModelFamily) -> str:
+def result_box(summary: PosteriorSummary, bands: Bands, angles, member: ModelFamily) -> str:
     """The answer first: TIS at ``angles`` (the scene's incidence angles and the article's 70°)
     and π·BRDF0 (Eq. 7's family), 95 % intervals; another family is named in the heading."""
     rows = []
@@ -47,13 +48,13 @@ def indices_of(grid: list[float], angles: tuple[float, ...]) -> list[int]:
     return [list(grid).index(angle) for angle in angles if angle in grid]
 
 
-def tis_fold(bands: dict) -> bool:
+def tis_fold(bands: Bands) -> bool:
     """Eq. (10) in the run's TIS band: its ``"fold"`` (the scene's switch); a run written
     before that key had its TIS folded always."""
     return bands.get("fold", True)
 
 
-def fold_note(bands: dict) -> str:
+def fold_note(bands: Bands) -> str:
     """One line under the result: whether its TIS includes Eq. (10), and how to change it."""
     fold = tis_fold(bands)
     change = (
@@ -65,7 +66,7 @@ def fold_note(bands: dict) -> str:
     return f"<p class='fold'>{_html.escape(fold_statement(fold))}; {_html.escape(change)}.</p>"
 
 
-def tis_table(bands: dict) -> str:
+def tis_table(bands: Bands) -> str:
     band = bands["tis"]
     chosen = indices_of(band["theta_i_deg"], (0.0, 5.0, 30.0, 50.0, 70.0, 80.0))
     rows = [

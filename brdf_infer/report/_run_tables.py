@@ -9,6 +9,7 @@ from brdf_infer._arviz import az
 from brdf_infer.model import fold_statement
 from brdf_infer.report import _html
 from brdf_infer.report._instruments import MEANINGS
+from brdf_infer.run_records import PosteriorSummary
 
 PRIOR_COORDINATES = {
     "brdf0": "ln BRDF0 [ln sr⁻¹]",
@@ -52,7 +53,7 @@ def family_priors_table(member) -> str:
     )
 
 
-def run_table(scene, rows, idata, summary: dict, member) -> str:
+def run_table(scene, rows, idata, summary: PosteriorSummary, member) -> str:
     """The run's settings: scene, model, instrument, measurements, sampler, seed, options, the
     Eq. (10) folding, versions and wall time [s]."""
     attrs = idata.posterior.attrs
@@ -106,7 +107,7 @@ def data_table(rows) -> str:
     )
 
 
-def summary_table(idata, summary: dict, member) -> str:
+def summary_table(idata, summary: PosteriorSummary, member) -> str:
     """ArviZ's summary of the family's free parameters in physical units."""
     table = az.summary(
         idata,
@@ -121,7 +122,7 @@ def summary_table(idata, summary: dict, member) -> str:
     )
 
 
-def run_section(scene, rows, idata, summary: dict, member) -> list[str]:
+def run_section(scene, rows, idata, summary: PosteriorSummary, member) -> list[str]:
     """The run: its settings, its priors and its data."""
     return [
         "<h2>The run</h2>",

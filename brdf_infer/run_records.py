@@ -1,0 +1,125 @@
+"""The records a posterior run passes on: ``summary.json`` and ``bands.json``, typed.
+
+They are JSON on disk and dicts in memory (a notebook indexes ``run.summary["tis_70deg"]``
+as it reads the file); these ``TypedDict`` classes say which keys each holds, of what type
+and in which unit, for the posterior that writes them and for the CLI, the report, the verdict,
+batch and the studies that read them. Keys a sampler or family has only sometimes are marked
+``NotRequired``. The test suite holds real runs' files (NUTS, emcee) against them.
+Units: angles in degrees, BRDF in sr⁻¹, TIS and reflectance as fractions, noise scales in
+ln R, times in seconds.
+"""
+
+# no ``from __future__ import annotations``: TypedDict reads NotRequired from real types
+from typing import Any, NotRequired, TypedDict
+
+
+class Interval(TypedDict):
+    """Posterior median and 95 % interval of one quantity."""
+
+    median: float
+    lo95: float
+    hi95: float
+
+
+class Band(Interval):
+    """Median, 68 % and 95 % intervals of one quantity."""
+
+    lo68: float
+    hi68: float
+
+
+class Diagnostics(TypedDict):
+    """Sampler health: ArviZ's R-hat and ESS over the sampled parameters, the failures in
+    words; NUTS adds divergences and BFMI, emcee its autocorrelation time."""
+
+    r_hat_max: float
+    ess_bulk_min: float
+    ess_tail_min: float
+    parameters: dict[str, dict[str, float]]  # ArviZ's summary row per parameter
+    fixed: list[str]  # parameters the scene fixes (not sampled)
+    failures: list[str]
+    divergences: NotRequired[int]  # NUTS
+    bfmi_min: NotRequired[float | None]  # NUTS
+    steps_per_autocorrelation_time: NotRequired[float]  # emcee
+    autocorrelation_time_max: NotRequired[float]  # emcee
+    acceptance_fraction: NotRequired[float]  # emcee
+    thin: NotRequired[int]  # emcee
+
+
+class Predictive(TypedDict):
+    """PSIS-LOO and the LOO-PIT of every row."""
+
+    elpd_loo: float
+    se: float
+    p_loo: float
+    pareto_k_max: float
+    pareto_k_high: int  # rows above 0.7
+    pareto_k: NotRequired[list[float]]  # every row's (runs written before it lack it)
+    loo_pit: list[float]
+    loo_pit_ks_p: float
+
+
+class VerdictRecord(TypedDict):
+    """The run's one verdict (:class:`brdf_infer.verdict.Verdict`)."""
+
+    ok: bool
+    lines: list[str]
+    text: str
+
+
+class PosteriorSummary(TypedDict):
+    """``summary.json``: what ran, the answer and how far to trust it."""
+
+    scene: str
+    model: str  # the model family
+    instrument: str
+    sampler: str  # "nuts" or "emcee"
+    settings: dict[str, Any]  # the sampler's settings (chains, draws, seed, …)
+    error_model: dict[str, Any]  # the scene's [errors], as used
+    options: dict[str, Any]  # {"reparametrised": whitened coordinates used}
+    n_points: int
+    fold: bool  # Eq. (10) in the bands and the TIS
+    median: dict[str, float]  # posterior median of each physical parameter
+    units: dict[str, str]
+    noise: dict[str, Interval]  # learned noise scales [ln R]
+    diagnostics: Diagnostics
+    predictive: Predictive
+    tis_70deg: Band | None  # TIS at θi = 70° (None: the run has no TIS band)
+    pi_brdf0: Interval | None  # π·BRDF0, Eq. (7)'s near-normal TIS (None: other families)
+    seconds: dict[str, Any]  # sampling, compile, after_sampling (per step), total
+    forced: list[str]  # plausibility checks the run went past
+    fingerprint: dict[str, str]  # what ran, for a resume
+    verdict: VerdictRecord
+
+
+class BandLists(TypedDict):
+    """Median, 68 % and 95 % intervals over a band's angles."""
+
+    median: list
+    lo68: list
+    hi68: list
+    lo95: list
+    hi95: list
+
+
+class BrdfBand(BandLists):
+    """The in-plane BRDF band [sr⁻¹]: one list per θi of values over θs."""
+
+    theta_i_deg: list[float]
+    theta_s_deg: list[float]
+
+
+class TisBand(BandLists):
+    """The TIS band over θi; ``draws``: how many draws, where not every draw."""
+
+    theta_i_deg: list[float]
+    draws: NotRequired[int]
+
+
+class Bands(TypedDict):
+    """``bands.json``: the bands of a run."""
+
+    fold: bool
+    brdf_inplane: BrdfBand
+    tis: NotRequired[TisBand]  # where the run makes a TIS
+    pi_brdf0: NotRequired[Band]  # Eq. (7)'s family
