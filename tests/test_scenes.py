@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from brdf_infer.errors import BadInputError
-from brdf_infer.model import tis
+from brdf_infer.model import family, tis
 from brdf_infer.observations import build_observation_model
 from brdf_infer.params import UV_PAPER, VIS_PAPER
 from brdf_infer.posterior import run_posterior
@@ -174,7 +174,9 @@ def test_scene_without_out_of_plane_builds_no_hemisphere_product(lya, tmp_path):
     path = tmp_path / "in_plane.toml"
     path.write_text(text + "\n[model]\nout_of_plane = false\n")
     in_plane = load_scene(path)
-    assert not in_plane.makes_tis and not in_plane.makes_maps
+    strumik, abg = family("strumik2024"), family("abg")
+    assert not strumik.hemispheric(in_plane.model.out_of_plane) and strumik.hemispheric(True)
+    assert abg.hemispheric(in_plane.model.out_of_plane)  # Eq. (8) is Eq. (7)'s switch only
     run = run_posterior(
         in_plane, measurements, sampler="emcee", walkers=16, steps=400, warmup=100, progress=False
     )

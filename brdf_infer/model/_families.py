@@ -103,6 +103,11 @@ class ModelFamily:
         to measure next) apply to it."""
         return self.as_params is not None
 
+    def hemispheric(self, out_of_plane: bool) -> bool:
+        """The family predicts the BRDF over the hemisphere (TIS bands, maps): Eq. (7)'s with
+        Eq. (8) only, the scene's ``[model] out_of_plane``; every other family always."""
+        return out_of_plane or not self.paper_parameters
+
     def with_fold(self, fold: bool) -> ModelFamily:
         """The same family with Eq. (10)'s folding on or off.
 

@@ -369,8 +369,7 @@ def complete_run(
     theta_i_band = scene.band_theta_i_deg(measurements)
     member = model.family
     physical = draws_physical(result.sites, member)
-    # [model] out_of_plane (Eq. 8) is Eq. (7)'s switch; the other families are hemispheric
-    with_tis = scene.makes_tis or not member.paper_parameters
+    with_tis = scene.outputs.tis and member.hemispheric(scene.model.out_of_plane)
     bands = posterior_bands(member, physical, theta_i_band, with_tis)
     parameters = member.parameters
     # the scene's [priors] (which may fix a parameter) are Eq. (7)'s; other families use their own

@@ -181,8 +181,7 @@ def _product_figures(add: AddFigure, idata, bands, scene, member, physical) -> N
             + f"; {fold_statement(tis_fold(bands))}.",
             lambda: _figures.tis_band(bands, scene.load_tis_reference()),
         )
-    # [model] out_of_plane (Eq. 8) is Eq. (7)'s switch; the other families are hemispheric
-    if scene.outputs.maps and (scene.model.out_of_plane or not member.paper_parameters):
+    if scene.outputs.maps and member.hemispheric(scene.model.out_of_plane):
         add(
             "hemisphere",
             "Hemisphere maps (cf. Fig. 9): posterior median BRDF on one logarithmic colour scale "

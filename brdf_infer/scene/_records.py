@@ -244,14 +244,6 @@ class Scene:
             angles = angles[picks]
         return tuple(float(a) for a in angles)
 
-    @property
-    def makes_tis(self) -> bool:
-        return self.model.out_of_plane and self.outputs.tis
-
-    @property
-    def makes_maps(self) -> bool:
-        return self.model.out_of_plane and self.outputs.maps
-
     def load_tis_reference(self) -> list[tuple[float, float, str]]:
         """Reference TIS points (θi [deg], TIS [-], label) of the scene, possibly none."""
         if self.outputs.tis_reference is None:
