@@ -72,29 +72,15 @@ def paule_mandel(residuals: np.ndarray, variances: np.ndarray, dof: int) -> floa
 
     0 when the rows already scatter no more than their variances say (χ²/dof ≤ 1).
     """
+    return float(paule_mandel_many(np.asarray(residuals, float)[None], variances, dof, 200)[0])
+
+
+def paule_mandel_many(
+    residuals: np.ndarray, variances: np.ndarray, dof: int, iterations: int = 60
+) -> np.ndarray:
+    """:func:`paule_mandel` of every row of ``residuals`` (sets × rows) at once, by bisection
+    (60 halvings by default: the bracket shrinks 2⁶⁰-fold, below any σ's meaning)."""
     residuals, variances = np.asarray(residuals, float), np.asarray(variances, float)
-
-    def excess(s: float) -> float:
-        total = variances + s * s
-        safe = np.where(total > 0, total, 1.0)
-        terms = np.where(total > 0, residuals**2 / safe, np.where(residuals == 0, 0.0, np.inf))
-        return float(np.sum(terms)) - dof
-
-    if excess(0.0) <= 0:
-        return 0.0
-    low, high = 0.0, float(np.sqrt(np.sum(residuals**2) / dof))
-    for _ in range(200):
-        middle = 0.5 * (low + high)
-        if excess(middle) > 0:
-            low = middle
-        else:
-            high = middle
-    return high
-
-
-def paule_mandel_many(residuals: np.ndarray, variances: np.ndarray, dof: int) -> np.ndarray:
-    """:func:`paule_mandel` of every row of ``residuals`` (sets × rows) at once, by bisection."""
-    residuals = np.asarray(residuals, float)
     squares = residuals**2
 
     def excess(s: np.ndarray) -> np.ndarray:
@@ -105,7 +91,7 @@ def paule_mandel_many(residuals: np.ndarray, variances: np.ndarray, dof: int) ->
 
     low = np.zeros(len(residuals))
     high = np.sqrt(np.sum(squares, axis=1) / dof)
-    for _ in range(60):  # the bracket shrinks 2⁶⁰-fold: far below any σ's meaning
+    for _ in range(iterations):
         middle = 0.5 * (low + high)
         above = excess(middle) > 0
         low, high = np.where(above, middle, low), np.where(above, high, middle)
