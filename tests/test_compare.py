@@ -72,6 +72,21 @@ def test_compare_ranks_the_family_that_generated_the_data_first(lya, truth):
             assert parameters[name]["lo95"] <= value <= parameters[name]["hi95"], name
 
 
+def assert_png_shows_the_comparison(path, models: int) -> None:
+    """compare.png is ArviZ's compare plot (left, 3/5 of the width) beside the TIS panel: a PNG
+    of 10 in × (0.6 per model + 1.8) in at 90 dpi, each panel with drawn (non-white) pixels
+    and more than two colours. A blank figure, a panel left empty or a figure not sized by the
+    number of models fails (planted by hand: all three fail, an axes-with-a-line figure passes)."""
+    from matplotlib.image import imread
+
+    image = imread(path)
+    assert image.shape[:2] == (round(90 * (0.6 * models + 1.8)), 900), image.shape
+    drawn = np.any(image[..., :3] < 0.9, axis=-1)
+    for panel in (drawn[:, :500], drawn[:, 560:]):
+        assert panel.mean() > 0.01, panel.mean()
+    assert len(np.unique(image[..., :3].reshape(-1, 3), axis=0)) > 2
+
+
 def test_compare_command_json_contract_and_files(tmp_path, capsys):
     """At the settings of ``SMALL`` the two families' NUTS programs are the suite's (the lya
     posterior's and the ABg run's): one chain of 100 draws costs no compilation of its own."""
@@ -103,9 +118,10 @@ def test_compare_command_json_contract_and_files(tmp_path, capsys):
         assert entry["tis70"]["lo95"] <= entry["tis70"]["median"] <= entry["tis70"]["hi95"]
     assert payload["models"][0]["d_elpd"] == 0.0
     assert sum(m["weight"] for m in payload["models"]) == pytest.approx(1.0)
-    assert payload["seconds"] > 0
-    assert json.loads((tmp_path / "cmp" / "compare.json").read_text())["models"]
-    assert (tmp_path / "cmp" / "compare.png").stat().st_size > 0
+    written = json.loads((tmp_path / "cmp" / "compare.json").read_text())
+    for key in ("name", "elpd_loo", "d_elpd", "dse", "weight"):  # the file is what was printed
+        assert [m[key] for m in written["models"]] == [m[key] for m in payload["models"]], key
+    assert_png_shows_the_comparison(tmp_path / "cmp" / "compare.png", len(payload["models"]))
     # one chain of 100 draws cannot reach a bulk ESS of 400 (and has no R-hat: NaN, which
     # fails as in a posterior run): every family's sampler diagnostics fail, stand next to
     # its rank, and mark it not to be trusted
