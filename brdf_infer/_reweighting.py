@@ -7,7 +7,6 @@ from __future__ import annotations
 import numpy as np
 
 from brdf_infer.error_model import angle_slopes, theta_s_per_rotation
-from brdf_infer.fit_quality import TAIL_DRAWS
 from brdf_infer.model import ModelFamily, Physical
 from brdf_infer.observations import family_log_reflectance_at, log_reflectance
 from brdf_infer.scene import Scene
@@ -33,6 +32,7 @@ class Reweighting:
         else:
             self.repeatability = float(errors.repeatability)
         self.angle_variance = np.zeros_like(self.value_variance)
+        self.rotation_slope = np.zeros_like(self.value_variance)  # g_rot [ln R / deg]
         self.sigma = self._sigma()
         self.solves = 0
 
@@ -53,6 +53,7 @@ class Reweighting:
                 data.theta_s_deg,
                 theta_s_per_rotation(errors, len(self.value_variance)),
             )
+            self.rotation_slope = np.asarray(g_rot)
             self.angle_variance = np.asarray(
                 (g_rot * errors.rotation_deg) ** 2 + (g_cam * errors.camera_deg) ** 2
             )
@@ -67,16 +68,18 @@ class Reweighting:
         return bool(np.max(np.abs(self.sigma / previous - 1.0)) > REWEIGHT_TOLERANCE)
 
 
-def paule_mandel(residuals: np.ndarray, variances: np.ndarray, dof: int) -> float:
+def paule_mandel(residuals: np.ndarray, variances: np.ndarray, dof: float) -> float:
     """The s ≥ 0 with Σ rᵢ²/(vᵢ + s²) = dof (Paule & Mandel 1982), by bisection.
 
-    0 when the rows already scatter no more than their variances say (χ²/dof ≤ 1).
+    0 when the rows already scatter no more than their variances say (χ²/dof ≤ 1). Any other
+    target value of the sum gives the ends of σ_rep's Q-profile interval
+    (:func:`brdf_infer.fit_quality.repeatability_check`).
     """
     return float(paule_mandel_many(np.asarray(residuals, float)[None], variances, dof, 200)[0])
 
 
 def paule_mandel_many(
-    residuals: np.ndarray, variances: np.ndarray, dof: int, iterations: int = 60
+    residuals: np.ndarray, variances: np.ndarray, dof: float, iterations: int = 60
 ) -> np.ndarray:
     """:func:`paule_mandel` of every row of ``residuals`` (sets × rows) at once, by bisection
     (60 halvings by default: the bracket shrinks 2⁶⁰-fold, below any σ's meaning)."""
@@ -96,44 +99,3 @@ def paule_mandel_many(
         above = excess(middle) > 0
         low, high = np.where(above, middle, low), np.where(above, high, middle)
     return np.where(excess(np.zeros(len(residuals))) <= 0, 0.0, high)
-
-
-def repeatability_tail(
-    errors, layout, variances: np.ndarray, projector: np.ndarray, learned: float, dof: int
-) -> float:
-    """P(σ̂_rep ≥ ``learned``) for data the scene's error model gives: the prior predictive
-    p-value of the Paule–Mandel repeatability (:mod:`brdf_infer.fit_quality`).
-
-    Each of :data:`TAIL_DRAWS` simulated data sets draws its noise scales from their priors
-    (σ_rep and the sample scale τ half-normal, σ_cal the scene's) and its noise from the
-    generative model (``layout``: each row's own variance ``variances``, the repeatability,
-    one effect per sample and per calibration group); the fit is linearised: ``projector``
-    (rows × rows, in σ-weighted residuals) removes what the fitted parameters absorb, and
-    σ̂_rep is Paule–Mandel's on what is left, with ``dof`` degrees of freedom. Seeded: the
-    same fit gives the same p-value.
-    """
-    rng = np.random.default_rng(0)
-    rows = len(variances)
-    draws = TAIL_DRAWS
-    repeatability = np.abs(rng.normal(0.0, errors.repeatability_sd_prior, draws))
-    noise = rng.standard_normal((draws, rows)) * np.sqrt(variances)
-    noise += repeatability[:, None] * rng.standard_normal((draws, rows))
-    if errors.hierarchical:
-        tau = np.abs(rng.normal(0.0, errors.sample_sd_prior, draws))
-        noise += tau[:, None] * _grouped(rng, layout.sample_members, layout.sample_alone, draws)
-    calibration = float(layout.calibration_sd)
-    if calibration > 0:
-        members, alone = layout.calibration_members, layout.calibration_alone
-        noise += calibration * _grouped(rng, members, alone, draws)
-    sigma = np.sqrt(variances + learned**2)  # the weights of the fit's last solve
-    left = (noise / sigma) @ projector.T * sigma
-    simulated = paule_mandel_many(left, variances, dof)
-    return float(np.mean(simulated >= learned))
-
-
-def _grouped(rng, members, alone, draws: int) -> np.ndarray:
-    """One standard normal effect per group, shared by its rows (``members``: rows × groups),
-    and one per row that is alone in its group: (draws × rows)."""
-    members, alone = np.asarray(members, float), np.asarray(alone, float)
-    shared = rng.standard_normal((draws, members.shape[1])) @ members.T
-    return shared + alone * rng.standard_normal((draws, members.shape[0]))

@@ -118,6 +118,11 @@ class ErrorSettings:
         sample_sd_prior: scale of the half-normal prior of τ [-].
         repeatability: ``"learned"`` or a fixed 1σ of the per-row repeatability [-].
         repeatability_sd_prior: scale of the half-normal prior of σ_rep [-].
+        expected_repeatability: the per-row scatter beyond each row's own σ and the angle
+            terms that the instrument is known to reach, sample and calibration scatter
+            included: what judges a least-squares fit's learned σ_rep
+            (:mod:`brdf_infer.fit_quality`) [ln R]; a scene without the key gets its
+            ``reflectance_rel`` (0.065 by default).
     """
 
     model: str = "generative"
@@ -135,6 +140,7 @@ class ErrorSettings:
     sample_sd_prior: float = 0.2
     repeatability: float | str = LEARNED
     repeatability_sd_prior: float = 0.1
+    expected_repeatability: float = 0.065
 
     @property
     def learns_repeatability(self) -> bool:

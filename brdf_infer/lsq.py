@@ -39,10 +39,16 @@ from brdf_infer._fit_space import fit_space as fit_space
 from brdf_infer._fit_space import internal_bounds as internal_bounds
 from brdf_infer._fit_space import start_points as start_points
 from brdf_infer._reweighting import REWEIGHT_TOLERANCE as REWEIGHT_TOLERANCE
-from brdf_infer._reweighting import Reweighting, repeatability_tail
+from brdf_infer._reweighting import Reweighting
 from brdf_infer._reweighting import paule_mandel as paule_mandel
 from brdf_infer.error_model import noise_layout
 from brdf_infer.errors import BadInputError
+from brdf_infer.fit_quality import (
+    RepeatabilityCheck,
+    repeatability_check,
+    residual_trends,
+    trend_regressors,
+)
 from brdf_infer.measurements import Measurements
 from brdf_infer.model import FAMILY_NAMES, ModelFamily, family
 from brdf_infer.observations import Observations, build_observation_model, log_reflectance
@@ -100,9 +106,11 @@ class LsqResult:
         compile_seconds: compilation time.
         row_sigma: the σ_i that weighted each row at the end [ln R].
         repeatability: σ_rep used (estimated by Paule–Mandel when learned) [ln R].
-        repeatability_p_value: where it is learned, P(σ̂_rep ≥ ``repeatability``) for data the
-            scene's error model gives (:func:`brdf_infer._reweighting.repeatability_tail`);
-            else None.
+        repeatability_check: where it is learned, its Q-profile interval and its p-value
+            against twice the scene's expected repeatability
+            (:func:`brdf_infer.fit_quality.repeatability_check`); else None.
+        residual_trend_p_values: F-test p-values of the residuals' trends in θs, θi and series
+            (:func:`brdf_infer.fit_quality.residual_trends`; empty without degrees of freedom).
         reweightings: solves of the reweighting loop.
         warnings: identifiability and convergence warnings, in words.
     """
@@ -128,7 +136,8 @@ class LsqResult:
     compile_seconds: float
     row_sigma: np.ndarray
     repeatability: float
-    repeatability_p_value: float | None
+    repeatability_check: RepeatabilityCheck | None
+    residual_trend_p_values: dict[str, float]
     reweightings: int
     warnings: list[str] = field(default_factory=list)
 
@@ -323,7 +332,7 @@ def _lsq_result(
         values = physical_of(member, transform.free_to_full(z, free_index))
         return jnp.stack([jnp.asarray(values[n], float) for n in member.parameters])
 
-    covariance_free, condition, warnings, projector = _internal_covariance(
+    covariance_free, condition, warnings, absorbed = _internal_covariance(
         residuals_free, z_best, reduced if scale_covariance else None
     )
     jacobian_physical = np.asarray(jax.jacfwd(free_to_physical)(jnp.asarray(z_best)))
@@ -343,6 +352,8 @@ def _lsq_result(
         warnings.append(
             f"only {converged} of {starts} starts reached the best cost {best_cost:.6g}"
         )
+    row_sigma = np.asarray(model.data.sigma)
+    residuals = np.asarray(residuals_free(jnp.asarray(z_best))) * row_sigma  # [ln R]
     return LsqResult(
         family=member.name,
         physical=physical,
@@ -363,28 +374,59 @@ def _lsq_result(
         solver=solver,
         seconds=solved.seconds,
         compile_seconds=solved.compile_seconds,
-        row_sigma=np.asarray(model.data.sigma),
+        row_sigma=row_sigma,
         repeatability=reweight.repeatability,
-        repeatability_p_value=_repeatability_p_value(scene, measurements, reweight, projector),
+        repeatability_check=_repeatability_check(scene, reweight, residuals),
+        residual_trend_p_values=_residual_trends(
+            scene, measurements, residuals, row_sigma, absorbed, reweight
+        ),
         reweightings=reweight.solves,
         warnings=warnings,
     )
 
 
-def _repeatability_p_value(scene, measurements, reweight: Reweighting, projector):
-    """The prior predictive p-value of a learned repeatability (None: not learned)."""
+def _repeatability_check(scene, reweight: Reweighting, residuals) -> RepeatabilityCheck | None:
+    """A learned repeatability's interval and p-value against the scene's expected one (None:
+    not learned); ``residuals``: the fit's, in ln R."""
     if not reweight.learned:
         return None
-    layout = noise_layout(scene.errors, measurements)
     variances = reweight.value_variance + reweight.angle_variance
-    return repeatability_tail(
-        scene.errors, layout, variances, projector, reweight.repeatability, reweight.dof
+    expected = scene.errors.expected_repeatability
+    return repeatability_check(residuals, variances, reweight.dof, expected)
+
+
+def _residual_trends(scene, measurements, residuals, sigma, absorbed, reweight: Reweighting):
+    """The residual-trend p-values of the fit (:func:`brdf_infer.fit_quality.residual_trends`):
+    the rows whitened by the error model's covariance as least squares knows it: each row's
+    σ² of the last solve, with its rotation term shared by the rows of one rotation setting,
+    and the scene's calibration factors (the sample effect, whose scale the scene does not
+    state, left out); ``absorbed``: a basis of what the fitted parameters absorb, in
+    σ-weighted residuals."""
+    if reweight.dof <= 0:
+        return {}
+    layout = noise_layout(scene.errors, measurements)
+
+    def shared(members, alone) -> np.ndarray:
+        members = np.asarray(members, float)
+        return members @ members.T + np.diag(np.asarray(alone, float))
+
+    rotation = reweight.rotation_slope * scene.errors.rotation_deg
+    covariance = (
+        np.diag(sigma**2 - rotation**2)
+        + np.outer(rotation, rotation) * shared(layout.rotation_members, layout.rotation_alone)
+        + float(layout.calibration_sd) ** 2
+        * shared(layout.calibration_members, layout.calibration_alone)
     )
+    regressors = trend_regressors(
+        measurements.theta_i_deg, measurements.theta_s_deg, np.asarray(measurements.series)
+    )
+    return residual_trends(residuals, covariance, sigma[:, None] * absorbed, regressors)
 
 
 def _internal_covariance(residuals_free, z_best, reduced_chi2):
     """(JᵀJ)⁻¹ in the free internal coordinates (pseudo-inverse), cond(J), the warnings and
-    I − J(JᵀJ)⁺Jᵀ, what of the weighted residuals the fitted parameters cannot absorb."""
+    an orthonormal basis of J's columns, what of the weighted residuals the fitted parameters
+    absorb."""
     warnings = []
     jacobian = np.asarray(jax.jacfwd(residuals_free)(jnp.asarray(z_best)))
     singular_values = np.linalg.svd(jacobian, compute_uv=False)
@@ -394,7 +436,6 @@ def _internal_covariance(residuals_free, z_best, reduced_chi2):
     u, s, vt = np.linalg.svd(jacobian, full_matrices=False)
     keep = s > s[0] * 1e-14
     covariance_free = (vt[keep].T / s[keep] ** 2) @ vt[keep]
-    projector = np.eye(len(jacobian)) - u[:, keep] @ u[:, keep].T
     if not keep.all():
         warnings.append("the Jacobian is singular: some parameter combinations are not determined")
     if reduced_chi2 is not None:
@@ -402,7 +443,7 @@ def _internal_covariance(residuals_free, z_best, reduced_chi2):
             covariance_free = covariance_free * reduced_chi2
         else:
             warnings.append("zero residual: covariance left unscaled by the reduced chi2")
-    return covariance_free, condition, warnings, projector
+    return covariance_free, condition, warnings, u[:, keep]
 
 
 def _correlation(covariance: np.ndarray, sigma: np.ndarray) -> np.ndarray:

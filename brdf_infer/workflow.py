@@ -207,7 +207,9 @@ def lsq_summary(
         result.cost,
         dof,
         result.repeatability if learned and dof > 0 else None,
-        result.repeatability_p_value,
+        result.repeatability_check,
+        scene.errors.expected_repeatability,
+        result.residual_trend_p_values,
     )
     summary = {
         "method": "lsq",
@@ -250,7 +252,9 @@ def _lsq_details(result, quality, names) -> dict[str, Any]:
         "compile_seconds": result.compile_seconds,
         "row_sigma": result.row_sigma.tolist(),
         "repeatability": result.repeatability,
-        "repeatability_p_value": result.repeatability_p_value,
+        "repeatability_p_value": None
+        if result.repeatability_check is None
+        else result.repeatability_check.p_value,
         "reweightings": result.reweightings,
         "warnings": result.warnings,
     }

@@ -76,9 +76,10 @@ def parse_errors(table: dict, path: Path, series: tuple[str, ...]) -> ErrorSetti
     if repeatability != LEARNED:
         repeatability = number("repeatability", 0.0)
     angle = number("angle_deg", defaults.angle_deg)
+    reflectance_rel = number("reflectance_rel", defaults.reflectance_rel)
     return ErrorSettings(
         model=_choice(table, "model", path, ERROR_MODELS, defaults.model),
-        reflectance_rel=number("reflectance_rel", defaults.reflectance_rel),
+        reflectance_rel=reflectance_rel,
         calibration=_choice(table, "calibration", path, CALIBRATIONS, defaults.calibration),
         calibration_rel=number("calibration_rel", defaults.calibration_rel),
         rotation_coupling=_choice(
@@ -95,5 +96,10 @@ def parse_errors(table: dict, path: Path, series: tuple[str, ...]) -> ErrorSetti
         repeatability=repeatability,
         repeatability_sd_prior=number(
             "repeatability_sd_prior", defaults.repeatability_sd_prior, positive=True
+        ),
+        expected_repeatability=number(
+            "expected_repeatability",
+            reflectance_rel or defaults.expected_repeatability,
+            positive=True,
         ),
     )
