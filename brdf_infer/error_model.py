@@ -171,9 +171,14 @@ class ErrorSettings:
         }
 
     def structure(self) -> dict:
-        """:meth:`describe` without :data:`DATA_OPTIONS`: what the compiled model depends on.
-        Settings with the same structure share one compiled program; their data differ."""
-        return {k: v for k, v in self.describe().items() if k not in DATA_OPTIONS}
+        """:meth:`describe` without :data:`DATA_OPTIONS` and ``expected_repeatability`` (which
+        only judges least-squares fits): what the compiled model depends on. Settings with the
+        same structure share one compiled program; their data differ."""
+        return {
+            k: v
+            for k, v in self.describe().items()
+            if k not in DATA_OPTIONS and k != "expected_repeatability"
+        }
 
 
 class NoiseLayout(NamedTuple):
