@@ -11,6 +11,7 @@ from brdf_infer.bench._cache import HEADERS as CACHE_HEADERS
 from brdf_infer.bench._export import ABG_HEADERS, GRID_HEADERS
 from brdf_infer.bench._instrument import BIAS_HEADERS, ESS_HEADERS, NODE_HEADERS
 from brdf_infer.bench._misspec import HEADERS as MISSPEC_HEADERS
+from brdf_infer.bench._misspec import MisspecStudy
 from brdf_infer.bench._misspec import section_text as misspec_text
 from brdf_infer.bench._robustness import HEADERS as ROBUSTNESS_HEADERS
 from brdf_infer.bench._robustness import LOADER_HEADERS
@@ -269,17 +270,24 @@ def sbc_section(calibrations: list, sbc_plots: list[Path]) -> list[str]:
     ]
 
 
-def misspec_section(misspecified: list) -> list[str]:
-    """Misspecified error models: what SBC cannot see."""
-    misspec_before, misspec_after = misspec_text(misspecified)
+def misspec_section(study: MisspecStudy) -> list[str]:
+    """Misspecified error models: what SBC cannot see, with truths from the prior and from the
+    posterior."""
+    before, prior_text, posterior_text, after = misspec_text(study)
     return [
         "## Misspecification: what SBC cannot see",
         "",
-        misspec_before,
+        before,
         "",
-        markdown_table(MISSPEC_HEADERS, [row.cells for row in misspecified]),
+        prior_text,
         "",
-        misspec_after,
+        markdown_table(MISSPEC_HEADERS, [row.cells for row in study.prior]),
+        "",
+        posterior_text,
+        "",
+        markdown_table(MISSPEC_HEADERS, [row.cells for row in study.posterior]),
+        "",
+        after,
         "",
     ]
 
