@@ -222,7 +222,9 @@ def test_posterior_exports_are_ordered_and_their_tis_lines_are_the_tis_band(
         "--out", str(tmp_path),
     )  # fmt: skip
     kinds = [f["kind"] for f in payload["files"]]
-    assert kinds == ["lower95", "median", "upper95", "draw", "draw"]
+    assert (
+        kinds == ["lower95", "median", "upper95", "tis_q025", "tis_q500", "tis_q975"] + ["draw"] * 2
+    )
     tables = {f["kind"]: oracle.read_bsdf(f["path"]) for f in payload["files"][:3]}
     lower, median, upper = (tables[k]["bsdf"] for k in ("lower95", "median", "upper95"))
     assert np.all(lower <= median) and np.all(median <= upper)
@@ -240,7 +242,7 @@ def test_posterior_exports_are_ordered_and_their_tis_lines_are_the_tis_band(
 
     first = type(draws)(*(float(v[0]) for v in draws))
     np.testing.assert_allclose(
-        oracle.read_bsdf(payload["files"][3]["path"])["tis"][0],
+        oracle.read_bsdf(payload["files"][6]["path"])["tis"][0],
         np.asarray(tis(np.array([0.0, 30.0, 60.0, 85.0]), first)),
         rtol=1e-10,
     )

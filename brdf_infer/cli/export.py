@@ -18,6 +18,8 @@ from brdf_infer.cli._options import add_fold_arguments, angles, chosen_fold, fol
 from brdf_infer.errors import BadInputError
 
 MAX_INTEGRAL_ERROR = 0.01  # a table whose own hemisphere integral misses its TIS by more
+_TWINS = {"lower95": "tis_q025", "median": "tis_q500", "upper95": "tis_q975"}
+_WHAT = {"lower95": "2.5 % quantile", "median": "median", "upper95": "97.5 % quantile"}
 
 
 def add_parser(commands) -> argparse.ArgumentParser:
@@ -44,6 +46,14 @@ def add_parser(commands) -> argparse.ArgumentParser:
         default=0,
         help="--run: also write this many single-draw .BSDF files (abg: draws fitted, 100)",
     )
+    parser.add_argument(
+        "--tis-quantile-at",
+        type=float,
+        metavar="DEG",
+        help="--run: the tis_q025/q500/q975.bsdf tables are the draws at the TIS quantiles at "
+        "this angle of incidence, one draw per file (default: at each angle of incidence, "
+        "each block the draw at its own angle's quantile)",
+    )
     add_fold_arguments(parser, "the scene's or the run's [model] fold, false unless set")
     parser.add_argument("--force", action="store_true", help="overwrite existing output files")
     parser.set_defaults(handler=main)
@@ -59,6 +69,13 @@ def _checked_options(args: argparse.Namespace) -> None:
         raise BadInputError(f"{args.draws} is negative", field="--draws")
     if args.draws and args.run is None:
         raise BadInputError("single draws need a posterior (--run)", field="--draws")
+    if args.tis_quantile_at is not None:
+        if args.run is None or args.format != "zemax-bsdf":
+            raise BadInputError(
+                "TIS-quantile tables are of a posterior's .BSDF export (--run, zemax-bsdf)",
+                field="--tis-quantile-at",
+            )
+        angles([args.tis_quantile_at], "--tis-quantile-at", 0.0, 90.0, upper_open=True)
     if args.out is None:
         raise BadInputError("an output directory is required", field="--out")
 
@@ -124,24 +141,51 @@ def main(args: argparse.Namespace) -> int:
             f"{existing[0]} exists (use --force to overwrite)", file=out / existing[0]
         )
     grid = scatter_grid(np.unique(theta_i), args.azimuth_step, args.radial_step)
-    result = run_export(source, args.format, grid, out, args.draws, progress)
+    result = run_export(source, args.format, grid, out, args.draws, progress, args.tis_quantile_at)
     if source.from_run:
         record_export(Path(args.run), result)
     for entry in result["files"]:
-        # the pointwise 2.5 %/97.5 % envelopes are no single BRDF: their tables integrate to
-        # more (upper) or less (lower) than the TIS quantile by design
-        if "table_integral" in entry and entry["kind"] not in ("lower95", "upper95"):
-            error = np.max(np.abs(np.divide(entry["table_integral"], entry["tis"]) - 1.0))
-            if error > MAX_INTEGRAL_ERROR:
-                progress(
-                    f"warning: {entry['path']}: the table's hemisphere integral misses its TIS "
-                    f"by {100 * error:.1f} %; use a finer --radial-step / --azimuth-step"
-                )
+        for warning in _integral_warnings(entry):
+            progress(f"warning: {entry['path']}: {warning}")
     if args.json:
         emit_json(result)
         return 0
     _print_result(result)
     return 0
+
+
+def _integral_warnings(entry: dict) -> list[str]:
+    """Where a table's hemisphere integral misses its TIS line by more than
+    :data:`MAX_INTEGRAL_ERROR`, and why: the grid's quadrature error (a finer grid removes it),
+    or a pointwise envelope's own excess over the draws' integrals (a finer grid does not; the
+    draw at the TIS quantile is the real BRDF)."""
+    if "table_integral" not in entry:
+        return []
+    theta_i = entry["theta_i_deg"]
+    miss = np.divide(entry["table_integral"], entry["tis"]) - 1.0
+    quadrature = np.asarray(entry["quadrature_error"])
+    warnings = []
+    k = int(np.argmax(quadrature))
+    if quadrature[k] > MAX_INTEGRAL_ERROR:
+        warnings.append(
+            f"the table's hemisphere integral misses its TIS by {100 * quadrature[k]:.1f} % at "
+            f"theta_i = {theta_i[k]:g} deg, the grid's quadrature error; use a finer "
+            "--radial-step / --azimuth-step"
+        )
+    if entry.get("pointwise_envelope"):
+        excess = np.asarray(entry["pointwise_excess"])
+        k = int(np.argmax(np.abs(excess)))
+        if abs(excess[k]) > MAX_INTEGRAL_ERROR:
+            warnings.append(
+                f"the table's hemisphere integral is {100 * miss[k]:+.1f} % off its TIS line at "
+                f"theta_i = {theta_i[k]:g} deg because the table is a pointwise envelope (the "
+                f"{_WHAT[entry['kind']]} of each cell over the draws), no BRDF of any posterior "
+                f"draw: {100 * excess[k]:+.1f} % against the {_WHAT[entry['kind']]} of the draws' "
+                f"own integrals on this grid, whose quadrature error there is "
+                f"{100 * quadrature[k]:.2f} %, so a finer grid does not remove it; "
+                f"{_TWINS[entry['kind']]}.bsdf is the draw at that TIS quantile, a real BRDF"
+            )
+    return warnings
 
 
 def _print_result(result: dict) -> None:

@@ -3,12 +3,20 @@
 What each file means:
 
 - ``params.bsdf``: the BRDF of one parameter set; TIS lines are its exact Eq. (9) TIS.
+- ``tis_q025.bsdf`` / ``tis_q500.bsdf`` / ``tis_q975.bsdf``: the posterior draw whose TIS
+  is at the 2.5 % / 50 % / 97.5 % TIS quantile, at each angle of incidence (each block the draw
+  at its own angle's quantile) or at one angle (``tis_quantile_at``: one draw for every block);
+  real BRDFs of the posterior, TIS lines their own exact TIS, so each table integrates to its
+  TIS line within the grid's quadrature error. ``tis_q975.bsdf`` is the bound for a
+  conservative stray-light budget.
 - ``median.bsdf``: the pointwise posterior median of the BRDF; TIS lines are the posterior
   median of the TIS at that angle of incidence.
 - ``lower95.bsdf`` / ``upper95.bsdf``: the pointwise 2.5 % / 97.5 % posterior quantiles;
-  TIS lines are the 2.5 % / 97.5 % quantiles of the TIS. ``upper95.bsdf`` is the
-  conservative choice for a stray-light budget (the ray tracer takes the scattered power
-  from the TIS line and the angular shape from the table).
+  TIS lines are the 2.5 % / 97.5 % quantiles of the TIS (the ray tracer takes the scattered
+  power from the TIS line and the angular shape from the table). These three are pointwise
+  envelopes, no BRDF of any draw: their hemisphere integrals are not the TIS quantiles (their
+  comments, ``"pointwise_envelope"`` and ``"pointwise_excess"`` in the JSON say so and by how
+  much).
 - ``draw_000.bsdf`` …: single posterior draws, each a consistent BRDF with its own exact TIS,
   for Monte Carlo stray-light runs (the spread of their results is the budget's band).
 - ``abg.json`` / ``abg.csv``: TIS-preserving ABg fits per angle of incidence.
@@ -201,9 +209,10 @@ def run_export(
     out: Path,
     draws: int = 0,
     progress: Callable[[str], None] = lambda message: None,
+    tis_quantile_at: float | None = None,
 ) -> dict:
     """Write the export and return the ``brdf-infer export --json`` object (``"fold"``: Eq. 10
-    in the exported BRDF)."""
+    in the exported BRDF; ``tis_quantile_at``: :func:`._zemax.export_zemax`)."""
     start = time.perf_counter()
     if export_format == "abg":
         files, rows = export_abg(source, grid.theta_i_deg, out, draws or 100, progress)
@@ -214,10 +223,11 @@ def run_export(
             "rows": rows,
             "seconds": time.perf_counter() - start,
         }
-    files = export_zemax(source, grid, out, draws, progress)
+    files = export_zemax(source, grid, out, draws, progress, tis_quantile_at)
     return {
         "format": export_format,
         "fold": source.fold,
+        **({"tis_quantile_at_deg": tis_quantile_at} if source.from_run else {}),
         "files": files,
         "seconds": time.perf_counter() - start,
     }

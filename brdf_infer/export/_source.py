@@ -11,6 +11,8 @@ from brdf_infer.model import ModelFamily
 from brdf_infer.params import PARAM_NAMES, HemisphereConstants, Params
 
 _BAND_QUANTILES = {"lower95": 0.025, "median": 0.5, "upper95": 0.975}
+# the posterior draw at each TIS quantile: a real BRDF, the envelope file of the same quantile
+_TIS_QUANTILE_FILES = {"tis_q025": "lower95", "tis_q500": "median", "tis_q975": "upper95"}
 
 
 @dataclass(frozen=True)
@@ -65,7 +67,7 @@ def planned_files(source: Source, export_format: str, draws: int) -> list[str]:
         return ["abg.json", "abg.csv"]
     if not source.from_run:
         return ["params.bsdf"]
-    bands = [f"{kind}.bsdf" for kind in _BAND_QUANTILES]
+    bands = [f"{kind}.bsdf" for kind in (*_BAND_QUANTILES, *_TIS_QUANTILE_FILES)]
     return bands + [f"draw_{k:03d}.bsdf" for k in range(draws)]
 
 

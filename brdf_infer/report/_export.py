@@ -16,6 +16,13 @@ from brdf_infer.report import _html
 
 SHOWN_THETA_I_DEG = (0.0, 30.0, 60.0, 80.0)
 _KIND_STYLE = {"lower95": ":", "median": "-", "upper95": ":", "params": "-"}
+_TIS_QUANTILE_STYLE = {"tis_q025": ":", "tis_q500": "-", "tis_q975": ":"}  # red: real BRDFs
+_MEANINGS = (
+    "lower95/median/upper95.bsdf are pointwise envelopes (each cell's quantile over the "
+    "draws), no BRDF of any draw: their hemisphere integrals are not the TIS quantiles; "
+    "tis_q025/q500/q975.bsdf are the posterior draws at the 2.5/50/97.5 % TIS quantiles, "
+    "real BRDFs that integrate to their TIS lines (tis_q975.bsdf: the conservative bound)"
+)
 
 
 def load_exports(run: Path) -> list[dict]:
@@ -78,9 +85,12 @@ def plot_export(
         for kind, table in contents.items():
             cut_s, cut_v = _in_plane_cut(table, k)
             positive = cut_v > 0
+            real = kind in _TIS_QUANTILE_STYLE
             ax.plot(
-                np.radians(cut_s[positive]), np.log10(cut_v[positive]) - floor, color="black",
-                ls=_KIND_STYLE.get(kind, "-"), lw=1, label=f"{kind}.bsdf",
+                np.radians(cut_s[positive]), np.log10(cut_v[positive]) - floor,
+                color="tab:red" if real else "black",
+                ls=(_TIS_QUANTILE_STYLE if real else _KIND_STYLE).get(kind, "-"), lw=1,
+                label=f"{kind}.bsdf",
             )  # fmt: skip
         ax.set_theta_zero_location("N")
         ax.set_theta_direction(-1)
@@ -93,7 +103,7 @@ def plot_export(
         ax.set_ylim(0.0, np.max(high) - floor + 0.2)
         ax.set_title(f"θi = {theta_i:g}°", fontsize=10)
     handles, labels = axes[0].get_legend_handles_labels()
-    figure.legend(handles, labels, loc="lower center", ncol=len(labels), fontsize=8)
+    figure.legend(handles, labels, loc="lower center", ncol=min(len(labels), 5), fontsize=8)
     figure.suptitle(
         "In-plane cut; angle: θs [deg] from the normal (forward scatter to the right); "
         "radius: BRDF [sr⁻¹], logarithmic",
@@ -143,6 +153,8 @@ def export_section(exports: list[dict], figures) -> list[str]:
             f"{_html.escape(names)}{f' and {more} more' if more > 0 else ''}"
             f"{_html.escape(folding)}</p>"
         )
+        if any(f["kind"] == "tis_q975" for f in entry["files"]):
+            parts.append(f"<p>{_html.escape(_MEANINGS)}.</p>")
         if entry["format"] == "abg" and entry.get("rows"):
             parts.append(abg_table(entry["rows"]))
     parts += [_html.figure(png, caption) for name, caption, png in figures if name == "export"]
