@@ -1,6 +1,7 @@
 """Simulation-based calibration (Talts et al. 2018, arXiv:1804.06788) of a scene's posterior.
 
-For each replicate: draw the parameters and every latent from the scene's prior, simulate a
+For each replicate: draw the parameters and every latent from the scene's physical prior
+(its ``[priors]`` without coatings that scatter more than they receive), simulate a
 data set at the scene's own geometry through the scene's own generative model (the NumPyro
 model in ``simulate`` mode), sample its posterior with NUTS, and rank the true value among L
 thinned posterior draws. If the posterior is calibrated, the ranks of every quantity are
@@ -42,7 +43,6 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 import numpy as np
-from numpyro.infer import Predictive
 from scipy import stats
 
 from brdf_infer.errors import BadInputError
@@ -57,6 +57,7 @@ from brdf_infer.posterior import (
     PosteriorModel,
     build_model,
     chain_keys,
+    prior_draws,
 )
 from brdf_infer.priors import Prior
 from brdf_infer.scene import Scene
@@ -147,11 +148,9 @@ def _ranked_values(sites: dict, member: ModelFamily) -> dict[str, np.ndarray]:
 
 
 def simulate(model: PosteriorModel, replicates: int, seed: int) -> dict[str, np.ndarray]:
-    """Prior draws of every site and a simulated ``obs`` per replicate (leading axis)."""
-    predictive = Predictive(model, num_samples=replicates)
-    return jax.device_get(
-        jax.jit(lambda key: predictive(key, mode="simulate"))(jax.random.PRNGKey(seed))
-    )
+    """Draws of every site of the physical prior (no coating with TIS > 1) and a simulated
+    ``obs`` per replicate (leading axis): :func:`brdf_infer.posterior.prior_draws`."""
+    return prior_draws(model, replicates, seed)
 
 
 def replicate_data(data: ModelData, log_reflectance: np.ndarray) -> ModelData:

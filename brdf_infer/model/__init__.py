@@ -12,6 +12,13 @@ from brdf_infer.model._aperture import (
     reflectance_to_brdf,
     solid_angle,
 )
+from brdf_infer.model._energy import (
+    ENERGY_MARGIN,
+    ENERGY_THETA_I_DEG,
+    conserves_energy,
+    energy_log_factor,
+    max_log_tis,
+)
 from brdf_infer.model._families import (
     FAMILIES,
     FAMILY_NAMES,
@@ -54,6 +61,8 @@ from brdf_infer.model._tis import TIS_NODES, log_tis, tis, tis_with_error
 
 __all__ = [
     "CHECK_QUADRATURE",
+    "ENERGY_MARGIN",
+    "ENERGY_THETA_I_DEG",
     "FAMILIES",
     "FAMILY_NAMES",
     "FIT_QUADRATURE",
@@ -74,7 +83,9 @@ __all__ = [
     "brdf_inplane",
     "brdf_to_reflectance",
     "check_family_name",
+    "conserves_energy",
     "disk_integral",
+    "energy_log_factor",
     "family",
     "fold_statement",
     "harvey_shack_integral",
@@ -84,6 +95,7 @@ __all__ = [
     "log_brdf_inplane",
     "log_fold",
     "log_tis",
+    "max_log_tis",
     "positive_power",
     "reflectance_to_brdf",
     "run_family_name",

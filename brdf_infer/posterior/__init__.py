@@ -23,6 +23,7 @@ from brdf_infer.posterior._nuts import (
 from brdf_infer.posterior._padding import pad_datasets, paddable, padded_signature, row_count
 from brdf_infer.posterior._potential import FlatPotential
 from brdf_infer.posterior._power_scaling import power_scaling
+from brdf_infer.posterior._prior import prior_draws
 from brdf_infer.posterior._results import (
     BANDS_FILE,
     POSTERIOR_FILE,
@@ -103,6 +104,7 @@ __all__ = [
     "pointwise_loo_terms",
     "posterior_bands",
     "power_scaling",
+    "prior_draws",
     "programs_by_structure",
     "row_count",
     "run_emcee",

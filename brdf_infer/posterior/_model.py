@@ -47,7 +47,13 @@ from brdf_infer.coordinates import ANGLE_SCALE_DEG, from_internal
 from brdf_infer.error_model import NoiseScales, angle_slopes, covariance_factors
 from brdf_infer.errors import BadInputError
 from brdf_infer.measurements import Measurements
-from brdf_infer.model import ModelFamily, Physical, log_fold, strumik_family
+from brdf_infer.model import (
+    ModelFamily,
+    Physical,
+    energy_log_factor,
+    log_fold,
+    strumik_family,
+)
 from brdf_infer.observations import family_log_reflectance_at, log_reflectance
 from brdf_infer.params import Params
 from brdf_infer.posterior._likelihood import (
@@ -71,6 +77,7 @@ from brdf_infer.scene import Scene
 LINEAR = ("brdf0", "a1", "a2", "a3")  # priors of c = (ln BRDF0, b1, b2, b3)
 LINEAR_SITES = ("log_brdf0", "b1", "b2", "b3")
 NOISE_SITES = ("sample_sd", "repeatability")
+ENERGY_SITE = "energy_conservation"  # the physical prior's truncation (brdf_infer.model._energy)
 
 
 def prior_distribution(prior: Prior, scale: float = 1.0) -> dist.Distribution:
@@ -207,6 +214,9 @@ class PosteriorModel:
         )
         for name in ("brdf0", "a1", "a2", "a3", "theta_s0"):
             numpyro.deterministic(name, getattr(params, name))
+        # the physical prior: no mass on coatings with TIS > 1 (simulations reject such draws,
+        # brdf_infer.sbc.simulate)
+        numpyro.factor(ENERGY_SITE, energy_log_factor(params, self.family.constants))
         return params
 
     def _whitened(self, data: ModelData, scales: NoiseScales, alpha, t_s0, free: list[int]):
