@@ -55,6 +55,8 @@ class Predictive(TypedDict):
     pareto_k_max: float
     pareto_k_high: int  # rows above 0.7
     pareto_k: NotRequired[list[float]]  # every row's (runs written before it lack it)
+    # the rows above 0.7: row, series, sample, theta_i_deg, theta_s_deg, [phi_s_deg], k
+    pareto_k_rows: NotRequired[list[dict[str, Any]]]
     loo_pit: list[float]
     loo_pit_ks_p: float
 
@@ -63,8 +65,60 @@ class VerdictRecord(TypedDict):
     """The run's one verdict (:class:`brdf_infer.verdict.Verdict`)."""
 
     ok: bool
-    lines: list[str]
+    lines: list[str]  # the failed checks
+    facts: NotRequired[list[str]]  # what a reader must know, no failures (older runs lack it)
     text: str
+
+
+class VariantWidth(TypedDict):
+    """A headline 95 % interval with one assumption of the error model removed."""
+
+    lo95: float
+    hi95: float
+    ratio: float  # its width over the run's (1 − ratio: the share the assumption carries)
+    pareto_k: float  # of the importance weights to the variant
+    method: str  # "psis" (reweighted), "refit" (sampled anew) or "unreliable"
+    words: str  # the assumption in words
+
+
+class PriorInterval(TypedDict):
+    """The prior predictive 95 % interval of a quantity and its probability above 1."""
+
+    lo95: float
+    hi95: float
+    p_above_1: float
+
+
+class Width(TypedDict):
+    """What carries one headline quantity's 95 % width (brdf_infer.posterior._width)."""
+
+    lo95: float
+    hi95: float
+    prior: PriorInterval
+    without: dict[str, VariantWidth]  # per assumption: calibration, sample_effect, …
+    without_note: NotRequired[str]  # why no variant was computed
+
+
+class Learned(TypedDict):
+    """Whether the data contract a parameter or noise scale (brdf_infer.posterior._learned)."""
+
+    contraction: float  # 1 − var_post / var_prior on its prior's coordinate
+    prior_sensitivity: float | None  # power-scaling sensitivity to the prior
+    learned: bool  # contraction ≥ 0.5
+    prior_sensitive: bool  # prior_sensitivity ≥ 0.05
+    coordinate: str  # the site the prior is written on
+    prior: str  # the prior in words
+    words: str  # "learned", "learned, prior-sensitive (…)" or "set by its prior (…)"
+
+
+class Reference(TypedDict):
+    """A scene's published value placed in the posterior."""
+
+    quantity: str  # tis_<θi>deg, pi_brdf0 or a parameter
+    value: float
+    source: str
+    posterior_quantile: float  # share of the draws below the value
+    inside95: bool
 
 
 class PosteriorSummary(TypedDict):
@@ -86,6 +140,10 @@ class PosteriorSummary(TypedDict):
     predictive: Predictive
     tis_70deg: Band | None  # TIS at θi = 70° (None: the run has no TIS band)
     pi_brdf0: Interval | None  # π·BRDF0, Eq. (7)'s near-normal TIS (None: other families)
+    # tis_<θi>deg at the band angles, 70° and the references' angles; pi_brdf0
+    width: NotRequired[dict[str, Width]]
+    learned: NotRequired[dict[str, Learned]]  # per free parameter and learned noise scale
+    reference: NotRequired[list[Reference]]  # the scene's [reference] values
     seconds: dict[str, Any]  # sampling, compile, after_sampling (per step), total
     forced: list[str]  # plausibility checks the run went past
     fingerprint: dict[str, str]  # what ran, for a resume

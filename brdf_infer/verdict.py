@@ -11,9 +11,14 @@ disagree. It lists, most serious first:
 3. every sampler diagnostic that failed its threshold (R-hat, ESS, divergences, BFMI, emcee's
    autocorrelation times; :data:`brdf_infer.posterior.THRESHOLDS`);
 4. the rows whose PSIS-LOO Pareto k exceeds :data:`PARETO_K_LIMIT` (the leave-one-out
-   estimate, and so the report's model comparisons, are unreliable there).
+   estimate, and so the report's model comparisons, are unreliable there), each named by its
+   series, sample, angles and k.
 
-Empty, the verdict is "every diagnostic passes".
+Empty, the verdict is "every diagnostic passes". Beside these failures it states *facts* a
+reader of the answer must know, which are not failures: an assumption of the error model that
+alone carries more than a third of a headline 95 % width (TIS(70°), π·BRDF0;
+:mod:`brdf_infer.posterior._width`), a learned noise scale the data do not contract (set by
+its prior), and a published reference value outside the 95 % interval.
 """
 
 from __future__ import annotations
@@ -31,6 +36,8 @@ PARETO_K_LIMIT = 0.7
 ALL_PASS = "every diagnostic passes"
 FORCED = "forced past a plausibility check: "
 IMPLAUSIBLE = "implausible answer: "
+FACT = "Of note: "
+NAMED_ROWS = 5  # rows with a high Pareto k named in the verdict (all in summary.json)
 
 
 @dataclass(frozen=True)
@@ -42,23 +49,30 @@ class Verdict:
     """
 
     lines: tuple[str, ...] = ()
+    facts: tuple[str, ...] = ()
 
     @property
     def ok(self) -> bool:
-        """True when every check passed."""
+        """True when every check passed (facts are no failures)."""
         return not self.lines
 
     @property
     def text(self) -> str:
         """The verdict in one line (``verdict: …`` on stdout, the report's verdict box)."""
-        return "; ".join(self.lines) if self.lines else ALL_PASS
+        checks = "; ".join(self.lines) if self.lines else ALL_PASS
+        return checks + (f". {FACT}" + "; ".join(self.facts) if self.facts else "")
 
     def as_json(self) -> dict[str, Any]:
-        return {"ok": self.ok, "lines": list(self.lines), "text": self.text}
+        return {
+            "ok": self.ok,
+            "lines": list(self.lines),
+            "facts": list(self.facts),
+            "text": self.text,
+        }
 
     @classmethod
     def from_json(cls, payload: dict[str, Any]) -> Verdict:
-        return cls(tuple(payload["lines"]))
+        return cls(tuple(payload["lines"]), tuple(payload.get("facts", ())))
 
 
 def posterior_verdict(
@@ -96,7 +110,94 @@ def posterior_verdict(
     lines += summary["diagnostics"]["failures"]
     bad = summary["predictive"]["pareto_k_high"]
     if bad:
+        named = summary["predictive"].get("pareto_k_rows") or []
+        words = [row_words(row) for row in named[:NAMED_ROWS]]
+        if len(named) > NAMED_ROWS:
+            words.append(f"{len(named) - NAMED_ROWS} more in summary.json")
+        where = ": " + "; ".join(words) if words else ""
         lines.append(
-            f"{bad} measurement(s) with Pareto k > {PARETO_K_LIMIT} (PSIS-LOO unreliable there)"
+            f"{bad} measurement(s) with Pareto k > {PARETO_K_LIMIT} (PSIS-LOO unreliable "
+            f"there){where}"
         )
-    return Verdict(tuple(lines))
+    return Verdict(tuple(lines), tuple(answer_facts(summary)))
+
+
+def row_words(row: dict[str, Any]) -> str:
+    """One measurement row in words: series, sample, angles [deg] and its Pareto k."""
+    phi = row.get("phi_s_deg")
+    where = "" if phi is None else f", φs {phi:g}°"
+    return (
+        f"series {row['series']}, sample {row['sample']}, θi {row['theta_i_deg']:g}°, "
+        f"θs {row['theta_s_deg']:g}°{where} (k {row['k']:.2f})"
+    )
+
+
+QUANTITY_WORDS = {"pi_brdf0": "π·BRDF0", "brdf0": "BRDF0"}
+HEADLINE = ("tis_70deg", "pi_brdf0")  # the headline widths whose carriers the verdict names
+SHARE_STATED = 1.0 / 3.0  # an assumption carrying more of a headline width is named
+
+
+def carried_shares(
+    width: dict[str, Any], quantities: Sequence[str], least: float = SHARE_STATED
+) -> list[tuple[str, str, float]]:
+    """(quantity, the assumption in words, share) for each assumption of the error model
+    that alone carries more than ``least`` of a quantity's 95 % width (share = 1 − the
+    width ratio without it, :mod:`brdf_infer.posterior._width`), largest first."""
+    found = []
+    for quantity in quantities:
+        for entry in width.get(quantity, {}).get("without", {}).values():
+            share = 1.0 - entry["ratio"]
+            if np.isfinite(share) and share > least:
+                found.append((quantity, entry["words"], float(share)))
+    return sorted(found, key=lambda item: -item[2])
+
+
+def quantity_words(name: str) -> str:
+    """A headline quantity or parameter's name in words (``tis_70deg`` → ``TIS(70°)``)."""
+    if name.startswith("tis_") and name.endswith("deg"):
+        return f"TIS({name[4:-3]}°)"
+    return QUANTITY_WORDS.get(name, name)
+
+
+def value_words(name: str, value: float) -> str:
+    """A value of a quantity with its unit (fractions in %)."""
+    if name.startswith("tis_") or name == "pi_brdf0":
+        return f"{100 * value:.3g} %"
+    if name == "brdf0":
+        return f"{value:.3g} sr⁻¹"
+    return f"{value:.3g}"
+
+
+def answer_facts(summary: PosteriorSummary) -> list[str]:
+    """The facts of the verdict (module docstring) from the run's ``width``, ``learned`` and
+    ``reference`` records (a run written before they existed has none)."""
+    carried: dict[str, list[str]] = {}
+    for quantity, words, share in carried_shares(summary.get("width", {}), HEADLINE):
+        carried.setdefault(words, []).append(f"{100 * share:.0f} % of {quantity_words(quantity)}'s")
+    facts = [
+        f"{words} assumption alone carries {' and '.join(parts)} 95 % width"
+        for words, parts in carried.items()
+    ]
+    for name in ("sample_sd", "repeatability"):
+        entry = summary.get("learned", {}).get(name)
+        if entry is not None and not entry["learned"]:
+            facts.append(
+                f"the {NOISE_WORDS[name]} is {entry['words']}: the data do not contract it "
+                f"(contraction {entry['contraction']:.2f})"
+            )
+    outside = [
+        f"{quantity_words(r['quantity'])} {value_words(r['quantity'], r['value'])} (posterior "
+        f"quantile {r['posterior_quantile']:.3f})"
+        for r in summary.get("reference", [])
+        if not r["inside95"]
+    ]
+    if outside:
+        facts.append(
+            "reference values outside the 95 % interval: "
+            + ", ".join(outside)
+            + ' (docs/instruments.md, "The answer and the article")'
+        )
+    return facts
+
+
+NOISE_WORDS = {"sample_sd": "sample-to-sample scale", "repeatability": "repeatability"}

@@ -72,7 +72,7 @@ def log_prior_draws(model: PosteriorModel, sites: dict[str, np.ndarray]) -> np.n
 
 def log_likelihood_draws(model: PosteriorModel, sites: dict[str, np.ndarray]) -> np.ndarray:
     """ln p(y | θ) of every draw, the joint density of all rows (module docstring)."""
-    shape = np.shape(sites["alpha"])
+    shape = np.shape(sites[model.family.parameters[0]])
     flat = {k: np.reshape(v, (-1, *np.shape(v)[len(shape) :])) for k, v in sites.items()}
     parts = model.draw_parts(flat)
     y = model.data.rows.log_reflectance

@@ -20,6 +20,7 @@ from brdf_infer.error_model import ERROR_MODELS
 from brdf_infer.errors import BadInputError
 from brdf_infer.measurements import Measurements
 from brdf_infer.model import check_family_name, family
+from brdf_infer.posterior._answer import answer_records
 from brdf_infer.posterior._bands import (
     draws_physical,
     interval95,
@@ -147,18 +148,27 @@ def run_fingerprint(model: PosteriorModel, measurements: Measurements) -> dict[s
     }
 
 
-def predictive_checks(idata: az.InferenceData, log_lik: np.ndarray, cdf: np.ndarray) -> dict:
-    """PSIS-LOO (elpd with its standard error, p_loo, every row's Pareto k, the largest and the
-    number of rows above :data:`~brdf_infer.verdict.PARETO_K_LIMIT`) and the LOO-PIT of
-    every row with a Kolmogorov–Smirnov test of its uniformity, from the leave-one-out terms
-    of :func:`loo_terms` (``idata`` holds the same ``log_lik``)."""
+def predictive_checks(
+    idata: az.InferenceData,
+    log_lik: np.ndarray,
+    cdf: np.ndarray,
+    measurements: Measurements | None = None,
+) -> dict:
+    """PSIS-LOO (elpd with its standard error, p_loo, every row's Pareto k, the largest, the
+    number of rows above :data:`~brdf_infer.verdict.PARETO_K_LIMIT` and, given
+    ``measurements``, those rows by name) and the LOO-PIT of every row with a
+    Kolmogorov–Smirnov test of its uniformity, from the leave-one-out terms of
+    :func:`loo_terms` (``idata`` holds the same ``log_lik``)."""
     import warnings
 
     with warnings.catch_warnings():  # high Pareto k are reported in the verdict instead
         warnings.simplefilter("ignore", UserWarning)
         loo = az.loo(idata, pointwise=True)
     pit = loo_pit(log_lik.reshape(-1, log_lik.shape[-1]), cdf.reshape(-1, cdf.shape[-1]))
+    pareto_k = np.asarray(loo.pareto_k, float)
+    named = {} if measurements is None else {"pareto_k_rows": high_k_rows(measurements, pareto_k)}
     return {
+        **named,
         "elpd_loo": float(loo.elpd_loo),
         "se": float(loo.se),
         "p_loo": float(loo.p_loo),
@@ -168,6 +178,26 @@ def predictive_checks(idata: az.InferenceData, log_lik: np.ndarray, cdf: np.ndar
         "loo_pit": pit.tolist(),
         "loo_pit_ks_p": uniformity_p_value(pit),
     }
+
+
+def high_k_rows(measurements: Measurements, pareto_k: np.ndarray) -> list[dict]:
+    """The rows whose Pareto k exceeds :data:`~brdf_infer.verdict.PARETO_K_LIMIT`, each with
+    its index, series, sample, angles [deg] and k."""
+    rows = []
+    for index in np.flatnonzero(pareto_k > PARETO_K_LIMIT):
+        phi = None if measurements.phi_s_deg is None else float(measurements.phi_s_deg[index])
+        rows.append(
+            {
+                "row": int(index),
+                "series": str(measurements.series[index]),
+                "sample": str(measurements.sample[index]),
+                "theta_i_deg": float(measurements.theta_i_deg[index]),
+                "theta_s_deg": float(measurements.theta_s_deg[index]),
+                **({} if phi is None or not np.isfinite(phi) else {"phi_s_deg": phi}),
+                "k": float(pareto_k[index]),
+            }
+        )
+    return rows
 
 
 def run_posterior(
@@ -382,6 +412,8 @@ def complete_run(
     clock.lap("bands")
     checks = diagnostics(idata, result, parameters, fixed)
     clock.lap("diagnostics")
+    answer = answer_records(model, measurements, result, theta_i_band, with_tis, seed)
+    clock.lap("answer")
     tis_70 = None
     if "tis" in bands:
         at = bands["tis"]["theta_i_deg"].index(70.0)
@@ -402,9 +434,10 @@ def complete_run(
             site: interval95(result.sites[site]) for site in NOISE_SITES if site in result.sites
         },
         "diagnostics": checks,
-        "predictive": predictive_checks(idata, log_lik, cdf),
+        "predictive": predictive_checks(idata, log_lik, cdf, measurements),
         "tis_70deg": tis_70,
         "pi_brdf0": pi_brdf0,
+        **answer,  # width, learned, reference
         "seconds": dict(result.seconds),
         "forced": list(forced),
         "fingerprint": run_fingerprint(model, measurements),  # what ran: for a resume

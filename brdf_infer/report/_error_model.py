@@ -46,11 +46,15 @@ def error_model_table(summary: PosteriorSummary) -> str:
         )
     noise = summary.get("noise", {})
 
+    judged = summary.get("learned", {})
+
     def learned(name: str) -> str:
         if name not in noise:
             return "off"
         value = noise[name]
-        return f"{value['median']:.3f} (95 %: {value['lo95']:.3f}–{value['hi95']:.3f}), learned"
+        # a run written before the "learned" record: the data's say unknown, call it sampled
+        words = judged[name]["words"] if name in judged else "sampled"
+        return f"{value['median']:.3f} (95 %: {value['lo95']:.3f}–{value['hi95']:.3f}), {words}"
 
     repeatability = (
         learned("repeatability")
@@ -96,8 +100,11 @@ def error_model_table(summary: PosteriorSummary) -> str:
             else "off",
         ],
     ]
-    return "<p>Every noise source enters once (sizes in ln R):</p>" + _html.table(
-        ["source", "size"], rows
+    return (
+        "<p>Every noise source enters once (sizes in ln R). A learned scale is called "
+        "<em>learned</em> only where the data contract it (posterior variance at most half "
+        "the prior's); otherwise it is <em>set by its prior</em>, whose scale is named.</p>"
+        + _html.table(["source", "size"], rows)
     )
 
 

@@ -8,12 +8,65 @@ import numpy as np
 from brdf_infer.model import ModelFamily, fold_statement
 from brdf_infer.report import _html
 from brdf_infer.run_records import Bands, PosteriorSummary
+from brdf_infer.verdict import quantity_words, value_words
+
+
+def _percent_interval(low: float, high: float) -> str:
+    return f"{100 * low:.2f} – {100 * high:.2f} %"
+
+
+def width_words(width: dict | None) -> str:
+    """What carries one quantity's 95 % width, in one line: each assumption of the error model
+    with its share (1 − the width ratio without it) and the prior predictive interval."""
+    if not width:
+        return "not recorded (a run written before this record)"
+    parts = []
+    for entry in sorted(width["without"].values(), key=lambda e: e["ratio"]):
+        if not np.isfinite(entry["ratio"]):
+            parts.append(f"{entry['words']}: not reliable (Pareto k {entry['pareto_k']:.1f})")
+            continue
+        share = 1.0 - entry["ratio"]
+        effect = (
+            f"makes {100 * share:.0f} % of this width"
+            if share >= 0
+            else f"narrows it: {100 * -share:.0f} % wider without"
+        )
+        parts.append(f"{entry['words']} assumption {effect}")
+    if "without_note" in width:
+        parts.append(width["without_note"])
+    prior = width["prior"]
+    parts.append(f"the prior alone: {_percent_interval(prior['lo95'], prior['hi95'])}")
+    return "; ".join(parts)
+
+
+def reference_lines(summary: PosteriorSummary) -> str:
+    """Where each of the scene's published values falls in the posterior."""
+    entries = summary.get("reference", [])
+    if not entries:
+        return ""
+    items = "".join(
+        f"<li>{_html.escape(quantity_words(r['quantity']))} = "
+        f"{_html.escape(value_words(r['quantity'], r['value']))} "
+        f"({_html.escape(r['source'])}): posterior quantile {r['posterior_quantile']:.3f}, "
+        f"{'inside' if r['inside95'] else '<strong>outside</strong>'} the 95 % interval</li>"
+        for r in entries
+    )
+    return (
+        "<p>Published values placed in this posterior (why they can differ: "
+        '<a href="https://doi.org/10.1117/1.JATIS.10.1.018004">the article</a> fixes α and '
+        "θs0, fits ln BRDF by unweighted regression and treats no noise source apart; "
+        "docs/instruments.md, “The answer and the article”):</p>"
+        f"<ul>{items}</ul>"
+    )
 
 
 def result_box(summary: PosteriorSummary, bands: Bands, angles, member: ModelFamily) -> str:
     """The answer first: TIS at ``angles`` (the scene's incidence angles and the article's 70°)
-    and π·BRDF0 (Eq. 7's family), 95 % intervals; another family is named in the heading."""
+    and π·BRDF0 (Eq. 7's family), 95 % intervals, each with what carries its width
+    (:func:`width_words`); then the published reference values; another family is named in
+    the heading."""
     rows = []
+    widths = summary.get("width", {})
     if "tis" in bands:
         grid = np.asarray(bands["tis"]["theta_i_deg"])
         for angle in angles:
@@ -22,7 +75,8 @@ def result_box(summary: PosteriorSummary, bands: Bands, angles, member: ModelFam
                 [
                     f"TIS(θi = {angle:g}°)",
                     f"{100 * values[0]:.2f} %",
-                    f"{100 * values[1]:.2f} – {100 * values[2]:.2f} %",
+                    _percent_interval(values[1], values[2]),
+                    width_words(widths.get(f"tis_{float(angle):g}deg")),
                 ]
             )
     brdf0 = summary.get("pi_brdf0")
@@ -31,14 +85,19 @@ def result_box(summary: PosteriorSummary, bands: Bands, angles, member: ModelFam
             [
                 "π·BRDF0 (near-normal TIS, Sec. 7)",
                 f"{100 * brdf0['median']:.2f} %",
-                f"{100 * brdf0['lo95']:.2f} – {100 * brdf0['hi95']:.2f} %",
+                _percent_interval(brdf0["lo95"], brdf0["hi95"]),
+                width_words(widths.get("pi_brdf0")),
             ]
         )
     return (
         '<div class="result"><h2>Result'
         + ("" if member.paper_parameters else f" ({_html.escape(member.name)})")
         + "</h2>"
-        + _html.table(["quantity", "posterior median", "95 % credible interval"], rows)
+        + _html.table(
+            ["quantity", "posterior median", "95 % credible interval", "what carries the width"],
+            rows,
+        )
+        + reference_lines(summary)
         + "</div>"
     )
 

@@ -94,6 +94,9 @@ Schema (keys other than these are errors; defaults in brackets)::
     series = "II"                            # [the series with the most rows] the series
                                              #   (aperture, calibration) a new row joins
     budget = 3                               # [3] rows chosen together
+    [reference.tis_70deg]                    # a published value to place in the posterior:
+    value = 0.058                            #   tis_<θi>deg, pi_brdf0 or a parameter of
+    source = "Strumik et al. 2024, Sec. 7"   #   Eq. (7), in its units; value and source
 """
 
 from brdf_infer.scene._errors import parse_errors
@@ -107,6 +110,7 @@ from brdf_infer.scene._records import (
     OutputSettings,
     PaperFitSettings,
     RaytraceSettings,
+    ReferenceValue,
     Scene,
     SeriesGeometry,
     Studies,
@@ -123,6 +127,7 @@ __all__ = [
     "OutputSettings",
     "PaperFitSettings",
     "RaytraceSettings",
+    "ReferenceValue",
     "Scene",
     "SeriesGeometry",
     "Studies",

@@ -22,6 +22,7 @@ from brdf_infer.scene._setups import _parse_instrument, _parse_raytrace, check_i
 from brdf_infer.scene._tables import (
     _model_family,
     _parse_design,
+    _parse_references,
     _parse_studies,
     _scene_name,
     _selection,
@@ -44,6 +45,7 @@ _TOP_KEYS = {
     "studies",
     "bsdf",
     "design",
+    "reference",
 }
 
 
@@ -100,6 +102,7 @@ def parse_scene(document: dict, path: Path) -> Scene:
         bsdf_thinning=thinning,
         instrument=_parse_instrument(document, path, series),
         design=_parse_design(document, path, series),
+        references=_parse_references(document, path),
     )
     check_instrument(scene, scene.instrument.model, field="instrument.model")
     return scene

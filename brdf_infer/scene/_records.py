@@ -199,6 +199,25 @@ class DesignSettings:
 
 
 @dataclass(frozen=True)
+class ReferenceValue:
+    """A value of the answer published elsewhere, to be placed in the posterior
+    (``[reference.QUANTITY]``).
+
+    Attributes:
+        quantity: ``tis_<θi>deg`` (TIS at that incidence angle [deg], a fraction), ``pi_brdf0``
+            (π·BRDF0, a fraction) or a parameter of Eq. (7) in its paper units.
+        value: the published value, in the quantity's units.
+        source: where it comes from (publication, section), shown beside it.
+
+    The posterior's quantity is the run's own (a TIS with the scene's ``[model] fold``).
+    """
+
+    quantity: str
+    value: float
+    source: str
+
+
+@dataclass(frozen=True)
 class Scene:
     """A validated scene."""
 
@@ -218,6 +237,7 @@ class Scene:
     bsdf_thinning: tuple[int, int] = (1, 1)
     instrument: InstrumentSettings = field(default_factory=InstrumentSettings)
     design: DesignSettings = field(default_factory=DesignSettings)
+    references: tuple[ReferenceValue, ...] = ()
 
     def setup_of(self, series: str) -> RaytraceSettings | None:
         """The beam geometry of a series: ``[instrument.series.NAME]``, else the

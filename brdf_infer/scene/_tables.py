@@ -1,8 +1,10 @@
 """Readers of the scene's analysis tables: ``[model] family``, ``[paper_fit] selection``,
-``name``, ``[studies]`` and ``[design]``."""
+``name``, ``[studies]``, ``[design]`` and ``[reference]``."""
 
 from __future__ import annotations
 
+import math
+import re
 from pathlib import Path
 
 from brdf_infer.errors import BadInputError
@@ -14,7 +16,7 @@ from brdf_infer.scene._fields import (
     _string,
     _table,
 )
-from brdf_infer.scene._records import DesignSettings, Studies
+from brdf_infer.scene._records import DesignSettings, ReferenceValue, Studies
 from brdf_infer.selections import SELECTIONS
 
 
@@ -142,3 +144,44 @@ def _selection(paper: dict, path: Path) -> str:
             field="paper_fit.selection",
         )
     return name
+
+
+_TIS_QUANTITY = re.compile(r"tis_(\d+(?:\.\d+)?)deg")
+
+
+def reference_quantity_ok(quantity: str) -> bool:
+    """Whether a ``[reference]`` quantity names something a run reports: ``tis_<θi>deg``
+    with 0 ≤ θi < 90, ``pi_brdf0`` or a parameter of Eq. (7)."""
+    from brdf_infer.params import PARAM_NAMES
+
+    match = _TIS_QUANTITY.fullmatch(quantity)
+    if match is not None:
+        return float(match.group(1)) < 90.0
+    return quantity == "pi_brdf0" or quantity in PARAM_NAMES
+
+
+def _parse_references(document: dict, path: Path) -> tuple[ReferenceValue, ...]:
+    """The ``[reference.QUANTITY]`` tables: published values with their source."""
+    table = document.get("reference", {})
+    if not isinstance(table, dict):
+        raise BadInputError("expected a table [reference]", file=path, field="reference")
+    references = []
+    for quantity, entry in table.items():
+        field_name = f"reference.{quantity}"
+        if not reference_quantity_ok(quantity):
+            raise BadInputError(
+                "unknown quantity (tis_<angle>deg, pi_brdf0 or a parameter of Eq. 7)",
+                file=path,
+                field=field_name,
+            )
+        entry = _table(table, quantity, path, {"value", "source"}, parent="reference.")
+        value = _number(entry, "value", path)
+        if not math.isfinite(value):
+            raise BadInputError("expected a finite number", file=path, field=field_name + ".value")
+        source = entry.get("source")
+        if not isinstance(source, str) or not source.strip():
+            raise BadInputError(
+                "missing: where the value comes from", file=path, field=field_name + ".source"
+            )
+        references.append(ReferenceValue(quantity, value, source.strip()))
+    return tuple(references)

@@ -1,0 +1,95 @@
+"""What a run's answer rests on: the three records ``summary.json`` adds beside the answer.
+
+* ``"width"``: what carries each headline interval's width (:mod:`._width`);
+* ``"learned"``: which parameters and noise scales the data taught (:mod:`._learned`);
+* ``"reference"``: where the scene's published values fall in the posterior (:mod:`._reference`).
+
+All three compare the posterior with the physical prior, drawn once here
+(:data:`PRIOR_DRAWS` draws, :func:`brdf_infer.posterior.prior_draws`).
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from brdf_infer.measurements import Measurements
+from brdf_infer.posterior._bands import draws_physical
+from brdf_infer.posterior._learned import learned_record
+from brdf_infer.posterior._model import PosteriorModel
+from brdf_infer.posterior._prior import prior_draws
+from brdf_infer.posterior._reference import reference_record
+from brdf_infer.posterior._samplers import Draws, run_nuts
+from brdf_infer.posterior._width import HEADLINE_TIS_DEG, headline_draws, width_attribution
+
+PRIOR_DRAWS = 4000  # the prior predictive's 2.5 % quantile from ~100 draws beyond it
+_TIS_NAME = re.compile(r"tis_(\d+(?:\.\d+)?)deg")
+
+
+def headline_angles(model: PosteriorModel, band_angles: Sequence[float]) -> list[float]:
+    """The incidence angles of the headline TIS [deg]: the bands' angles, 70° and every angle
+    a ``[reference]`` value names."""
+    named = [_TIS_NAME.fullmatch(r.quantity) for r in model.scene.references]
+    angles = {*map(float, band_angles), HEADLINE_TIS_DEG}
+    angles.update(float(m.group(1)) for m in named if m is not None)
+    return sorted(angles)
+
+
+def _refit(draws: Draws, seed: int, tis_angles: Sequence[float]):
+    """A variant's headline draws from a NUTS run with the run's settings (None: the run was
+    not NUTS; such a variant is reported unreliable)."""
+    if draws.sampler != "nuts":
+        return None
+    settings = draws.settings
+
+    def refit(variant: PosteriorModel) -> dict[str, np.ndarray]:
+        sampled = run_nuts(
+            variant,
+            chains=settings["chains"],
+            warmup=settings["warmup"],
+            draws=settings["draws"],
+            seed=seed,
+            target_accept=settings["target_accept"],
+            progress=False,
+        )
+        physical = draws_physical(sampled.sites, variant.family)
+        return headline_draws(variant.family, physical, tis_angles)
+
+    return refit
+
+
+def answer_records(
+    model: PosteriorModel,
+    measurements: Measurements,
+    draws: Draws,
+    band_angles: Sequence[float],
+    with_tis: bool,
+    seed: int,
+) -> dict[str, Any]:
+    """``{"width", "learned", "reference"}`` of a run (module docstring).
+
+    Args:
+        model: the run's posterior model.
+        measurements: its rows.
+        draws: its draws.
+        band_angles: the incidence angles of its bands [deg].
+        with_tis: the run reports a TIS (its family and scene have one).
+        seed: the run's seed (the prior draws use ``seed + 11``).
+    """
+    angles = headline_angles(model, band_angles) if with_tis else []
+    member = model.family
+    physical = draws_physical(draws.sites, member)
+    headline = headline_draws(member, physical, angles)
+    prior = prior_draws(model, PRIOR_DRAWS, seed + 11)
+    prior_headline = headline_draws(member, draws_physical(prior, member), angles)
+    width = width_attribution(
+        model, measurements, draws.sites, headline, prior_headline, _refit(draws, seed, angles)
+    )
+    return {
+        "width": width,
+        "learned": learned_record(model, draws.sites, prior),
+        "reference": reference_record(model.scene.references, {**headline, **physical}),
+    }

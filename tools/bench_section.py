@@ -1,0 +1,63 @@
+"""Measure one section of the benchmark report again and splice it into the report.
+
+    python tools/bench_section.py sbc [--report reports/benchmarks.md]
+
+The full benchmark (``brdf-infer bench``) takes long; after a change that touches one study,
+this reruns that study's section as ``brdf-infer bench`` would and replaces the section of the
+same heading (up to the next ``## `` heading) in the report, leaving every other section as it
+was measured. The section's text says which code measured it (the header of the report does
+not: see the commit that spliced it).
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+import time
+from pathlib import Path
+
+from brdf_infer._atomic import atomic_write_bytes
+
+
+def sbc(report: Path) -> list[str]:
+    from brdf_infer.bench._sbc import sbc_rows
+    from brdf_infer.bench._sections import sbc_section
+    from brdf_infer.report import ecdf_differences, png
+    from brdf_infer.scene import load_scene
+
+    rows = sbc_rows(load_scene("lya"), quick=False)
+    plots = []
+    for row, suffix in zip(rows[:2], ("sbc", "sbc_planted"), strict=True):
+        path = report.with_name(f"{report.stem}_{suffix}.png")
+        atomic_write_bytes(path, png(ecdf_differences(row.result)))
+        plots.append(path)
+    return sbc_section(rows, plots)
+
+
+SECTIONS = {"sbc": sbc}
+
+
+def splice(report: Path, lines: list[str]) -> None:
+    """Replace the section whose ``## `` heading is ``lines[0]`` in ``report``."""
+    text = report.read_text()
+    heading = lines[0]
+    pattern = re.compile(rf"^{re.escape(heading)}\n.*?(?=^## |\Z)", re.S | re.M)
+    if not pattern.search(text):
+        raise SystemExit(f"{report}: no section {heading!r}")
+    new = "\n".join(lines).rstrip("\n") + "\n\n"
+    atomic_write_bytes(report, pattern.sub(lambda _: new, text, count=1).encode())
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("section", choices=sorted(SECTIONS))
+    parser.add_argument("--report", type=Path, default=Path("reports/benchmarks.md"))
+    args = parser.parse_args()
+    started = time.perf_counter()
+    lines = SECTIONS[args.section](args.report)
+    splice(args.report, lines)
+    print(f"{args.section}: spliced into {args.report} ({time.perf_counter() - started:.0f} s)")
+
+
+if __name__ == "__main__":
+    main()
