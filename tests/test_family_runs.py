@@ -107,7 +107,7 @@ def test_export_of_a_family_run_reads_back_and_its_tis_lines_are_the_band(
     )  # fmt: skip
     assert code == 0, err
     kinds = {f["kind"] for f in json.loads(text)["files"]}
-    assert kinds == {"lower95", "median", "upper95", "draw"}
+    assert kinds == {"lower95", "median", "upper95", "tis_q025", "tis_q500", "tis_q975", "draw"}
     code, band, err = run_cli(
         "tis", "--run", str(out), "--theta-i", "0", "70", "--json", capsys=capsys
     )

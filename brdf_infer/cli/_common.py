@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import math
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -153,6 +154,7 @@ def print_verdict(verdict: dict[str, Any]) -> None:
 def print_posterior_summary(summary: PosteriorSummary, out: Path) -> None:
     """A posterior run's parameters with their diagnostics, TIS(70°) and times."""
     diagnostics = summary["diagnostics"]
+    judged = summary.get("learned", {})
     rows = [
         [
             name,
@@ -161,13 +163,15 @@ def print_posterior_summary(summary: PosteriorSummary, out: Path) -> None:
             f"{values['r_hat']:.3f}",
             f"{values['ess_bulk']:.0f}",
             f"{values['ess_tail']:.0f}",
+            judged[name]["words"] if name in judged else "-",
         ]
         for name, values in diagnostics["parameters"].items()
     ]
     print(
         f"posterior of scene '{summary['scene']}', model {summary['model']} ({summary['sampler']})"
     )
-    print(table(["parameter", "mean", "sd", "R-hat", "ESS bulk", "ESS tail"], rows))
+    headers = ["parameter", "mean", "sd", "R-hat", "ESS bulk", "ESS tail", "from the data"]
+    print(table(headers, rows))
     tis70 = summary["tis_70deg"]
     if tis70 is not None:
         print(
@@ -175,6 +179,14 @@ def print_posterior_summary(summary: PosteriorSummary, out: Path) -> None:
             f"(95 %: {100 * tis70['lo95']:.2f}-{100 * tis70['hi95']:.2f} %; "
             f"{'with' if summary['fold'] else 'without'} Eq. (10) folding)"
         )
+        without = summary.get("width", {}).get("tis_70deg", {}).get("without", {})
+        shares = [
+            f"{entry['words']} {100 * (1 - entry['ratio']):.0f} %"
+            for entry in without.values()
+            if math.isfinite(entry["ratio"])
+        ]
+        if shares:
+            print(f"  share of its 95 % width carried by each assumption: {', '.join(shares)}")
     seconds = summary["seconds"]
     print(
         f"sampling {seconds['sampling']:.1f} s, total {seconds['total']:.1f} s; results in {out}/"

@@ -50,7 +50,7 @@ def coordinates(model: PosteriorModel) -> dict[str, str]:
     if member.paper_parameters:
         names = {n: PAPER_COORDINATES[n] for n in model.scene.free_parameters}
     else:
-        names = {c.name: c.site for c in member.coordinates}
+        names = {c.site: c.site for c in member.coordinates}
     errors = model.errors
     if errors.model == "generative" and errors.hierarchical:
         names["sample_sd"] = "sample_sd"

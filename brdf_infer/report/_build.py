@@ -137,7 +137,7 @@ def _fit_figures(add: AddFigure, run: Path, idata, summary, bands, scene, rows, 
     add(
         "trace",
         "Trace plots in the sampler's well-conditioned coordinates (ln BRDF0, b1–b3, α, θs0 "
-        "and the learned noise scales).",
+        "and the sampled noise scales).",
         lambda: _figures.trace(idata),
     )
     add("rank", "Rank plots: chains that mix give flat histograms.", lambda: _figures.rank(idata))

@@ -101,7 +101,7 @@ def error_model_table(summary: PosteriorSummary) -> str:
         ],
     ]
     return (
-        "<p>Every noise source enters once (sizes in ln R). A learned scale is called "
+        "<p>Every noise source enters once (sizes in ln R). A sampled scale is called "
         "<em>learned</em> only where the data contract it (posterior variance at most half "
         "the prior's); otherwise it is <em>set by its prior</em>, whose scale is named.</p>"
         + _html.table(["source", "size"], rows)

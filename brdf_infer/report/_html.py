@@ -20,6 +20,7 @@ th { background: #f4f4f4; } td:first-child, th:first-child { text-align: left; }
   background: #eef3fb; margin: 1em 0; }
 .result h2 { border: none; margin: .3em 0; }
 .result table { font-size: 1.05em; }
+.result td:last-child, .result th:last-child { text-align: left; font-size: .85em; }
 table { max-width: 100%; overflow-x: auto; display: block; }
 .pass { background: #e6f4ea; border: 1px solid #34a853; }
 .fail { background: #fce8e6; border: 1px solid #d93025; }

@@ -17,26 +17,30 @@ def _percent_interval(low: float, high: float) -> str:
 
 def width_words(width: dict | None) -> str:
     """What carries one quantity's 95 % width, in one line: each assumption of the error model
-    with its share (1 − the width ratio without it) and the prior predictive interval."""
+    with its share (1 − the width ratio without it; negative: wider without it) and the prior
+    predictive interval."""
     if not width:
         return "not recorded (a run written before this record)"
     parts = []
     for entry in sorted(width["without"].values(), key=lambda e: e["ratio"]):
-        if not np.isfinite(entry["ratio"]):
-            parts.append(f"{entry['words']}: not reliable (Pareto k {entry['pareto_k']:.1f})")
-            continue
-        share = 1.0 - entry["ratio"]
-        effect = (
-            f"makes {100 * share:.0f} % of this width"
-            if share >= 0
-            else f"narrows it: {100 * -share:.0f} % wider without"
-        )
-        parts.append(f"{entry['words']} assumption {effect}")
+        name = entry["words"].removeprefix("the ")
+        if np.isfinite(entry["ratio"]):
+            parts.append(f"{name} {round(100 * (1.0 - entry['ratio'])):+d} %")
+        else:
+            parts.append(f"{name}: unreliable (Pareto k {entry['pareto_k']:.1f})")
     if "without_note" in width:
         parts.append(width["without_note"])
     prior = width["prior"]
-    parts.append(f"the prior alone: {_percent_interval(prior['lo95'], prior['hi95'])}")
-    return "; ".join(parts)
+    return ", ".join(parts) + f"; prior alone {_percent_interval(prior['lo95'], prior['hi95'])}"
+
+
+WIDTH_LEGEND = (
+    "<p class='fold'>What carries the width: the share of the 95 % width each assumption of "
+    "the error model carries, 1 − (width without it) / (width), computed from the run's draws "
+    "(Pareto-smoothed importance reweighting, or a new posterior where that is unreliable); "
+    "negative where the band is wider without it (the data then put that scatter elsewhere). "
+    "<em>Prior alone</em>: the 95 % interval before the data.</p>"
+)
 
 
 def reference_lines(summary: PosteriorSummary) -> str:
@@ -97,6 +101,7 @@ def result_box(summary: PosteriorSummary, bands: Bands, angles, member: ModelFam
             ["quantity", "posterior median", "95 % credible interval", "what carries the width"],
             rows,
         )
+        + (WIDTH_LEGEND if widths else "")
         + reference_lines(summary)
         + "</div>"
     )
