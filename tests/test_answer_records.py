@@ -40,7 +40,7 @@ def test_the_physical_prior_has_no_coating_that_scatters_more_than_it_receives(l
     draws = prior_draws(model, 3000, seed=5)
     # independently of the check's grid and nodes: every 0.5° from 0 to 85°, 64 nodes
     fine = np.asarray(log_tis(jnp.arange(0.0, 85.01, 0.5), _params(draws)))
-    assert np.exp(fine.max()) <= 1.0
+    assert np.exp(fine.max()) < 0.99  # the check keeps 0.95; peaks between its angles add < 4 %
     # the untruncated priors do put mass there (so the truncation is what removes it)
     import jax
     from numpyro.infer import Predictive

@@ -1,6 +1,6 @@
 """Measure one section of the benchmark report again and splice it into the report.
 
-    python tools/bench_section.py sbc [--report reports/benchmarks.md]
+    python tools/bench_section.py sbc|misspec [--report reports/benchmarks.md]
 
 The full benchmark (``brdf-infer bench``) takes long; after a change that touches one study,
 this reruns that study's section as ``brdf-infer bench`` would and replaces the section of the
@@ -12,6 +12,7 @@ not: see the commit that spliced it).
 from __future__ import annotations
 
 import argparse
+import os
 import re
 import time
 from pathlib import Path
@@ -34,7 +35,41 @@ def sbc(report: Path) -> list[str]:
     return sbc_section(rows, plots)
 
 
-SECTIONS = {"sbc": sbc}
+def misspec(report: Path) -> list[str]:
+    from brdf_infer.bench._misspec import misspec_rows
+    from brdf_infer.bench._sections import misspec_section
+    from brdf_infer.scene import load_scene
+
+    return misspec_section(misspec_rows(load_scene("lya"), quick=False))
+
+
+SECTIONS = {"sbc": sbc, "misspec": misspec}
+
+
+def provenance(seconds: float) -> str:
+    """Where and when a spliced section was measured, and on which commit."""
+    import platform
+    import subprocess
+
+    import jax
+
+    commit = subprocess.run(
+        ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, check=False
+    ).stdout.strip()
+    dirty = subprocess.run(
+        ["git", "status", "--porcelain", "--untracked-files=no", "brdf_infer"],
+        capture_output=True,
+        text=True,
+        check=False,
+    ).stdout.strip()
+    code = f"commit {commit}" + (" with uncommitted changes to brdf_infer" if dirty else "")
+    return (
+        f"Measured on its own (`python tools/bench_section.py`, full size, {seconds:.0f} s wall, "
+        f"{platform.machine()}, {os.cpu_count()} cores shared with other jobs, JAX "
+        f"{jax.__version__} on {jax.default_backend()}, Python {platform.python_version()}, "
+        f"{time.strftime('%Y-%m-%d')}; the code of {code}) and spliced into this report; "
+        "`brdf-infer bench` regenerates it with the rest."
+    )
 
 
 def splice(report: Path, lines: list[str]) -> None:
@@ -55,6 +90,7 @@ def main() -> None:
     args = parser.parse_args()
     started = time.perf_counter()
     lines = SECTIONS[args.section](args.report)
+    lines = [lines[0], "", provenance(time.perf_counter() - started), *lines[1:]]
     splice(args.report, lines)
     print(f"{args.section}: spliced into {args.report} ({time.perf_counter() - started:.0f} s)")
 
