@@ -25,6 +25,7 @@ CONTRACT_KEYS = {
     "theta_s_deg",
     "phi_s_deg",
     "series",
+    "session",
     "expected_sd",
     "sd_ratio",
     "eig_nats",
@@ -86,7 +87,7 @@ def test_targets_parse_and_unknown_ones_are_refused():
 def candidates_csv(tmp_path_factory):
     path = tmp_path_factory.mktemp("design") / "candidates.csv"
     path.write_text(
-        "series,theta_i_deg,theta_s_deg\nII,45,-30\nII,60,80\nI,30,30\nII,20,20\nII,80,-40\n"
+        "series,theta_i_deg,theta_s_deg\nII,45,-85\nII,60,80\nI,30,30\nII,20,20\nII,80,-40\n"
     )
     return path
 
@@ -153,17 +154,149 @@ def test_design_json_contract_and_map(nuts_run, candidates_csv, tmp_path, capsys
         (["--scene", "lya-fixed"], "a run of scene 'lya', not of 'lya-fixed'"),
         (["--series", "III"], "field '--series': no measured series 'III'"),
         (["--budget", "0"], "field '--budget'"),
+        (["--same-session", "III"], "field '--same-session': no measured series 'III'"),
+        (["--aperture", "7.5"], "field '--aperture': expected D_MM,R_MM"),
+        (["--aperture", "7.5,110"], "field '--aperture': series 'II' has measured rows"),
+        (["--candidates", "UNREACHABLE"], "row 2, field 'theta_i_deg'"),  # θi 10 < 18
     ],
 )
 def test_bad_design_input_is_one_line_and_writes_nothing(
     nuts_run, tmp_path, capsys, extra, message
 ):
     out = tmp_path / "out"
+    if "UNREACHABLE" in extra:
+        csv = tmp_path / "candidates.csv"
+        csv.write_text("theta_i_deg,theta_s_deg\n30,40\n10,40\n")
+        extra = [str(csv) if a == "UNREACHABLE" else a for a in extra]
     code, stdout, stderr = run_cli(
         "design", str(nuts_run.out), "--out", str(out), *extra, capsys=capsys
     )
     assert code == 2 and message in stderr and len(stderr.strip().splitlines()) == 1
     assert not out.exists() and stdout == ""
+
+
+def test_the_grid_holds_only_what_the_lya_goniometer_reaches_and_counts_the_rest():
+    """The bundled scene's [design]: θi 18–80° (Sec. 2, 3.1), the camera ≥ 36° from the beam.
+    Of the 5° grid (θi 0–85° with 18° added: 19 values, θs ±85°: 35), θi 0, 5, 10, 15, 85
+    are out of reach (5 × 35 = 175) and 188 reachable-θi settings put the camera within 36°
+    of the beam; the old default range (θi 10–85°, 10° clearance) keeps 513 of its 630."""
+    from dataclasses import replace
+
+    from brdf_infer.design import grid_candidates, reachable
+    from brdf_infer.scene import load_scene
+
+    settings = load_scene("lya").design
+    assert settings.theta_i_deg == (18.0, 80.0) and settings.source_clearance_deg == 36.0
+    grid = grid_candidates(settings, "II")
+    assert grid.left_out == {
+        "grid": 665,
+        "reachable": 302,
+        "theta_i_deg": 175,
+        "theta_s_deg": 0,
+        "source_clearance_deg": 188,
+    }
+    assert len(grid) == 302 and np.all(
+        reachable(settings, *(grid.theta_i_deg, grid.theta_s_deg, grid.phi_s_deg))
+    )
+    assert grid.theta_i_deg.min() == 18.0 and grid.theta_i_deg.max() == 80.0
+    assert np.all(np.abs(grid.theta_i_deg + grid.theta_s_deg) >= 36.0)
+    lax = replace(settings, theta_i_deg=(10.0, 85.0), source_clearance_deg=10.0)
+    assert grid_candidates(lax, "II").left_out["reachable"] == 513
+
+
+def _dense_conditional(run, candidates, draws, series):
+    """Mean and covariance of the candidates' rows given the measured ones from the dense
+    joint Gaussian of the error model with the rows appended to the data in ``series`` (an
+    independent path: the posterior model's own W and D of the augmented rows)."""
+    from dataclasses import replace
+
+    from brdf_infer.design import candidate_measurements
+    from brdf_infer.measurements import Measurements
+    from brdf_infer.posterior import build_posterior_model
+
+    measured = run.measurements
+    new = candidate_measurements(candidates, measured)
+    fields = ("series", "sample", "theta_i_deg", "theta_s_deg", "reflectance", "reflectance_err")
+    joined = {f: np.concatenate([getattr(measured, f), getattr(new, f)]) for f in fields}
+    joined["series"] = np.concatenate([measured.series, np.full(len(new), series)])
+    scene = replace(run.scene, series={**run.scene.series, series: run.scene.series["II"]})
+    model = build_posterior_model(scene, Measurements(path=measured.path, **joined))
+    parts = model.draw_parts(draws)
+    n = len(measured)
+    factor, diagonal = np.asarray(parts.factor), np.asarray(parts.diagonal)
+    cov = np.einsum("snq,smq->snm", factor, factor) + np.stack([np.diag(d) for d in diagonal])
+    residual = np.log(measured.reflectance)[None, :] - np.asarray(parts.mean)[:, :n]
+    gain = np.linalg.solve(cov[:, :n, :n], cov[:, :n, n:]).transpose(0, 2, 1)
+    mean = np.asarray(parts.mean)[:, n:] + np.einsum("scn,sn->sc", gain, residual)
+    return mean, cov[:, n:, n:] - gain @ cov[:, :n, n:]
+
+
+@pytest.mark.parametrize(("session", "appended_as"), [("new", "III"), ("II", "II")])
+def test_a_sessions_predictive_is_the_dense_conditional_of_rows_appended_to_the_data(
+    nuts_run, session, appended_as
+):
+    """A new session is a series of its own (a calibration factor shared by its rows and
+    with no measured row, rotation settings of its own); continuing series II's session is
+    the rows appended to series II (its calibration, the rotation error at θi 45° measured
+    there). Rows at distinct θi, so that the appended rows form no rotation group of their
+    own (design takes a new setting's rotation error per row)."""
+    from brdf_infer.design import Candidates, predictive
+
+    run = load_design_run(nuts_run.out)
+    candidates = Candidates(
+        series=np.array(["II"] * 3),
+        theta_i_deg=np.array([45.0, 60.0, 30.0]),
+        theta_s_deg=np.array([60.0, 70.0, -60.0]),
+        phi_s_deg=np.full(3, np.nan),
+        session=np.array([session] * 3),
+    )
+    keep = np.arange(0, len(run.sites["brdf0"]), len(run.sites["brdf0"]) // 4)[:4]
+    draws = {name: values[keep] for name, values in run.sites.items()}
+    got = predictive(run, candidates, draws)
+    mean, covariance = _dense_conditional(run, candidates, draws, appended_as)
+    np.testing.assert_allclose(got.mean, mean, rtol=1e-6, atol=1e-9)
+    shared = np.einsum("scq,sdq->scd", got.loading, got.loading)
+    own = np.stack([np.diag(d) for d in np.asarray(got.own)])
+    np.testing.assert_allclose(shared + own, covariance, rtol=1e-6, atol=1e-12)
+
+
+def test_design_takes_new_rows_in_a_new_session_within_reach(nuts_run, tmp_path, capsys):
+    """By default every chosen row is a new session; the grid holds only reachable settings
+    and the JSON says how many it left out, and why; the human table says so too."""
+    from brdf_infer.design import reach_line
+
+    out = tmp_path / "out"
+    argv = ["design", str(nuts_run.out), "--budget", "1", "--draws", "100"]
+    code, stdout, stderr = run_cli(
+        *argv, "--simulations", "16", "--out", str(out), "--json", capsys=capsys
+    )
+    assert code == 0, stderr
+    payload = json.loads(stdout)
+    assert payload["same_session"] is None
+    assert payload["reach"] == {
+        "theta_i_deg": [18.0, 80.0],
+        "theta_s_deg": [-85.0, 85.0],
+        "source_clearance_deg": 36.0,
+    }
+    assert payload["left_out"]["reachable"] == len(payload["candidates"]) == 302
+    assert payload["left_out"]["grid"] - 302 == 175 + 188
+    for entry in payload["chosen"] + payload["candidates"]:
+        assert entry["session"] == "new" and entry["series"] == "II"
+        assert 18 <= entry["theta_i_deg"] <= 80
+        assert abs(entry["theta_i_deg"] + entry["theta_s_deg"]) >= 36
+    line = reach_line(payload)
+    assert "of 665 grid settings 363 left out" in line and "camera too near the beam 188" in line
+
+
+def test_same_session_continues_its_series_only(nuts_run, candidates_csv):
+    """``same_session="II"``: the rows of series II continue its session, the row of series I
+    is a new one."""
+    run = load_design_run(nuts_run.out)
+    candidates = read_candidates(candidates_csv, run.scene, run.measurements, "II")
+    options = DesignOptions(draws=100, simulations=16, budget=1)
+    payload = design(run, "tis:70", candidates, options, same_session="II").as_json()
+    sessions = {(c["series"], c["session"]) for c in payload["candidates"]}
+    assert sessions == {("II", "II"), ("I", "new")} and payload["same_session"] == "II"
 
 
 def test_candidates_the_instrument_cannot_reach_name_file_row_and_field(nuts_run, tmp_path):
@@ -195,6 +328,7 @@ def test_library_design_of_all_parameters_ranks_by_information(nuts_run, candida
     [
         ({"design": {"theta_i_deg": [50, 10]}}, "design.theta_i_deg"),
         ({"design": {"series": "IV"}}, "design.series"),
+        ({"design": {"same_session": "IV"}}, "design.same_session"),
         ({"design": {"budget": 0}}, "design.budget"),
         ({"design": {"reach": 1}}, "design.reach"),
         ({"studies": {"design": "gloss"}}, "studies.design"),
@@ -219,8 +353,10 @@ def test_scene_design_table_is_read(tmp_path):
         "design": {"theta_i_deg": [20, 60], "step_deg": 10, "series": "I", "budget": 2},
         "studies": {"design": "pi_brdf0"},
     }
+    document["design"] |= {"same_session": "I", "source_clearance_deg": 36}
     scene = parse_scene(document, tmp_path / "x.scene.toml")
     assert scene.design.theta_i_deg == (20.0, 60.0) and scene.design.budget == 2
+    assert scene.design.same_session == "I" and scene.design.source_clearance_deg == 36.0
     assert scene.studies.design == "pi_brdf0"
 
 
@@ -301,5 +437,5 @@ def test_the_design_table_shows_tis_and_pi_brdf0_in_per_cent():
 
     chosen = {"step": 1, "theta_i_deg": 10.0, "theta_s_deg": -20.0, "series": "II"}
     chosen |= {"expected_sd": 0.00388, "sd_ratio": 0.968, "eig_nats": 0.07}
-    assert design_rows({"target": "tis_70deg", "chosen": [chosen]})[0][4] == "0.388 %"
-    assert design_rows({"target": "alpha", "chosen": [chosen]})[0][4] == "0.00388"
+    assert design_rows({"target": "tis_70deg", "chosen": [chosen]})[0][5] == "0.388 %"
+    assert design_rows({"target": "alpha", "chosen": [chosen]})[0][5] == "0.00388"

@@ -46,8 +46,21 @@ def add_parser(commands) -> argparse.ArgumentParser:
     )
     parser.add_argument(
         "--series",
-        help="the series a new grid row joins (default: [design] series, else "
-        "the series with the most rows)",
+        help="the series a new grid row is taken in (default: --same-session, else [design] "
+        "series, else the series with the most rows); one without rows is a new series, its "
+        "aperture from [series.NAME] or --aperture",
+    )
+    parser.add_argument(
+        "--same-session",
+        metavar="SERIES",
+        help="new rows of SERIES continue its measured session (its reference measurement and "
+        "rotation settings; default: [design] same_session, else every new row is a new "
+        "session with a reference of its own)",
+    )
+    parser.add_argument(
+        "--aperture",
+        metavar="D_MM,R_MM",
+        help="aperture diameter and aperture-sample distance [mm] of a new series",
     )
     parser.add_argument(
         "--budget",
@@ -81,7 +94,9 @@ def main(args: argparse.Namespace) -> int:
         design_series,
         load_design_run,
         parse_target,
+        reach_line,
         read_candidates,
+        session_scene,
         write_design,
     )
 
@@ -95,15 +110,19 @@ def main(args: argparse.Namespace) -> int:
         budget=args.budget if args.budget is not None else scene.design.budget,
         seed=args.seed,
     )
-    series = design_series(scene, run.measurements, args.series)
+    aperture = _aperture(args.aperture)
+    same_session = args.same_session or scene.design.same_session
+    series = design_series(scene, run.measurements, args.series, same_session, aperture)
     candidates = None
     if args.candidates != "grid":
-        candidates = read_candidates(args.candidates, scene, run.measurements, series)
+        scene_ = session_scene(scene, series, aperture)
+        candidates = read_candidates(args.candidates, scene_, run.measurements, series)
+    session = "new sessions" if same_session is None else f"series {same_session}'s session"
     progress(
         f"where to measure next for {target.label}, scene '{scene.name}', series {series}, "
-        f"budget {options.budget} ..."
+        f"{session}, budget {options.budget} ..."
     )
-    result = design(run, target, candidates, options, series)
+    result = design(run, target, candidates, options, series, same_session, aperture)
     # into the run folder: added to a finished run (its own lock, the run stays complete);
     # elsewhere: one writer per folder
     adds = Path(out).resolve() == Path(args.run_dir).resolve()
@@ -121,6 +140,26 @@ def main(args: argparse.Namespace) -> int:
         )
     print(f"chosen together (budget {options.budget}):")
     print(table(DESIGN_HEADERS, design_rows(payload)))
+    print(reach_line(payload))
     print(f"{len(payload['candidates'])} candidates, {payload['seconds']:.1f} s")
     print(f"written: {out / DESIGN_FILE}, {out / DESIGN_FIGURE}")
     return 0
+
+
+def _aperture(text: str | None) -> tuple[float, float] | None:
+    """``--aperture D_MM,R_MM`` as (diameter, distance) [mm]."""
+    from brdf_infer.errors import BadInputError
+
+    if text is None:
+        return None
+    try:
+        diameter, distance = (float(part) for part in text.split(","))
+    except ValueError:
+        raise BadInputError(
+            f"expected D_MM,R_MM (two numbers), got {text!r}", field="--aperture"
+        ) from None
+    if not 0 < diameter < distance < float("inf"):
+        raise BadInputError(
+            f"expected 0 < diameter < distance [mm], got {text!r}", field="--aperture"
+        )
+    return diameter, distance

@@ -6,8 +6,10 @@ from brdf_infer.design._candidates import (
     Candidates,
     design_series,
     grid_candidates,
+    reach_limit,
     reachable,
     read_candidates,
+    session_scene,
 )
 from brdf_infer.design._estimate import ESS_FLOOR, candidate_outcomes, set_outcome
 from brdf_infer.design._study import (
@@ -24,7 +26,7 @@ from brdf_infer.design._study import (
     target_values,
     write_design,
 )
-from brdf_infer.design._table import DESIGN_HEADERS, design_rows, target_scale
+from brdf_infer.design._table import DESIGN_HEADERS, design_rows, reach_line, target_scale
 
 __all__ = [
     "DESIGN_FIGURE",
@@ -45,9 +47,12 @@ __all__ = [
     "load_design_run",
     "parse_target",
     "predictive",
+    "reach_limit",
+    "reach_line",
     "reachable",
     "read_candidates",
     "read_design",
+    "session_scene",
     "set_outcome",
     "target_scale",
     "target_values",

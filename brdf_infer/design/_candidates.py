@@ -1,11 +1,18 @@
-"""The settings a new row may take: a grid over the scene's ``[design]`` range, or a CSV.
+"""The settings a new row may take: the reachable points of a grid, or a CSV.
 
-A candidate is one new measurement row: its series (whose aperture and calibration it shares),
-its sample (the series' sample with the most rows: a new row is taken on a sample already in
+A candidate is one new measurement row: its series (whose aperture it has), its session (a new
+one with its own reference measurement, Eq. 2, or the measured session of its series it
+continues, sharing that reference and the rotation settings), its sample (the series' sample
+with the most rows, or the scene's for a new series: a new row is taken on a sample already in
 the lab) and its geometry (θi, signed in-plane θs, or polar θs with an azimuth φs out of the
-plane). The instrument reaches a setting when θi and θs lie in the ``[design]`` ranges and the
-camera stays clear of the incident beam: in the plane the camera sits at the lab angle θi + θs
-from the direction back to the source, so |θi + θs| ≥ ``source_clearance_deg``.
+plane).
+
+The instrument reaches a setting when θi and θs lie in the ``[design]`` ranges and the camera
+stays clear of the incident beam: in the plane the camera sits at the lab angle θi + θs from the
+direction back to the source, so |θi + θs| ≥ ``source_clearance_deg``. The grid is every
+in-plane setting whose θi and θs are multiples of ``step_deg`` (θi 0–89°, θs ±89°), the limits
+of the reachable ranges added; the settings the instrument cannot reach are left out and
+counted by the first limit they break (θi, θs, then the beam).
 
 Candidate CSV (header required): ``theta_i_deg,theta_s_deg`` and optionally ``series`` (default
 the design series) and ``phi_s_deg`` (out of the plane; empty or absent: in the plane).
@@ -15,14 +22,14 @@ from __future__ import annotations
 
 import csv
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
 from brdf_infer.errors import BadInputError
 from brdf_infer.measurements import Measurements
-from brdf_infer.scene import DesignSettings, Scene
+from brdf_infer.scene import DesignSettings, Scene, SeriesGeometry
 
 
 @dataclass(frozen=True)
@@ -34,15 +41,36 @@ class Candidates:
         theta_i_deg: θi [deg].
         theta_s_deg: θs [deg]: signed in the plane, polar out of it.
         phi_s_deg: azimuth [deg], NaN in the plane.
+        session: ``"new"`` (a new reference measurement) or the series whose measured
+            session the row continues; None: not yet said (:func:`~brdf_infer.design.design`
+            gives each row a new session unless it continues the ``same_session`` series;
+            :func:`~brdf_infer.design.predictive` takes every row as continuing its series).
+        left_out: for a grid, ``{"grid", "reachable", "theta_i_deg", "theta_s_deg",
+            "source_clearance_deg"}``: the grid's settings, those kept, and those left out
+            by each limit; None for a CSV.
     """
 
     series: np.ndarray
     theta_i_deg: np.ndarray
     theta_s_deg: np.ndarray
     phi_s_deg: np.ndarray
+    session: np.ndarray | None = None
+    left_out: dict[str, int] | None = None
 
     def __len__(self) -> int:
         return len(self.series)
+
+    def sessions(self) -> np.ndarray:
+        """The session of every row (None taken as continuing its series')."""
+        return self.series.astype(str) if self.session is None else self.session
+
+    def in_sessions(self, same_session: str | None) -> Candidates:
+        """The candidates, each row in a new session unless its series is ``same_session``
+        (rows whose session is already said keep it)."""
+        if self.session is not None:
+            return self
+        session = np.where(self.series == same_session, self.series, "new").astype(str)
+        return replace(self, session=session)
 
     def as_measurements(self, measurements: Measurements) -> Measurements:
         """The candidates as measurement rows (value 1: only their geometry is used), each on
@@ -70,61 +98,121 @@ class Candidates:
             "theta_s_deg": theta_s,
             "phi_s_deg": phi if math.isfinite(phi) else (180.0 if theta_s >= 0 else 0.0),
             "series": str(self.series[index]),
+            "session": str(self.sessions()[index]),
         }
 
 
-def design_series(scene: Scene, measurements: Measurements, series: str | None = None) -> str:
-    """The series new rows join: ``series``, else ``[design] series``, else the one with the
-    most rows.
+def design_series(
+    scene: Scene,
+    measurements: Measurements,
+    series: str | None = None,
+    same_session: str | None = None,
+    aperture: tuple[float, float] | None = None,
+) -> str:
+    """The series new rows join: ``series``, else ``same_session``, else ``[design] series``,
+    else the one with the most rows. A series without rows is a new one: its aperture from
+    the scene's ``[series.NAME]`` or ``aperture`` (:func:`session_scene`).
 
     Raises:
-        BadInputError: a series the scene lacks.
+        BadInputError: ``same_session`` not a measured series; a new series without an
+            aperture; an aperture for a measured series.
     """
-    name = series or scene.design.series
+    measured = list(dict.fromkeys(measurements.series))
+    if same_session is not None and same_session not in measured:
+        raise BadInputError(
+            f"no measured series {same_session!r} in scene '{scene.name}' to continue "
+            f"(known: {', '.join(measured)})",
+            field="same_session",
+        )
+    name = series or same_session or scene.design.series
     if name is None:
         names, counts = np.unique(measurements.series, return_counts=True)
         return str(names[int(np.argmax(counts))])
-    if name not in scene.series or name not in set(measurements.series):
+    if aperture is not None and name in measured:
         raise BadInputError(
-            f"no measured series {name!r} in scene '{scene.name}' "
-            f"(known: {', '.join(dict.fromkeys(measurements.series))})",
+            f"series {name!r} has measured rows and their aperture; an aperture is for a new "
+            "series (name one with --series)",
+            field="aperture",
+        )
+    if name not in measured and name not in scene.series and aperture is None:
+        raise BadInputError(
+            f"no measured series {name!r} in scene '{scene.name}' (known: "
+            f"{', '.join(measured)}), and no aperture for a new one (a [series.{name}] table "
+            "in the scene, or --aperture D_MM,R_MM)",
             field="series",
         )
     return name
 
 
+def session_scene(scene: Scene, series: str, aperture: tuple[float, float] | None = None) -> Scene:
+    """``scene`` with the aperture (diameter, distance) [mm] of ``series``: ``aperture`` where
+    given (a new series, or another aperture for a measured one), else the scene's own."""
+    if aperture is None:
+        return scene
+    diameter, distance = aperture
+    if not (0 < diameter < distance and math.isfinite(distance)):
+        raise BadInputError(
+            f"expected 0 < diameter < distance [mm], got {diameter:g}, {distance:g}",
+            field="aperture",
+        )
+    geometry = SeriesGeometry(float(diameter), float(distance))
+    return replace(scene, series={**scene.series, series: geometry})
+
+
 def design_sample(measurements: Measurements, series: str) -> str:
-    """The sample of ``series`` with the most rows (the one a new row is taken on)."""
+    """The sample of ``series`` with the most rows (the one a new row is taken on); for a
+    series without rows, the scene's sample with the most rows."""
+    mask = measurements.series == series
     samples, counts = np.unique(
-        measurements.sample[measurements.series == series], return_counts=True
+        measurements.sample[mask if np.any(mask) else slice(None)], return_counts=True
     )
     return str(samples[int(np.argmax(counts))])
 
 
-def reachable(settings: DesignSettings, theta_i, theta_s, phi_s) -> np.ndarray:
-    """True where the instrument reaches the setting (module docstring)."""
+REACH_LIMITS = ("theta_i_deg", "theta_s_deg", "source_clearance_deg")
+
+
+def reach_limit(settings: DesignSettings, theta_i, theta_s, phi_s) -> np.ndarray:
+    """Per setting, the first limit of the instrument it breaks (:data:`REACH_LIMITS`:
+    θi range, θs range, camera too near the beam), or ``""`` where it is reached."""
     theta_i, theta_s = np.asarray(theta_i, float), np.asarray(theta_s, float)
     in_plane = ~np.isfinite(np.asarray(phi_s, float))
     low_i, high_i = settings.theta_i_deg
     low_s, high_s = settings.theta_s_deg
-    inside = (theta_i >= low_i - 1e-9) & (theta_i <= high_i + 1e-9)
-    inside &= np.where(
+    inside_i = (theta_i >= low_i - 1e-9) & (theta_i <= high_i + 1e-9)
+    inside_s = np.where(
         in_plane, (theta_s >= low_s - 1e-9) & (theta_s <= high_s + 1e-9), theta_s <= high_s
     )
-    clear = np.abs(theta_i + theta_s) >= settings.source_clearance_deg - 1e-9
-    return inside & (clear | ~in_plane)
+    clear = (np.abs(theta_i + theta_s) >= settings.source_clearance_deg - 1e-9) | ~in_plane
+    return np.select([~inside_i, ~inside_s, ~clear], list(REACH_LIMITS), "")
+
+
+def reachable(settings: DesignSettings, theta_i, theta_s, phi_s) -> np.ndarray:
+    """True where the instrument reaches the setting (module docstring)."""
+    return reach_limit(settings, theta_i, theta_s, phi_s) == ""
+
+
+def _axis(step: float, low: float, high: float, limits: tuple[float, float]) -> np.ndarray:
+    """The multiples of ``step`` in [low, high] [deg], with the reachable ``limits`` added."""
+    first, last = math.ceil((low - 1e-9) / step), math.floor((high + 1e-9) / step)
+    return np.unique(np.concatenate([step * np.arange(first, last + 1), limits]))
 
 
 def grid_candidates(settings: DesignSettings, series: str) -> Candidates:
-    """Every reachable in-plane setting on the ``[design]`` grid, in the given series."""
-    step = settings.step_deg
-    theta_i = np.arange(settings.theta_i_deg[0], settings.theta_i_deg[1] + 1e-9, step)
-    theta_s = np.arange(settings.theta_s_deg[0], settings.theta_s_deg[1] + 1e-9, step)
+    """Every reachable in-plane setting of the grid (module docstring), in the given series;
+    ``left_out`` counts the rest by the limit they break."""
+    theta_i = _axis(settings.step_deg, 0.0, 89.0, settings.theta_i_deg)
+    theta_s = _axis(settings.step_deg, -89.0, 89.0, settings.theta_s_deg)
     grid_i, grid_s = (a.reshape(-1) for a in np.meshgrid(theta_i, theta_s, indexing="ij"))
     phi = np.full(grid_i.shape, np.nan)
-    keep = reachable(settings, grid_i, grid_s, phi)
+    limit = reach_limit(settings, grid_i, grid_s, phi)
+    keep = limit == ""
     count = int(np.sum(keep))
-    return Candidates(np.full(count, series), grid_i[keep], grid_s[keep], phi[keep])
+    left_out = {"grid": int(limit.size), "reachable": count}
+    left_out |= {name: int(np.sum(limit == name)) for name in REACH_LIMITS}
+    return Candidates(
+        np.full(count, series), grid_i[keep], grid_s[keep], phi[keep], left_out=left_out
+    )
 
 
 def _number(text: str, field: str, where: dict) -> float:
@@ -157,7 +245,7 @@ def read_candidates(
     for column in ("theta_i_deg", "theta_s_deg"):
         if column not in header:
             raise BadInputError("missing column", file=path, field=column)
-    known = set(measurements.series)
+    known = set(measurements.series) | {series}
     names, theta_i, theta_s, phi = [], [], [], []
     for number, row in enumerate(rows, start=1):
         where = {"file": path, "row": number}
@@ -169,18 +257,14 @@ def read_candidates(
         azimuth = (row.get("phi_s_deg") or "").strip()
         values = [_number(row[c], c, where) for c in ("theta_i_deg", "theta_s_deg")]
         values.append(_number(azimuth, "phi_s_deg", where) if azimuth else math.nan)
-        if not reachable(scene.design, *values):
-            field = (
-                "theta_i_deg"
-                if not scene.design.theta_i_deg[0] <= values[0] <= scene.design.theta_i_deg[1]
-                else "theta_s_deg"
-            )
+        limit = str(reach_limit(scene.design, *values))
+        if limit:
             raise BadInputError(
                 f"the instrument cannot reach θi = {values[0]:g}°, θs = {values[1]:g}° "
                 f"([design] θi {list(scene.design.theta_i_deg)}, θs "
                 f"{list(scene.design.theta_s_deg)}, camera ≥ "
                 f"{scene.design.source_clearance_deg:g}° from the beam)",
-                field=field,
+                field="theta_s_deg" if limit == "source_clearance_deg" else limit,
                 **where,
             )
         names.append(name)

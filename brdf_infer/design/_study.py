@@ -8,8 +8,13 @@ adds the candidate that, measured together with those already chosen, leaves the
 expected sd — not K times the single best).
 
 The new rows' predictive is their conditional given the measured rows under the scene's own
-error model (shared calibration and sample effects), so the answer depends on which series a
-row joins. The run must be of the scene (its name and its rows).
+error model, so the answer depends on the session a row is taken in. By default every new row
+is a new session: a reference measurement of its own (Eq. 2; the source fluctuates ≈ 9 % from
+pulse to pulse, Sec. 3), i.e. a calibration factor of its own — one for all new rows of a
+series, shared among them and unknown to the measured rows — and rotation settings of its own;
+only the sample effect is shared with the measured rows. A row continuing a measured session
+(``same_session``) shares that series' calibration factor and, at a θi already measured, its
+rotation error with the measured rows. The run must be of the scene (its name and its rows).
 """
 
 from __future__ import annotations
@@ -17,7 +22,7 @@ from __future__ import annotations
 import json
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -26,7 +31,13 @@ import jax.numpy as jnp
 import numpy as np
 
 from brdf_infer._design_target import DesignTarget, parse_target
-from brdf_infer.design._candidates import Candidates, design_series, grid_candidates
+from brdf_infer.design._candidates import (
+    REACH_LIMITS,
+    Candidates,
+    design_series,
+    grid_candidates,
+    session_scene,
+)
 from brdf_infer.design._estimate import (
     ESS_FLOOR,
     RowPredictive,
@@ -140,12 +151,17 @@ def target_values(target: DesignTarget, params: Params, scene: Scene) -> np.ndar
 
 
 def candidate_measurements(candidates: Candidates, measurements: Measurements) -> Measurements:
-    """The candidates as rows whose σ is the median relative σ of their series' rows."""
+    """The candidates as rows whose σ is the median relative σ of their series' rows (of
+    every row for a new series)."""
     rows = candidates.as_measurements(measurements)
     if measurements.reflectance_err is None:
         return rows
     relative = measurements.reflectance_err / measurements.reflectance
-    median = {s: float(np.median(relative[measurements.series == s])) for s in set(rows.series)}
+    median = {
+        s: float(np.median(relative[mask if np.any(mask) else slice(None)]))
+        for s in set(rows.series)
+        for mask in [measurements.series == s]
+    }
     error = np.array([median[s] for s in rows.series]) * rows.reflectance
     return Measurements(**{**rows.__dict__, "reflectance_err": error})
 
@@ -159,7 +175,10 @@ def _shared_column(keys: list, key) -> int:
 
 
 def predictive(run: DesignRun, candidates: Candidates, draws: dict) -> RowPredictive:
-    """Every draw's conditional predictive of every candidate row (:mod:`._estimate`)."""
+    """Every draw's conditional predictive of every candidate row (:mod:`._estimate`), each
+    row in its session (:attr:`Candidates.session`; None: its series' measured one). A new
+    session's calibration factor is one more shared effect, a column of the loading that the
+    measured rows do not load on."""
     scene, measurements = run.scene, run.measurements
     model = build_posterior_model(scene, measurements)
     parts = model.draw_parts(draws)
@@ -168,6 +187,8 @@ def predictive(run: DesignRun, candidates: Candidates, draws: dict) -> RowPredic
     rows = build_observation_model(scene, new).data
     layout = noise_layout(scene.errors, new)
     errors = scene.errors
+    sessions = candidates.sessions()
+    fresh = sessions == "new"  # a new session: nothing shared but the sample
     samples = list(measurements.sample)
     groups = calibration_groups(errors, measurements)
     sample_shared = group_members(samples)[0].shape[1]
@@ -175,19 +196,34 @@ def predictive(run: DesignRun, candidates: Candidates, draws: dict) -> RowPredic
     columns = parts.factor.shape[2]
     sample_col = np.array([_shared_column(samples, s) for s in new.sample])
     calibration_col = np.array(
-        [-1 if groups is None else _shared_column(groups, g) for g in (new_groups or [])]
-        or [-1] * len(new)
+        [
+            -1 if groups is None or is_new else _shared_column(groups, g)
+            for g, is_new in zip(new_groups or [None] * len(new), fresh, strict=True)
+        ]
     )
     calibration_col = np.where(calibration_col >= 0, calibration_col + sample_shared, -1)
-    # a row at a (series, sample, θi) already measured shares that setting's rotation error
+    # a new session's reference: one calibration factor per new group, shared by its rows
+    fresh_keys = [g for g, is_new in zip(new_groups or [], fresh, strict=False) if is_new]
+    fresh_groups = list(dict.fromkeys(fresh_keys))
+    fresh_col = np.array(
+        [
+            fresh_groups.index(g) if new_groups is not None and is_new else -1
+            for g, is_new in zip(new_groups or [None] * len(new), fresh, strict=True)
+        ]
+    )
+    fresh_one_hot = jnp.asarray(fresh_col[:, None] == np.arange(len(fresh_groups))[None, :], float)
+    # a row continuing a session at a (series, sample, θi) measured shares that setting's
+    # rotation error; a new session's settings are its own
     settings = list(
         zip(measurements.series, measurements.sample, measurements.theta_i_deg, strict=True)
     )
     rotation_shared = columns - group_members(settings)[0].shape[1]
     rotation_col = np.array(
         [
-            _shared_column(settings, key)
-            for key in zip(new.series, new.sample, new.theta_i_deg, strict=True)
+            -1 if is_new else _shared_column(settings, key)
+            for key, is_new in zip(
+                zip(new.series, new.sample, new.theta_i_deg, strict=True), fresh, strict=True
+            )
         ]
     )
     rotation_col = np.where(rotation_col >= 0, rotation_col + rotation_shared, -1)
@@ -228,9 +264,13 @@ def predictive(run: DesignRun, candidates: Candidates, draws: dict) -> RowPredic
             + (g_cam * errors.camera_deg * angles) ** 2
             + rotation_new * rotation**2
             + jnp.asarray(sample_col < 0, float) * tau**2
-            + jnp.asarray(calibration_col < 0, float) * calibration**2
+            + jnp.asarray((calibration_col < 0) & (fresh_col < 0), float) * calibration**2
         )
-        return row_predictive(res, factor, diagonal, mean, loading, own)
+        given = row_predictive(res, factor, diagonal, mean, loading, own)
+        if not fresh_groups:
+            return given
+        shared = jnp.concatenate([given.loading, calibration * fresh_one_hot], axis=1)
+        return given._replace(loading=shared)
 
     program = jax.jit(jax.vmap(one))
     return program(params, sample_sd, repeatability, residual, parts.factor, parts.diagonal)
@@ -248,6 +288,9 @@ class DesignResult:
     seconds: float
     measured: list[dict[str, Any]]
     options: DesignOptions
+    reach: dict[str, Any]
+    left_out: dict[str, int] | None
+    same_session: str | None
 
     def as_json(self) -> dict[str, Any]:
         return {
@@ -261,6 +304,9 @@ class DesignResult:
             "draws": self.options.draws,
             "simulations": self.options.simulations,
             "ess_floor": ESS_FLOOR,
+            "same_session": self.same_session,
+            "reach": self.reach,
+            "left_out": self.left_out,
             "measured": self.measured,
         }
 
@@ -292,24 +338,39 @@ def design(
     candidates: Candidates | None = None,
     options: DesignOptions | None = None,
     series: str | None = None,
+    same_session: str | None = None,
+    aperture: tuple[float, float] | None = None,
 ) -> DesignResult:
     """Where to measure next for ``target`` (module docstring).
 
     Args:
         run: the run folder's draws and scene (:func:`load_design_run`).
         target: a target string (:mod:`brdf_infer._design_target`) or a parsed one.
-        candidates: the settings to consider (default: the scene's ``[design]`` grid in the
-            design series).
+        candidates: the settings to consider (default: the reachable settings of the scene's
+            ``[design]`` grid in the design series).
         options: draws, simulations, budget and seed (default :class:`DesignOptions`).
-        series: the series new grid rows join (default: ``[design] series`` or the series
-            with the most rows).
+        series: the series new grid rows are taken in (default: ``same_session``, else
+            ``[design] series``, else the series with the most rows); one without rows is a
+            new series.
+        same_session: the measured series whose session its new rows continue (default
+            ``[design] same_session``; None: every new row is a new session).
+        aperture: (diameter, distance) [mm] of a new series (default its ``[series.NAME]``).
+
+    Raises:
+        BadInputError: ``same_session`` not a measured series, a new series without an
+            aperture.
     """
     start = time.perf_counter()
     options = DesignOptions() if options is None else options
     target = parse_target(target) if isinstance(target, str) else target
-    scene, measurements = run.scene, run.measurements
+    measurements = run.measurements
+    same_session = same_session or run.scene.design.same_session
+    name = design_series(run.scene, measurements, series, same_session, aperture)
+    run = replace(run, scene=session_scene(run.scene, name, aperture))
+    scene = run.scene
     if candidates is None:
-        candidates = grid_candidates(scene.design, design_series(scene, measurements, series))
+        candidates = grid_candidates(scene.design, name)
+    candidates = candidates.in_sessions(same_session)
     total = len(run.sites["brdf0"])
     keep = np.unique(np.linspace(0, total - 1, min(options.draws, total)).round().astype(int))
     draws = {name: values[keep] for name, values in run.sites.items()}
@@ -363,6 +424,12 @@ def design(
         seconds=time.perf_counter() - start,
         measured=measured,
         options=options,
+        reach={
+            name: list(value) if isinstance(value, tuple) else value
+            for name, value in ((n, getattr(scene.design, n)) for n in REACH_LIMITS)
+        },
+        left_out=candidates.left_out,
+        same_session=same_session,
     )
 
 

@@ -2,7 +2,16 @@
 
 from __future__ import annotations
 
-DESIGN_HEADERS = ["step", "θi [deg]", "θs [deg]", "series", "expected sd", "sd ratio", "EIG [nats]"]
+DESIGN_HEADERS = [
+    "step",
+    "θi [deg]",
+    "θs [deg]",
+    "series",
+    "session",
+    "expected sd",
+    "sd ratio",
+    "EIG [nats]",
+]
 
 
 def target_scale(payload: dict) -> tuple[float, str]:
@@ -22,9 +31,32 @@ def design_rows(payload: dict) -> list[list[str]]:
             f"{c['theta_i_deg']:g}",
             f"{c['theta_s_deg']:g}",
             c["series"],
+            c.get("session", c["series"]),  # design.json before sessions: the series' own
             f"{scale * c['expected_sd']:.3g}{unit}",
             f"{c['sd_ratio']:.3f}",
             f"{c['eig_nats']:.2f}",
         ]
         for c in payload["chosen"]
     ]
+
+
+def reach_line(payload: dict) -> str:
+    """What the instrument reaches and how many grid settings were left out, and why (empty
+    for a design.json without it)."""
+    reach, left = payload.get("reach"), payload.get("left_out")
+    if not reach:
+        return ""
+    low_i, high_i = reach["theta_i_deg"]
+    low_s, high_s = reach["theta_s_deg"]
+    text = (
+        f"reachable: θi {low_i:g}–{high_i:g}°, θs {low_s:g}–{high_s:g}°, camera ≥ "
+        f"{reach['source_clearance_deg']:g}° from the beam"
+    )
+    if not left:
+        return text + " (candidates from a file, each checked)"
+    out = left["grid"] - left["reachable"]
+    return (
+        f"{text}; of {left['grid']} grid settings {out} left out: θi out of range "
+        f"{left['theta_i_deg']}, θs out of range {left['theta_s_deg']}, camera too near the "
+        f"beam {left['source_clearance_deg']}"
+    )

@@ -85,14 +85,18 @@ Schema (keys other than these are errors; defaults in brackets)::
     compare = ["strumik2024", "abg"]         # [] model families compared by PSIS-LOO
     design = "tis:70"                        # [unset] where to measure next for this target
                                              #   (brdf_infer.design; tis:THETA, pi_brdf0, ...)
-    [design]                                 # the settings a new row may take (brdf-infer design)
-    theta_i_deg = [10.0, 85.0]               # [[10, 85]] θi range [deg]
-    theta_s_deg = [-85.0, 85.0]              # [[-85, 85]] signed in-plane θs range [deg]
+    [design]                                 # what the goniometer reaches, how a new row is
+                                             #   taken (brdf-infer design)
+    theta_i_deg = [18.0, 80.0]               # [[10, 85]] θi it reaches [deg]
+    theta_s_deg = [-85.0, 85.0]              # [[-85, 85]] signed in-plane θs it reaches [deg]
     step_deg = 5.0                           # [5] grid step [deg]
-    source_clearance_deg = 10.0              # [10] least lab angle |θi + θs| between the
+    source_clearance_deg = 36.0              # [10] least lab angle |θi + θs| between the
                                              #   camera and the incident beam [deg]
     series = "II"                            # [the series with the most rows] the series
-                                             #   (aperture, calibration) a new row joins
+                                             #   (aperture) a new row is taken in; one without
+                                             #   rows: a new series ([series.NAME] aperture)
+    same_session = "II"                      # [unset: a new session, its own reference]
+                                             #   new rows of this series continue its session
     budget = 3                               # [3] rows chosen together
     [reference.tis_70deg]                    # a published value to place in the posterior:
     value = 0.058                            #   tis_<θi>deg, pi_brdf0 or a parameter of

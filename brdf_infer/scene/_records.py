@@ -176,18 +176,26 @@ class Studies:
 
 @dataclass(frozen=True)
 class DesignSettings:
-    """The ``[design]`` table: the settings a new row may take (:mod:`brdf_infer.design`).
+    """The ``[design]`` table: the settings the instrument can reach and how a new row is
+    taken (:mod:`brdf_infer.design`).
 
     Attributes:
-        theta_i_deg: (low, high) incidence angles [deg].
-        theta_s_deg: (low, high) signed in-plane scattering angles [deg] (> 0: forward side).
+        theta_i_deg: (low, high) incidence angles the goniometer reaches [deg].
+        theta_s_deg: (low, high) signed in-plane scattering angles it reaches [deg] (> 0:
+            forward side).
         step_deg: grid step in θi and θs [deg].
         source_clearance_deg: the least lab angle |θi + θs| between the camera and the
             incident beam [deg]; the camera cannot stand in the beam (θs = −θi is the
             retro-reflection direction, the source itself).
-        series: the series whose aperture and calibration a new row shares (None: the series
-            with the most rows).
+        series: the series (aperture) a new row is taken in (None: the series with the most
+            rows); one without measured rows is a new series, its aperture from its
+            ``[series.NAME]`` table.
+        same_session: the measured series whose session new rows of that series continue
+            (its reference measurement, Eq. 2, and rotation settings); None: every new row
+            is a new session with a reference of its own.
         budget: rows chosen together by default.
+
+    The defaults are a generic goniometer, not a measured one: a scene states its own.
     """
 
     theta_i_deg: tuple[float, float] = (10.0, 85.0)
@@ -195,6 +203,7 @@ class DesignSettings:
     step_deg: float = 5.0
     source_clearance_deg: float = 10.0
     series: str | None = None
+    same_session: str | None = None
     budget: int = 3  # as brdf_infer.settings.DesignOptions (a test holds them equal)
 
 

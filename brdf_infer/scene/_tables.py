@@ -88,13 +88,14 @@ def _parse_design(document: dict, path: Path, series: dict) -> DesignSettings:
     """The ``[design]`` table (:class:`DesignSettings`)."""
     table = _table(document, "design", path, set(DesignSettings.__dataclass_fields__))
     defaults = DesignSettings()
-    name = table.get("series")
-    if name is not None and name not in series:
-        raise BadInputError(
-            f"no series {name!r} in the scene (known: {', '.join(series)})",
-            file=path,
-            field="design.series",
-        )
+    for key in ("series", "same_session"):
+        name = table.get(key)
+        if name is not None and name not in series:
+            raise BadInputError(
+                f"no series {name!r} in the scene (known: {', '.join(series)})",
+                file=path,
+                field=f"design.{key}",
+            )
     clearance = _number(table, "source_clearance_deg", path, default=defaults.source_clearance_deg)
     if not 0.0 <= clearance < 90.0:
         raise BadInputError(
@@ -116,7 +117,8 @@ def _parse_design(document: dict, path: Path, series: dict) -> DesignSettings:
         theta_s_deg=_angle_range(table, "theta_s_deg", path, defaults.theta_s_deg, -89.0, 89.0),
         step_deg=step,
         source_clearance_deg=clearance,
-        series=name,
+        series=table.get("series"),
+        same_session=table.get("same_session"),
         budget=budget,
     )
 
