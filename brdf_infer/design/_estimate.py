@@ -16,7 +16,10 @@ noise and the repeatability). So a set of new rows has, per draw, the conditiona
     y_new | y, θ ~ N(μ_new + W_new m_z,  diag(d_new) + B Bᵀ),   B = W_new L_C⁻ᵀ,
 
 which is exactly the new rows' conditional given the measured rows, not an independent draw:
-a new row of series II inherits what the data say about series II's calibration factor.
+a new row continuing series II's session inherits what the data say about series II's
+calibration factor. A row of a new session loads on its sample's column only; its session's
+calibration factor is a further column of B, σ_cal for every row of that session, which no
+measured row loads on (:func:`brdf_infer.design.predictive`).
 
 The expected posterior variance. For draws θ_s (s = 1…S, an evenly thinned posterior) and a
 set of settings x, simulate J outcomes y_j ~ p(y | θ_{s_j}, x, D) (s_j evenly spaced, common

@@ -9,8 +9,8 @@ expected sd — not K times the single best).
 
 The new rows' predictive is their conditional given the measured rows under the scene's own
 error model, so the answer depends on the session a row is taken in. By default every new row
-is a new session: a reference measurement of its own (Eq. 2; the source fluctuates ≈ 9 % from
-pulse to pulse, Sec. 3), i.e. a calibration factor of its own — one for all new rows of a
+is a new session: a reference measurement of its own (Eq. 2; the source's energy fluctuates by
+≈ 9 %, Sec. 2), i.e. a calibration factor of its own — one for all new rows of a
 series, shared among them and unknown to the measured rows — and rotation settings of its own;
 only the sample effect is shared with the measured rows. A row continuing a measured session
 (``same_session``) shares that series' calibration factor and, at a θi already measured, its
@@ -192,23 +192,26 @@ def predictive(run: DesignRun, candidates: Candidates, draws: dict) -> RowPredic
     samples = list(measurements.sample)
     groups = calibration_groups(errors, measurements)
     sample_shared = group_members(samples)[0].shape[1]
-    new_groups = calibration_groups(errors, new)
+    new_groups = calibration_groups(errors, new) or [None] * len(new)
     columns = parts.factor.shape[2]
     sample_col = np.array([_shared_column(samples, s) for s in new.sample])
     calibration_col = np.array(
         [
             -1 if groups is None or is_new else _shared_column(groups, g)
-            for g, is_new in zip(new_groups or [None] * len(new), fresh, strict=True)
+            for g, is_new in zip(new_groups, fresh, strict=True)
         ]
     )
     calibration_col = np.where(calibration_col >= 0, calibration_col + sample_shared, -1)
     # a new session's reference: one calibration factor per new group, shared by its rows
-    fresh_keys = [g for g, is_new in zip(new_groups or [], fresh, strict=False) if is_new]
-    fresh_groups = list(dict.fromkeys(fresh_keys))
+    fresh_groups = list(
+        dict.fromkeys(g for g, is_new in zip(new_groups, fresh, strict=True) if is_new)
+    )
+    if groups is None:  # no calibration in the error model
+        fresh_groups = []
     fresh_col = np.array(
         [
-            fresh_groups.index(g) if new_groups is not None and is_new else -1
-            for g, is_new in zip(new_groups or [None] * len(new), fresh, strict=True)
+            fresh_groups.index(g) if g in fresh_groups and is_new else -1
+            for g, is_new in zip(new_groups, fresh, strict=True)
         ]
     )
     fresh_one_hot = jnp.asarray(fresh_col[:, None] == np.arange(len(fresh_groups))[None, :], float)
