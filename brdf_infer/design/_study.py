@@ -151,17 +151,18 @@ def target_values(target: DesignTarget, params: Params, scene: Scene) -> np.ndar
 
 
 def candidate_measurements(candidates: Candidates, measurements: Measurements) -> Measurements:
-    """The candidates as rows whose σ is the median relative σ of their series' rows (of
-    every row for a new series)."""
+    """The candidates as rows whose σ is the median relative σ of their series' rows (for a
+    new series, the largest such median of the measured series: its noise is not known)."""
     rows = candidates.as_measurements(measurements)
     if measurements.reflectance_err is None:
         return rows
     relative = measurements.reflectance_err / measurements.reflectance
     median = {
-        s: float(np.median(relative[mask if np.any(mask) else slice(None)]))
-        for s in set(rows.series)
-        for mask in [measurements.series == s]
+        s: float(np.median(relative[measurements.series == s]))
+        for s in dict.fromkeys(measurements.series)
     }
+    widest = max(median.values())  # a new series: the noisiest measured series' (unknown)
+    median = {s: median.get(s, widest) for s in set(rows.series)}
     error = np.array([median[s] for s in rows.series]) * rows.reflectance
     return Measurements(**{**rows.__dict__, "reflectance_err": error})
 
