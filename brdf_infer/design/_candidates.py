@@ -127,7 +127,7 @@ def design_series(
     name = series or same_session or scene.design.series
     if name is None:
         names, counts = np.unique(measurements.series, return_counts=True)
-        return str(names[int(np.argmax(counts))])
+        name = str(names[int(np.argmax(counts))])
     if aperture is not None and name in measured:
         raise BadInputError(
             f"series {name!r} has measured rows and their aperture; an aperture is for a new "
@@ -145,8 +145,8 @@ def design_series(
 
 
 def session_scene(scene: Scene, series: str, aperture: tuple[float, float] | None = None) -> Scene:
-    """``scene`` with the aperture (diameter, distance) [mm] of ``series``: ``aperture`` where
-    given (a new series, or another aperture for a measured one), else the scene's own."""
+    """``scene`` with the aperture (diameter, distance) [mm] of the new series ``series``
+    where ``aperture`` is given (:func:`design_series` refuses one for a measured series)."""
     if aperture is None:
         return scene
     diameter, distance = aperture
