@@ -150,6 +150,20 @@ def _residual_sum(design: np.ndarray, y: np.ndarray) -> tuple[float, int]:
     return float(left @ left), basis.shape[1]
 
 
+def _whitener(covariance: np.ndarray):
+    """A map a → L⁻¹ a with L Lᵀ = ``covariance``; for a singular covariance (rows that share
+    every noise source, e.g. one incidence angle of one sample) the map onto its range,
+    eigenvalues below 1e-12 of the largest left out (fewer rows then count)."""
+    try:
+        factor = np.linalg.cholesky(covariance)
+    except np.linalg.LinAlgError:
+        values, vectors = np.linalg.eigh(covariance)
+        keep = values > 1e-12 * values.max()
+        basis = (vectors[:, keep] / np.sqrt(values[keep])).T
+        return lambda a: basis @ np.asarray(a, float)
+    return lambda a: np.linalg.solve(factor, np.asarray(a, float))
+
+
 def residual_trends(
     residuals: np.ndarray,
     covariance: np.ndarray,
@@ -178,11 +192,10 @@ def residual_trends(
         name → p-value for every group and ``"joint"`` (NaN where a group adds no rank or no
         degrees of freedom are left).
     """
-    factor = np.linalg.cholesky(np.asarray(covariance, float))
-    whiten = lambda a: np.linalg.solve(factor, np.asarray(a, float))  # noqa: E731
+    whiten = _whitener(np.asarray(covariance, float))
     y = whiten(residuals)
     rows = len(y)
-    base = whiten(np.column_stack([np.ones(rows), np.asarray(absorbed, float)]))
+    base = whiten(np.column_stack([np.ones(len(residuals)), np.asarray(absorbed, float)]))
     base_sum, base_rank = _residual_sum(base, y)
 
     def p_value(columns: list[np.ndarray]) -> float:

@@ -344,14 +344,7 @@ def _lsq_result(
     warnings += _identifiability_warnings(
         measurements, physical, sigma_of, condition, space, z_best
     )
-    if not settled:
-        warnings.append(
-            f"the row weights had not settled after {reweight.solves} reweighted solves"
-        )
-    if converged < 0.8 * starts:
-        warnings.append(
-            f"only {converged} of {starts} starts reached the best cost {best_cost:.6g}"
-        )
+    warnings += _solver_warnings(settled, reweight, converged, starts, best_cost)
     row_sigma = np.asarray(model.data.sigma)
     residuals = np.asarray(residuals_free(jnp.asarray(z_best))) * row_sigma  # [ln R]
     return LsqResult(
@@ -383,6 +376,22 @@ def _lsq_result(
         reweightings=reweight.solves,
         warnings=warnings,
     )
+
+
+def _solver_warnings(
+    settled: bool, reweight: Reweighting, converged: int, starts: int, best_cost: float
+) -> list[str]:
+    """Row weights that had not settled, and too few starts reaching the best cost."""
+    warnings = []
+    if not settled:
+        warnings.append(
+            f"the row weights had not settled after {reweight.solves} reweighted solves"
+        )
+    if converged < 0.8 * starts:
+        warnings.append(
+            f"only {converged} of {starts} starts reached the best cost {best_cost:.6g}"
+        )
+    return warnings
 
 
 def _repeatability_check(scene, reweight: Reweighting, residuals) -> RepeatabilityCheck | None:

@@ -175,26 +175,15 @@ def _shared_column(keys: list, key) -> int:
     return shared.index(key) if key in shared else -1
 
 
-def predictive(run: DesignRun, candidates: Candidates, draws: dict) -> RowPredictive:
-    """Every draw's conditional predictive of every candidate row (:mod:`._estimate`), each
-    row in its session (:attr:`Candidates.session`; None: its series' measured one). A new
-    session's calibration factor is one more shared effect, a column of the loading that the
-    measured rows do not load on."""
-    scene, measurements = run.scene, run.measurements
-    model = build_posterior_model(scene, measurements)
-    parts = model.draw_parts(draws)
-    residual = model.data.rows.log_reflectance[None, :] - parts.mean
-    new = candidate_measurements(candidates, measurements)
-    rows = build_observation_model(scene, new).data
-    layout = noise_layout(scene.errors, new)
-    errors = scene.errors
-    sessions = candidates.sessions()
-    fresh = sessions == "new"  # a new session: nothing shared but the sample
+def _loading_columns(errors, measurements, new, fresh: np.ndarray, columns: int):
+    """Where each candidate row loads on the measured rows' shared effects (a column of their
+    factor W, or −1: an effect of its own): its sample, its calibration group (−1 in a new
+    session, ``fresh``), and its rotation setting; and a new session's calibration groups
+    (``fresh_col``: the row's index among ``fresh_groups``, else −1)."""
     samples = list(measurements.sample)
     groups = calibration_groups(errors, measurements)
     sample_shared = group_members(samples)[0].shape[1]
     new_groups = calibration_groups(errors, new) or [None] * len(new)
-    columns = parts.factor.shape[2]
     sample_col = np.array([_shared_column(samples, s) for s in new.sample])
     calibration_col = np.array(
         [
@@ -215,7 +204,6 @@ def predictive(run: DesignRun, candidates: Candidates, draws: dict) -> RowPredic
             for g, is_new in zip(new_groups, fresh, strict=True)
         ]
     )
-    fresh_one_hot = jnp.asarray(fresh_col[:, None] == np.arange(len(fresh_groups))[None, :], float)
     # a row continuing a session at a (series, sample, θi) measured shares that setting's
     # rotation error; a new session's settings are its own
     settings = list(
@@ -231,6 +219,27 @@ def predictive(run: DesignRun, candidates: Candidates, draws: dict) -> RowPredic
         ]
     )
     rotation_col = np.where(rotation_col >= 0, rotation_col + rotation_shared, -1)
+    return sample_col, calibration_col, fresh_col, fresh_groups, rotation_col
+
+
+def predictive(run: DesignRun, candidates: Candidates, draws: dict) -> RowPredictive:
+    """Every draw's conditional predictive of every candidate row (:mod:`._estimate`), each
+    row in its session (:attr:`Candidates.session`; None: its series' measured one). A new
+    session's calibration factor is one more shared effect, a column of the loading that the
+    measured rows do not load on."""
+    scene, measurements = run.scene, run.measurements
+    model = build_posterior_model(scene, measurements)
+    parts = model.draw_parts(draws)
+    residual = model.data.rows.log_reflectance[None, :] - parts.mean
+    new = candidate_measurements(candidates, measurements)
+    rows = build_observation_model(scene, new).data
+    layout = noise_layout(scene.errors, new)
+    errors = scene.errors
+    columns = parts.factor.shape[2]
+    sample_col, calibration_col, fresh_col, fresh_groups, rotation_col = _loading_columns(
+        errors, measurements, new, candidates.sessions() == "new", columns
+    )
+    fresh_one_hot = jnp.asarray(fresh_col[:, None] == np.arange(len(fresh_groups))[None, :], float)
     one_hot_sample = jnp.asarray(sample_col[:, None] == np.arange(columns)[None, :], float)
     one_hot_cal = jnp.asarray(calibration_col[:, None] == np.arange(columns)[None, :], float)
     one_hot_rotation = jnp.asarray(rotation_col[:, None] == np.arange(columns)[None, :], float)
@@ -383,31 +392,9 @@ def design(
     scale = np.std(values, axis=0)
     scale = np.where(scale > 0, scale, 1.0)
     row_predictive_ = predictive(run, candidates, draws)
-    key_simulate, key_draws = jax.random.split(jax.random.PRNGKey(options.seed))
-    standard = jax.random.normal(key_simulate, (options.simulations, options.budget))
-    count = len(keep)
-    simulated = (jnp.arange(options.simulations) * count) // options.simulations
-    simulated = (simulated + jax.random.randint(key_draws, (), 0, count)) % count
-    standardised = jnp.asarray(values / scale)
-    chosen_index: list[int] = []
-    chosen, single = [], []
-    for step in range(options.budget):
-        outcome = candidate_outcomes(
-            row_predictive_,
-            jnp.asarray(chosen_index, int),
-            standardised,
-            standard[:, : step + 1],
-            simulated,
-        )
-        entries = [_entry(candidates, i, outcome) for i in range(len(candidates))]
-        for entry in entries:  # back to the target's units (standardised above)
-            if target.kind != "all":
-                entry["expected_sd"] *= float(scale[0])
-        order = _order(entries, target)
-        if step == 0:
-            single = [entries[i] for i in order]
-        chosen_index.append(order[0])
-        chosen.append({**entries[order[0]], "step": step + 1})
+    chosen, single = _greedy(
+        row_predictive_, candidates, target, jnp.asarray(values / scale), float(scale[0]), options
+    )
     current = _current(target, run, scene, scale)
     measured = [
         {
@@ -435,6 +422,44 @@ def design(
         left_out=candidates.left_out,
         same_session=same_session,
     )
+
+
+def _greedy(
+    row_predictive_: RowPredictive,
+    candidates: Candidates,
+    target: DesignTarget,
+    standardised: jnp.ndarray,
+    scale: float,
+    options: DesignOptions,
+) -> tuple[list[dict], list[dict]]:
+    """The rows chosen one after another, each the best given those before it (with its
+    ``step``), and every candidate's entry alone, best first; ``standardised``: the target's
+    values per draw over ``scale`` (its sd), the entries back in its units."""
+    count = standardised.shape[0]
+    key_simulate, key_draws = jax.random.split(jax.random.PRNGKey(options.seed))
+    standard = jax.random.normal(key_simulate, (options.simulations, options.budget))
+    simulated = (jnp.arange(options.simulations) * count) // options.simulations
+    simulated = (simulated + jax.random.randint(key_draws, (), 0, count)) % count
+    chosen_index: list[int] = []
+    chosen, single = [], []
+    for step in range(options.budget):
+        outcome = candidate_outcomes(
+            row_predictive_,
+            jnp.asarray(chosen_index, int),
+            standardised,
+            standard[:, : step + 1],
+            simulated,
+        )
+        entries = [_entry(candidates, i, outcome) for i in range(len(candidates))]
+        for entry in entries:  # back to the target's units (standardised above)
+            if target.kind != "all":
+                entry["expected_sd"] *= scale
+        order = _order(entries, target)
+        if step == 0:
+            single = [entries[i] for i in order]
+        chosen_index.append(order[0])
+        chosen.append({**entries[order[0]], "step": step + 1})
+    return chosen, single
 
 
 def _order(entries: list[dict], target: DesignTarget) -> list[int]:

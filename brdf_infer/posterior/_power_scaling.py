@@ -10,7 +10,9 @@ shared effects it holds the leave-one-out conditionals log p(yᵢ | y₋ᵢ, θ)
 whose sum is not the likelihood log p(y | θ). Both are therefore computed here from the draws:
 
 * the log prior: the scene's priors on the coordinates the model samples (ln BRDF0, b1–b3, α,
-  θs0/90°, and the half-normal priors of the learned noise scales); latent angle errors
+  θs0/90°, and the half-normal priors of the learned noise scales), truncated to coatings that
+  conserve energy (:mod:`brdf_infer.model._energy`: −∞ beyond, 0 for every posterior draw, so
+  power-scaling is unchanged by it); latent angle errors
   (``angle_method = "latent"``) are part of the likelihood's structure and left out;
 * the log likelihood: the joint normal of every row, N(y; μ, D + W Wᵀ) (independent rows for
   the ``spread`` model).
@@ -31,9 +33,12 @@ import numpyro.distributions as dist
 
 from brdf_infer._arviz import az
 from brdf_infer.coordinates import ANGLE_SCALE_DEG
+from brdf_infer.model import energy_log_factor
+from brdf_infer.params import PARAM_NAMES, Params
 from brdf_infer.posterior._likelihood import disjoint_columns
 from brdf_infer.posterior._lowrank import low_rank_normal_log_density
 from brdf_infer.posterior._model import (
+    ENERGY_SITE,
     LINEAR,
     LINEAR_SITES,
     PosteriorModel,
@@ -60,6 +65,9 @@ def log_prior_draws(model: PosteriorModel, sites: dict[str, np.ndarray]) -> np.n
         site, scale = _PRIOR_SITES[name]
         distribution = prior_distribution(prior, scale)
         total += np.asarray(distribution.log_prob(jnp.asarray(sites[site])))
+    if model.family.paper_parameters:  # the physical prior's truncation (0 on the posterior)
+        params = Params(*(jnp.asarray(sites[name]) for name in PARAM_NAMES))
+        total += np.asarray(energy_log_factor(params, model.family.constants))
     errors = model.errors
     for site, prior_scale in (
         ("sample_sd", errors.sample_sd_prior),
@@ -73,7 +81,11 @@ def log_prior_draws(model: PosteriorModel, sites: dict[str, np.ndarray]) -> np.n
 def log_likelihood_draws(model: PosteriorModel, sites: dict[str, np.ndarray]) -> np.ndarray:
     """ln p(y | θ) of every draw, the joint density of all rows (module docstring)."""
     shape = np.shape(sites[model.family.parameters[0]])
-    flat = {k: np.reshape(v, (-1, *np.shape(v)[len(shape) :])) for k, v in sites.items()}
+    flat = {
+        k: np.reshape(v, (-1, *np.shape(v)[len(shape) :]))
+        for k, v in sites.items()
+        if k != ENERGY_SITE  # the physical prior's factor: no value to reshape
+    }
     parts = model.draw_parts(flat)
     y = model.data.rows.log_reflectance
     if model.errors.model == "spread":

@@ -56,9 +56,9 @@ def reference_lines(summary: PosteriorSummary) -> str:
         for r in entries
     )
     return (
-        "<p>Published values placed in this posterior (why they can differ: "
-        '<a href="https://doi.org/10.1117/1.JATIS.10.1.018004">the article</a> fixes α and '
-        "θs0, fits ln BRDF by unweighted regression and treats no noise source apart; "
+        "<p>Published values placed in this posterior (why they can differ: the article "
+        "fixes α and θs0, fits ln BRDF by unweighted regression and treats no noise source "
+        "apart; "
         "docs/instruments.md, “The answer and the article”):</p>"
         f"<ul>{items}</ul>"
     )
