@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import os
 import re
+import subprocess
 import time
 from pathlib import Path
 
@@ -46,16 +47,12 @@ def misspec(report: Path) -> list[str]:
 SECTIONS = {"sbc": sbc, "misspec": misspec}
 
 
-def provenance(seconds: float) -> str:
+def provenance(seconds: float, commit: str) -> str:
     """Where and when a spliced section was measured, and on which commit."""
     import platform
-    import subprocess
 
     import jax
 
-    commit = subprocess.run(
-        ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, check=False
-    ).stdout.strip()
     dirty = subprocess.run(
         ["git", "status", "--porcelain", "--untracked-files=no", "brdf_infer"],
         capture_output=True,
@@ -89,8 +86,11 @@ def main() -> None:
     parser.add_argument("--report", type=Path, default=Path("reports/benchmarks.md"))
     args = parser.parse_args()
     started = time.perf_counter()
+    commit = subprocess.run(  # the code measured: HEAD when the run starts
+        ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, check=False
+    ).stdout.strip()
     lines = SECTIONS[args.section](args.report)
-    lines = [lines[0], "", provenance(time.perf_counter() - started), *lines[1:]]
+    lines = [lines[0], "", provenance(time.perf_counter() - started, commit), *lines[1:]]
     splice(args.report, lines)
     print(f"{args.section}: spliced into {args.report} ({time.perf_counter() - started:.0f} s)")
 

@@ -245,8 +245,10 @@ def sbc_section(calibrations: list, sbc_plots: list[Path]) -> list[str]:
         "## Simulation-based calibration",
         "",
         "`brdf-infer sbc lya`: each replicate draws every parameter and latent from the "
-        "prior, simulates a data set at the bundled geometry through the scene's generative "
-        "error model, samples it with NUTS (300 warmup, 200 draws thinned to 100) and ranks the "
+        "physical prior (the scene's priors truncated to coatings that conserve energy, "
+        "docs/posterior.md), simulates a data set at the bundled geometry through the scene's "
+        "generative error model, samples it with NUTS (300 warmup, 200 draws thinned to 100) "
+        "and ranks the "
         "truth. Quantities: the six parameters, TIS(70°) and the two learned noise scales. "
         "Verdict at a family-wise 1 % (Bonferroni over the three tests, χ², KS and 90 % "
         "coverage, of every quantity). The simulator is the likelihood itself (latent effects "
@@ -258,7 +260,9 @@ def sbc_section(calibrations: list, sbc_plots: list[Path]) -> list[str]:
         "(`jacobian`), every free prior moved by one prior sd (`prior`). Wall time includes "
         "simulating and compiling; per replicate excludes compiling (replicates run one per "
         "core). The `abg` rows run the same check on the ABg family (`sbc --model abg`): its "
-        "three parameters, TIS(70°) and the noise scales.",
+        "three parameters, TIS(70°) and the noise scales. A NUTS trajectory that reaches the "
+        "energy boundary ends there and counts as a divergent transition (most of the "
+        "replicates with divergences; docs/posterior.md).",
         "",
         markdown_table(SBC_HEADERS, [row.cells for row in calibrations]),
         "",
