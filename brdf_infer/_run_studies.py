@@ -50,6 +50,7 @@ def error_model_posterior(
         error_model=error_model,
         out=job.out / "variants" / error_model,
         forced=forced,
+        refit=False,  # a study's posterior: its width is the main run's business
         **options,
     )
 

@@ -111,7 +111,9 @@ def compare_instruments(
         else:
             progress(f"  posterior with the '{name}' instrument model")
             folder = out / "variants" / f"instrument-{name}"
-            run = run_posterior(check_instrument(scene, name), measurements, out=folder, **options)
+            run = run_posterior(  # no refits of error-model variants for a study's posterior
+                check_instrument(scene, name), measurements, out=folder, refit=False, **options
+            )
         entry = instrument_entry(name, folder, run.idata, run.summary)
         if scene.raytrace is not None:
             draws = thin_draws(draws_params(run.idata.posterior), TRACE_DRAWS)

@@ -73,9 +73,9 @@ class VerdictRecord(TypedDict):
 class VariantWidth(TypedDict):
     """A headline 95 % interval with one assumption of the error model removed."""
 
-    lo95: float
-    hi95: float
-    ratio: float  # its width over the run's (1 − ratio: the share the assumption carries)
+    lo95: float | None  # None: unreliable (k̂ > 0.7 and no refit)
+    hi95: float | None
+    ratio: float | None  # its width over the run's (1 − ratio: the share the assumption carries)
     pareto_k: float  # of the importance weights to the variant
     method: str  # "psis" (reweighted), "refit" (sampled anew) or "unreliable"
     words: str  # the assumption in words

@@ -146,8 +146,10 @@ def carried_shares(
     found = []
     for quantity in quantities:
         for entry in width.get(quantity, {}).get("without", {}).values():
+            if entry["ratio"] is None:  # unreliable: no interval without it
+                continue
             share = 1.0 - entry["ratio"]
-            if np.isfinite(share) and share > least:
+            if share > least:
                 found.append((quantity, entry["words"], float(share)))
     return sorted(found, key=lambda item: -item[2])
 

@@ -266,3 +266,24 @@ def test_an_assumption_carrying_a_third_of_a_headline_width_is_a_fact_not_a_fail
     assert facts == ["the calibration assumption alone carries 40 % of TIS(70°)'s 95 % width"]
     summary["width"]["tis_70deg"]["without"]["calibration"]["ratio"] = 0.67
     assert answer_facts(summary) == []  # 33 % is not more than a third
+
+
+def test_without_a_refit_an_unreliable_variant_has_no_interval(nuts_run, lya):
+    """Batch and a study's extra posteriors do not refit: a variant whose weights have
+    k̂ > 0.7 (on lya, the angle errors) is reported with its k̂ and no interval (JSON null)."""
+    from brdf_infer.posterior._width import headline_draws, width_attribution
+
+    model = build_posterior_model(*lya)
+    posterior = nuts_run.idata.posterior
+    sites = {name: np.asarray(posterior[name]) for name in posterior.data_vars}
+    physical = {name: sites[name].reshape(-1) for name in model.family.parameters}
+    headline = headline_draws(model.family, physical, [70.0])
+    width = width_attribution(model, lya[1], sites, headline, headline, refit=None)
+    angles = width["tis_70deg"]["without"]["angle_errors"]
+    assert angles["pareto_k"] > 0.7 and angles["method"] == "unreliable"
+    assert angles["lo95"] is None and angles["ratio"] is None
+    calibration = width["tis_70deg"]["without"]["calibration"]
+    assert calibration["ratio"] == pytest.approx(
+        nuts_run.summary["width"]["tis_70deg"]["without"]["calibration"]["ratio"], rel=1e-9
+    )
+    assert answer_facts({"width": width})[0].startswith("the calibration assumption")

@@ -289,8 +289,15 @@ class Batch:
             self._partials.add(partial)
         try:
             _remove(partial)
-            run = complete_run(
-                model, measurements, draws, self.settings.seed, partial, begun, forced=entry.forced
+            run = complete_run(  # no NUTS refits of error-model variants per scene
+                model,
+                measurements,
+                draws,
+                self.settings.seed,
+                partial,
+                begun,
+                forced=entry.forced,
+                refit=False,
             )
             self._publish(partial, target)  # complete: kept even if the batch is cancelled now
         finally:

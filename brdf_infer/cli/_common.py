@@ -6,7 +6,6 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-import math
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -183,7 +182,7 @@ def print_posterior_summary(summary: PosteriorSummary, out: Path) -> None:
         shares = [
             f"{entry['words']} {100 * (1 - entry['ratio']):.0f} %"
             for entry in without.values()
-            if math.isfinite(entry["ratio"])
+            if entry["ratio"] is not None
         ]
         if shares:
             print(f"  share of its 95 % width carried by each assumption: {', '.join(shares)}")

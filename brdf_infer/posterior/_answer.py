@@ -68,6 +68,7 @@ def answer_records(
     band_angles: Sequence[float],
     with_tis: bool,
     seed: int,
+    refit: bool = True,
 ) -> dict[str, Any]:
     """``{"width", "learned", "reference"}`` of a run (module docstring).
 
@@ -78,6 +79,8 @@ def answer_records(
         band_angles: the incidence angles of its bands [deg].
         with_tis: the run reports a TIS (its family and scene have one).
         seed: the run's seed (the prior draws use ``seed + 11``).
+        refit: sample a variant anew where reweighting is unreliable (else it is reported
+            unreliable).
     """
     angles = headline_angles(model, band_angles) if with_tis else []
     member = model.family
@@ -85,9 +88,8 @@ def answer_records(
     headline = headline_draws(member, physical, angles)
     prior = prior_draws(model, PRIOR_DRAWS, seed + 11)
     prior_headline = headline_draws(member, draws_physical(prior, member), angles)
-    width = width_attribution(
-        model, measurements, draws.sites, headline, prior_headline, _refit(draws, seed, angles)
-    )
+    resample = _refit(draws, seed, angles) if refit else None
+    width = width_attribution(model, measurements, draws.sites, headline, prior_headline, resample)
     return {
         "width": width,
         "learned": learned_record(model, draws.sites, prior),

@@ -328,9 +328,21 @@ class PosteriorModel:
         physical = {name: jnp.asarray(sites[name]) for name in self.family.parameters}
         count = next(iter(physical.values())).shape[0]
         scales = drawn_noise_scales(self.errors, self.data.noise, sites, count)
-        # the data as an argument, not a constant: one compilation serves every data set
-        parts = jax.jit(jax.vmap(lambda p, s, d: self.likelihood_parts(p, s, d), (0, 0, None)))
-        return parts(physical, scales, self.data)
+        return _draw_parts_program(self)(physical, scales, self.data)
+
+
+_DRAW_PARTS: dict[int, tuple[PosteriorModel, object]] = {}
+
+
+def _draw_parts_program(model: PosteriorModel):
+    """:meth:`PosteriorModel.likelihood_parts` vmapped over draws and jitted, once per model
+    object (kept alive beside its program; a model holds arrays, so it is not hashable); the
+    data an argument, not a constant, so one compilation serves every data set of a shape."""
+    key = id(model)
+    if key not in _DRAW_PARTS:
+        program = jax.jit(jax.vmap(lambda p, s, d: model.likelihood_parts(p, s, d), (0, 0, None)))
+        _DRAW_PARTS[key] = (model, program)
+    return _DRAW_PARTS[key][1]
 
 
 def build_posterior_model(

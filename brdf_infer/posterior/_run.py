@@ -219,6 +219,7 @@ def run_posterior(
     progress: bool | None = None,
     announce: Callable[[str], None] | None = None,
     forced: Sequence[str] = (),
+    refit: bool = True,
 ) -> PosteriorRun:
     """Sample the scene's posterior and write posterior.nc, summary.json, bands.json.
 
@@ -238,10 +239,11 @@ def run_posterior(
             family writes the same files (its physical parameters in the posterior, its
             bands; π·BRDF0 for ``strumik2024`` only).
         progress: progress bar on stderr (default: when stderr is a terminal).
-        announce: called with a one-line description of the run once every setting (and a
-            checkpoint to resume) has been checked, before any sampling.
+        announce: called with the run in one line, its settings checked, before sampling.
         forced: the plausibility checks (:mod:`brdf_infer.plausibility`) the caller went past
             with ``--force``, one line each: they open the run's verdict.
+        refit: sample an error-model variant anew where reweighting to it is unreliable
+            (:mod:`brdf_infer.posterior._width`); False: reported unreliable (studies, batch).
 
     Raises:
         BadInputError: a setting out of range, or a checkpoint that this run did not write.
@@ -275,7 +277,9 @@ def run_posterior(
             resume=resume,
             progress=progress,
         )
-        return complete_run(model, measurements, result, seed, out, started, forced=forced)
+        return complete_run(
+            model, measurements, result, seed, out, started, forced=forced, refit=refit
+        )
 
 
 def _checked_warmup(
@@ -385,6 +389,7 @@ def complete_run(
     started: float,
     *,
     forced: Sequence[str] = (),
+    refit: bool = True,
 ) -> PosteriorRun:
     """From a sampler's draws to the run: InferenceData, PSIS-LOO and LOO-PIT, bands,
     diagnostics, the summary and its verdict (:mod:`brdf_infer.verdict`; ``forced``: the
@@ -412,7 +417,7 @@ def complete_run(
     clock.lap("bands")
     checks = diagnostics(idata, result, parameters, fixed)
     clock.lap("diagnostics")
-    answer = answer_records(model, measurements, result, theta_i_band, with_tis, seed)
+    answer = answer_records(model, measurements, result, theta_i_band, with_tis, seed, refit)
     clock.lap("answer")
     tis_70 = None
     if "tis" in bands:

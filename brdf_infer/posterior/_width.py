@@ -177,14 +177,14 @@ def width_attribution(
         sites: its draws, (chains, draws, ...).
         headline: every draw (flattened) of each headline quantity (:func:`headline_draws`).
         prior_headline: the same quantities over draws of the physical prior.
-        refit: samples a variant model anew and returns its draws' headline quantities
-            (flattened), for a variant whose weights have k̂ > :data:`PARETO_K_LIMIT`; None:
-            such a variant is reported with its k̂ and no interval.
+        refit: a variant model's headline draws from a new posterior, for a variant whose
+            weights have k̂ > :data:`PARETO_K_LIMIT` (None: reported with k̂, no interval).
 
     Returns:
         ``{QUANTITY: {"lo95", "hi95", "prior": {"lo95", "hi95", "p_above_1"}, "without":
-        {ASSUMPTION: {"lo95", "hi95", "ratio", "pareto_k", "method", "words"}}}}`` and, where no
-        variant could be computed, ``"without_note"``.
+        {ASSUMPTION: {"lo95", "hi95", "ratio", "pareto_k", "method", "words"}}}}`` (an
+        unreliable variant's interval and ratio None) and, where no variant could be computed,
+        ``"without_note"``.
     """
     result: dict[str, Any] = {}
     for name, values in headline.items():
@@ -222,18 +222,20 @@ def width_attribution(
             refitted, method = refit(variant), "refit"
         for name, values in headline.items():
             entry = result[name]
+            low = high = ratio = None  # unreliable: no interval (JSON null)
             if refitted is not None:
                 low, high = _interval(refitted[name])
             elif k_hat <= PARETO_K_LIMIT:
                 low, high = weighted_interval(values, log_weights)
             else:
-                low = high = float("nan")
                 method = "unreliable"
             width = entry["hi95"] - entry["lo95"]
+            if low is not None and width > 0:
+                ratio = (high - low) / width
             entry["without"][assumption.name] = {
                 "lo95": low,
                 "hi95": high,
-                "ratio": (high - low) / width if width > 0 else float("nan"),
+                "ratio": ratio,
                 "pareto_k": k_hat,
                 "method": method,
                 "words": assumption.words,

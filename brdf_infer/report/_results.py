@@ -22,9 +22,9 @@ def width_words(width: dict | None) -> str:
     if not width:
         return "not recorded (a run written before this record)"
     parts = []
-    for entry in sorted(width["without"].values(), key=lambda e: e["ratio"]):
+    for entry in sorted(width["without"].values(), key=lambda e: e["ratio"] or np.inf):
         name = entry["words"].removeprefix("the ")
-        if np.isfinite(entry["ratio"]):
+        if entry["ratio"] is not None:
             parts.append(f"{name} {round(100 * (1.0 - entry['ratio'])):+d} %")
         else:
             parts.append(f"{name}: unreliable (Pareto k {entry['pareto_k']:.1f})")
