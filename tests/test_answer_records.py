@@ -160,6 +160,7 @@ def test_a_run_says_what_carries_its_width_what_it_learned_and_where_the_article
     assert summary["verdict"]["ok"]  # facts are no failures
 
 
+@pytest.mark.slow  # ≈ 15 s: a second NUTS run
 def test_psis_and_a_new_posterior_agree_on_the_width_without_the_calibration(nuts_run, lya):
     """The reweighted interval against a NUTS run of the variant itself (the sound case)."""
     scene, measurements = lya
