@@ -142,6 +142,13 @@ class ErrorSettings:
     repeatability_sd_prior: float = 0.1
     expected_repeatability: float = 0.065
 
+    def noise_prior_scale(self, site: str) -> float:
+        """The half-normal prior scale of a learned noise scale (``sample_sd`` or
+        ``repeatability``) [ln R]."""
+        return {"sample_sd": self.sample_sd_prior, "repeatability": self.repeatability_sd_prior}[
+            site
+        ]
+
     @property
     def learns_repeatability(self) -> bool:
         return self.repeatability == LEARNED

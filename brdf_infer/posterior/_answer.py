@@ -10,7 +10,6 @@ All three compare the posterior with the physical prior, drawn once here
 
 from __future__ import annotations
 
-import re
 from collections.abc import Sequence
 from typing import Any
 
@@ -20,21 +19,21 @@ from brdf_infer.measurements import Measurements
 from brdf_infer.posterior._bands import draws_physical
 from brdf_infer.posterior._learned import learned_record
 from brdf_infer.posterior._model import PosteriorModel
+from brdf_infer.posterior._power_scaling import log_likelihood_draws
 from brdf_infer.posterior._prior import prior_draws
 from brdf_infer.posterior._reference import reference_record
 from brdf_infer.posterior._samplers import Draws, run_nuts
 from brdf_infer.posterior._width import HEADLINE_TIS_DEG, headline_draws, width_attribution
 
 PRIOR_DRAWS = 4000  # the prior predictive's 2.5 % quantile from ~100 draws beyond it
-_TIS_NAME = re.compile(r"tis_(\d+(?:\.\d+)?)deg")
 
 
 def headline_angles(model: PosteriorModel, band_angles: Sequence[float]) -> list[float]:
     """The incidence angles of the headline TIS [deg]: the bands' angles, 70° and every angle
     a ``[reference]`` value names."""
-    named = [_TIS_NAME.fullmatch(r.quantity) for r in model.scene.references]
+    named = [r.tis_angle_deg for r in model.scene.references]
     angles = {*map(float, band_angles), HEADLINE_TIS_DEG}
-    angles.update(float(m.group(1)) for m in named if m is not None)
+    angles.update(angle for angle in named if angle is not None)
     return sorted(angles)
 
 
@@ -89,9 +88,12 @@ def answer_records(
     prior = prior_draws(model, PRIOR_DRAWS, seed + 11)
     prior_headline = headline_draws(member, draws_physical(prior, member), angles)
     resample = _refit(draws, seed, angles) if refit else None
-    width = width_attribution(model, measurements, draws.sites, headline, prior_headline, resample)
+    log_likelihood = log_likelihood_draws(model, draws.sites)  # once, for both records
+    width = width_attribution(
+        model, measurements, draws.sites, headline, prior_headline, resample, log_likelihood
+    )
     return {
         "width": width,
-        "learned": learned_record(model, draws.sites, prior),
+        "learned": learned_record(model, draws.sites, prior, log_likelihood),
         "reference": reference_record(model.scene.references, {**headline, **physical}),
     }

@@ -61,11 +61,8 @@ def coordinates(model: PosteriorModel) -> dict[str, str]:
 
 def prior_scale_words(model: PosteriorModel, name: str) -> str:
     """The scale of ``name``'s prior in words (for "set by its prior (scale …)")."""
-    errors = model.errors
-    if name == "sample_sd":
-        return f"half-normal, scale {errors.sample_sd_prior:g}"
-    if name == "repeatability":
-        return f"half-normal, scale {errors.repeatability_sd_prior:g}"
+    if name in ("sample_sd", "repeatability"):
+        return f"half-normal, scale {model.errors.noise_prior_scale(name):g}"
     prior = model.scene.priors.get(name) if model.family.paper_parameters else None
     if prior is None:
         return "the family's default prior"
@@ -75,7 +72,10 @@ def prior_scale_words(model: PosteriorModel, name: str) -> str:
 
 
 def learned_record(
-    model: PosteriorModel, sites: dict[str, np.ndarray], prior_sites: dict[str, np.ndarray]
+    model: PosteriorModel,
+    sites: dict[str, np.ndarray],
+    prior_sites: dict[str, np.ndarray],
+    log_likelihood: np.ndarray | None = None,
 ) -> dict[str, dict[str, Any]]:
     """The ``"learned"`` record of a run: ``{NAME: {"contraction", "prior_sensitivity",
     "learned", "prior_sensitive", "coordinate", "prior", "words"}}`` (module docstring).
@@ -84,15 +84,16 @@ def learned_record(
         model: the run's posterior model.
         sites: its draws, (chains, draws, ...).
         prior_sites: draws of its physical prior (leading axis the draws).
+        log_likelihood: the joint ln p(y | θ) of every draw, (chains, draws), where the caller
+            has it (None: computed by the power-scaling).
     """
     names = coordinates(model)
     missing = [site for site in names.values() if site not in sites or site not in prior_sites]
     names = {n: s for n, s in names.items() if s not in missing}
     sensitivity: dict[str, Any] = {}
     if model.family.paper_parameters and names:
-        sensitivity = power_scaling(
-            model, sites, {n: np.asarray(sites[s]) for n, s in names.items()}
-        )
+        quantities = {n: np.asarray(sites[s]) for n, s in names.items()}
+        sensitivity = power_scaling(model, sites, quantities, log_likelihood)
     record = {}
     for name, site in names.items():
         posterior_var = float(np.var(np.asarray(sites[site]).reshape(-1)))

@@ -69,11 +69,9 @@ def log_prior_draws(model: PosteriorModel, sites: dict[str, np.ndarray]) -> np.n
         params = Params(*(jnp.asarray(sites[name]) for name in PARAM_NAMES))
         total += np.asarray(energy_log_factor(params, model.family.constants))
     errors = model.errors
-    for site, prior_scale in (
-        ("sample_sd", errors.sample_sd_prior),
-        ("repeatability", errors.repeatability_sd_prior),
-    ):
+    for site in ("sample_sd", "repeatability"):
         if site in sites:
+            prior_scale = errors.noise_prior_scale(site)
             total += np.asarray(dist.HalfNormal(prior_scale).log_prob(jnp.asarray(sites[site])))
     return total
 
@@ -110,7 +108,10 @@ def diagnosis(prior: float, likelihood: float) -> str:
 
 
 def power_scaling(
-    model: PosteriorModel, sites: dict[str, np.ndarray], quantities: dict[str, np.ndarray]
+    model: PosteriorModel,
+    sites: dict[str, np.ndarray],
+    quantities: dict[str, np.ndarray],
+    log_likelihood: np.ndarray | None = None,
 ) -> dict[str, dict[str, float | str]]:
     """Prior and likelihood power-scaling sensitivity of each quantity.
 
@@ -120,11 +121,17 @@ def power_scaling(
         quantities: the quantities to diagnose, each (chains, draws): parameters in paper
             units, noise scales, derived quantities such as a TIS.
 
+        log_likelihood: :func:`log_likelihood_draws` of ``sites`` where the caller has it
+            (None: computed here).
+
     Returns:
         ``{name: {"prior", "likelihood", "diagnosis"}}``.
     """
     idata = az.from_dict(
-        posterior=quantities, log_likelihood={"y": log_likelihood_draws(model, sites)}
+        posterior=quantities,
+        log_likelihood={
+            "y": log_likelihood_draws(model, sites) if log_likelihood is None else log_likelihood
+        },
     )
     with warnings.catch_warnings():  # Pareto-smoothing notes on the importance weights
         warnings.simplefilter("ignore")

@@ -132,10 +132,7 @@ def _scale_marginal(model: PosteriorModel, flat: dict[str, np.ndarray], site: st
     """ln ∫ p(y | θ, τ) p(τ) dτ of every draw's θ, τ the learned scale ``site`` under its
     half-normal prior (module docstring)."""
     draws = np.asarray(flat[site], float)
-    prior_scale = {
-        "sample_sd": model.errors.sample_sd_prior,
-        "repeatability": model.errors.repeatability_sd_prior,
-    }[site]
+    prior_scale = model.errors.noise_prior_scale(site)
     low = np.log(max(np.min(draws), 1e-12) / 4.0)
     high = np.log(np.max(draws) * 4.0)
     x, w = np.polynomial.legendre.leggauss(TAU_NODES)
@@ -161,31 +158,10 @@ def variant_model(
     )
 
 
-def width_attribution(
-    model: PosteriorModel,
-    measurements: Measurements,
-    sites: dict[str, np.ndarray],
-    headline: dict[str, np.ndarray],
-    prior_headline: dict[str, np.ndarray],
-    refit: Callable[[PosteriorModel], dict[str, np.ndarray]] | None = None,
+def _intervals(
+    headline: dict[str, np.ndarray], prior_headline: dict[str, np.ndarray]
 ) -> dict[str, Any]:
-    """The ``"width"`` record of a run (module docstring).
-
-    Args:
-        model: the run's posterior model.
-        measurements: its rows.
-        sites: its draws, (chains, draws, ...).
-        headline: every draw (flattened) of each headline quantity (:func:`headline_draws`).
-        prior_headline: the same quantities over draws of the physical prior.
-        refit: a variant model's headline draws from a new posterior, for a variant whose
-            weights have k̂ > :data:`PARETO_K_LIMIT` (None: reported with k̂, no interval).
-
-    Returns:
-        ``{QUANTITY: {"lo95", "hi95", "prior": {"lo95", "hi95", "p_above_1"}, "without":
-        {ASSUMPTION: {"lo95", "hi95", "ratio", "pareto_k", "method", "words"}}}}`` (an
-        unreliable variant's interval and ratio None) and, where no variant could be computed,
-        ``"without_note"``.
-    """
+    """Each quantity's 95 % interval and its prior predictive one (``without`` left empty)."""
     result: dict[str, Any] = {}
     for name, values in headline.items():
         low, high = _interval(values)
@@ -201,13 +177,49 @@ def width_attribution(
             },
             "without": {},
         }
+    return result
+
+
+def width_attribution(
+    model: PosteriorModel,
+    measurements: Measurements,
+    sites: dict[str, np.ndarray],
+    headline: dict[str, np.ndarray],
+    prior_headline: dict[str, np.ndarray],
+    refit: Callable[[PosteriorModel], dict[str, np.ndarray]] | None = None,
+    log_likelihood: np.ndarray | None = None,
+) -> dict[str, Any]:
+    """The ``"width"`` record of a run (module docstring).
+
+    Args:
+        model: the run's posterior model.
+        measurements: its rows.
+        sites: its draws, (chains, draws, ...).
+        headline: every draw (flattened) of each headline quantity (:func:`headline_draws`).
+        prior_headline: the same quantities over draws of the physical prior.
+        refit: a variant model's headline draws from a new posterior, for a variant whose
+            weights have k̂ > :data:`PARETO_K_LIMIT` (None: reported with k̂, no interval).
+
+        log_likelihood: the run's joint ln p(y | θ) of every draw (None: computed here).
+
+    Returns:
+        ``{QUANTITY: {"lo95", "hi95", "prior": {"lo95", "hi95", "p_above_1"}, "without":
+        {ASSUMPTION: {"lo95", "hi95", "ratio", "pareto_k", "method", "words"}}}}`` (an
+        unreliable variant's interval and ratio None) and, where no variant could be computed,
+        ``"without_note"``.
+    """
+    result = _intervals(headline, prior_headline)
     errors = model.errors
     if errors.angles_on and errors.angle_method == "latent":
         for entry in result.values():
             entry["without_note"] = "not computed: the angle errors are latent variables"
         return result
     flat = {k: np.reshape(v, (-1, *np.shape(v)[2:])) for k, v in sites.items()}
-    base = log_likelihood_draws(model, flat)
+    base = (
+        log_likelihood_draws(model, flat)
+        if log_likelihood is None
+        else np.reshape(log_likelihood, -1)
+    )
     for assumption in ASSUMPTIONS:
         if not assumption.applies(errors):
             continue

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -224,6 +225,17 @@ class ReferenceValue:
     quantity: str
     value: float
     source: str
+
+    @property
+    def tis_angle_deg(self) -> float | None:
+        """θi [deg] of a ``tis_<θi>deg`` quantity, else None."""
+        return tis_angle_deg(self.quantity)
+
+
+def tis_angle_deg(quantity: str) -> float | None:
+    """θi [deg] named by ``tis_<θi>deg`` (e.g. ``tis_70deg`` → 70.0), else None."""
+    match = re.fullmatch(r"tis_(\d+(?:\.\d+)?)deg", quantity)
+    return None if match is None else float(match.group(1))
 
 
 @dataclass(frozen=True)

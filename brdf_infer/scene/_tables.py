@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 import math
-import re
 from pathlib import Path
 
 from brdf_infer.errors import BadInputError
@@ -16,7 +15,7 @@ from brdf_infer.scene._fields import (
     _string,
     _table,
 )
-from brdf_infer.scene._records import DesignSettings, ReferenceValue, Studies
+from brdf_infer.scene._records import DesignSettings, ReferenceValue, Studies, tis_angle_deg
 from brdf_infer.selections import SELECTIONS
 
 
@@ -148,17 +147,14 @@ def _selection(paper: dict, path: Path) -> str:
     return name
 
 
-_TIS_QUANTITY = re.compile(r"tis_(\d+(?:\.\d+)?)deg")
-
-
 def reference_quantity_ok(quantity: str) -> bool:
     """Whether a ``[reference]`` quantity names something a run reports: ``tis_<θi>deg``
     with 0 ≤ θi < 90, ``pi_brdf0`` or a parameter of Eq. (7)."""
     from brdf_infer.params import PARAM_NAMES
 
-    match = _TIS_QUANTITY.fullmatch(quantity)
-    if match is not None:
-        return float(match.group(1)) < 90.0
+    angle = tis_angle_deg(quantity)
+    if angle is not None:
+        return angle < 90.0
     return quantity == "pi_brdf0" or quantity in PARAM_NAMES
 
 
