@@ -114,3 +114,102 @@ def write_geometry_scene(directory: Path, geometry: str, params: Params, seed: i
     ]
     (directory / "measurements.csv").write_text("\n".join([header, *lines]) + "\n")
     return path
+
+
+class SyntheticLab:
+    """A virtual laboratory with a known coating: rows "measured" from the error model's
+    equations drawn term by term (docs/error-model.md), not from the likelihood's Gaussian.
+
+    For a row i of sample j in calibration group g at rotation setting k,
+
+        ln R_i = ln R_pred(θi + ε_k, θs + s ε_k + η_i) + u_j + κ_g + e_i + ν_i,
+
+    each effect drawn once and remembered: u_j ~ N(0, τ) per physical sample, κ_g ~ N(0, σ_cal)
+    per calibration group (a series is a session: one reference measurement, Eq. 2), ε_k ~
+    N(0, σ_rot) per (series, sample, θi) setting; per row η_i ~ N(0, σ_cam), the value's noise
+    e_i ~ N(0, σ(R)/(R √n)) with n the images averaged into a row of its series, and the
+    repeatability ν_i ~ N(0, σ_rep). The angle errors move the angles the forward model is
+    evaluated at (no linearisation). Rows of a series measured in a later call continue that
+    series' session; a series not seen before is a new session. The sample effects stay for
+    the lab's life: new rows on a measured sample share its effect.
+
+    Written separately from :class:`brdf_infer.posterior.PosteriorModel` (it never builds the
+    covariance the likelihood marginalises), so a check that simulates here and fits there
+    tests the one against the other.
+
+    Args:
+        scene: apertures, error model (every series a row may name must have an aperture).
+        params: the coating (Eq. 7).
+        sample_sd: τ [ln R] (unused without ``errors.hierarchical``).
+        repeatability: σ_rep [ln R] (the scene's value where it fixes one).
+        seed: of the lab's random numbers.
+    """
+
+    def __init__(
+        self, scene: Scene, params: Params, sample_sd: float, repeatability: float, seed: int
+    ):
+        errors = scene.errors
+        self.scene, self.params = scene, params
+        self.sample_sd = sample_sd if errors.hierarchical else 0.0
+        self.repeatability = (
+            repeatability if errors.learns_repeatability else float(errors.repeatability)
+        )
+        self.rng = np.random.default_rng(seed)
+        self.effects: dict[tuple, float] = {}
+
+    def _effect(self, key: tuple, sd: float) -> float:
+        if key not in self.effects:
+            self.effects[key] = float(sd * self.rng.standard_normal()) if sd > 0 else 0.0
+        return self.effects[key]
+
+    def log_values(self, rows: Measurements) -> np.ndarray:
+        """Measured ln R of ``rows`` (their geometry, series, sample and σ column; the σ
+        column and ``reflectance_rel`` are relative 1σ of one image)."""
+        from brdf_infer.model import strumik_family
+        from brdf_infer.observations import family_log_reflectance_at
+
+        errors, scene = self.scene.errors, self.scene
+        angles = errors.angles_on
+        count = len(rows)
+        if rows.reflectance_err is not None:
+            relative = rows.reflectance_err / rows.reflectance
+        else:
+            relative = np.full(count, errors.reflectance_rel)
+        images = np.array([errors.images_of(str(s)) for s in rows.series], float)
+        coupling = 1.0 if errors.rotation_coupling == "camera_follows" else -1.0
+        theta_i = np.asarray(rows.theta_i_deg, float).copy()
+        theta_s = np.asarray(rows.theta_s_deg, float).copy()
+        offset = np.zeros(count)
+        for i in range(count):
+            series, sample = str(rows.series[i]), str(rows.sample[i])
+            offset[i] += self._effect(("sample", sample), self.sample_sd)
+            if errors.calibration == "per_series":
+                offset[i] += self._effect(("calibration", series), errors.calibration_sd)
+            elif errors.calibration == "per_sample":
+                offset[i] += self._effect(("calibration", series, sample), errors.calibration_sd)
+            if angles:
+                key = ("rotation", series, sample, float(rows.theta_i_deg[i]))
+                rotation = self._effect(key, errors.rotation_deg)
+                theta_i[i] += rotation
+                theta_s[i] += coupling * rotation + errors.camera_deg * self.rng.standard_normal()
+        offset += relative / np.sqrt(images) * self.rng.standard_normal(count)
+        offset += self.repeatability * self.rng.standard_normal(count)
+        data = build_observation_model(scene, rows).data
+        fold, constants = scene.model.fold, scene.model.constants
+        member = strumik_family(fold, constants)
+        physical = self.params._asdict()
+        nominal = predicted_log_reflectance(self.params, data, fold, constants)
+        moved = family_log_reflectance_at(member, theta_i, theta_s, physical, data)
+        unmoved = family_log_reflectance_at(
+            member, data.theta_i_deg, data.theta_s_deg, physical, data
+        )
+        return np.asarray(nominal + moved - unmoved) + offset
+
+    def measure(self, rows: Measurements) -> Measurements:
+        """``rows`` with measured values (:meth:`log_values`) and σ columns keeping each row's
+        relative σ."""
+        values = np.exp(self.log_values(rows))
+        error = None
+        if rows.reflectance_err is not None:
+            error = rows.reflectance_err / rows.reflectance * values
+        return replace(rows, reflectance=values, reflectance_err=error)
