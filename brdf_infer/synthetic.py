@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 from dataclasses import replace
 from pathlib import Path
 
@@ -156,6 +157,13 @@ class SyntheticLab:
         )
         self.rng = np.random.default_rng(seed)
         self.effects: dict[tuple, float] = {}
+
+    def fork(self) -> SyntheticLab:
+        """A copy that goes on from this lab's state (its effects and random numbers), for
+        common random numbers across alternatives; the copies do not affect each other."""
+        other = copy.copy(self)
+        other.rng, other.effects = copy.deepcopy(self.rng), dict(self.effects)
+        return other
 
     def _effect(self, key: tuple, sd: float) -> float:
         if key not in self.effects:

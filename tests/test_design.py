@@ -361,35 +361,31 @@ def test_scene_design_table_is_read(tmp_path):
 
 
 @pytest.mark.slow
-def test_expected_sd_agrees_with_nuts_refits(nuts_run):
-    """The estimate's sd ratio for TIS(70°) after one more row against NUTS refits with that
-    row simulated from the posterior, each over a refit of the measured rows alone with the same
-    keys (best, median, worst candidate; the refits' Monte Carlo error is about 1 %)."""
+def test_expected_sd_ratio_agrees_with_refits_of_independently_simulated_data(nuts_run):
+    """Design's sd ratio for TIS(70°) after one more row (a new session) against NUTS refits of
+    data a :class:`~brdf_infer.synthetic.SyntheticLab` measured from truths drawn from the
+    posterior (best, median, worst candidate; the benchmark runs 8 replicates)."""
     from brdf_infer.bench._design import RefitSettings, refit_check
 
-    rows = refit_check(
-        nuts_run.out, "tis:70", "II", RefitSettings(replicates=3), progress=lambda _: None
-    )
-    assert [r["pick"] for r in rows] == ["best", "median", "worst"]
-    for row in rows:
-        assert abs(row["estimate_ratio"] - row["refit_ratio"]) < 0.05, row
-        assert 0.85 < row["estimate_sd"] / row["refit_sd"] < 1.15, row
+    result = refit_check(nuts_run.out, "tis:70", RefitSettings(replicates=3), lambda _: None)
+    assert [r["pick"] for r in result["rows"]] == ["best", "median", "worst"]
+    for row in result["rows"]:
+        mean, error = row["difference"]
+        assert abs(mean) < max(0.05, 3 * error), row
 
 
-@pytest.mark.slow  # ≈ 30 s: eight NUTS fits
+@pytest.mark.slow  # ≈ 60 s: seven NUTS fits and two design calls
 def test_a_chosen_row_narrows_tis_more_than_a_random_one_after_the_first_campaign(nuts_run):
-    """The pay-off experiment's clearest case (benchmark: width 0.46 of the initial one against
-    0.86 for a random row, 8 of 8 seeds): from series I's specular rows alone, one row chosen by
-    design narrows the 95 % interval of TIS(70°) far more than a random feasible row on
-    average, and is never worse beyond the refits' noise (a random row may by chance land on
-    a good setting: here seed 1's is as good as design's)."""
+    """The sequential study's clearest case: from series I's specular rows alone, one new
+    session's row chosen by design narrows the 95 % interval of TIS(70°) far more than a random
+    reachable row on average, and more than the article's plan's first row."""
     from brdf_infer.bench._design_payoff import PayoffSettings, payoff
 
-    settings = PayoffSettings(seeds=2, budgets=(1,), initial_series="I")
+    settings = PayoffSettings(seeds=2, rounds=1, rows_per_round=1)
     result = payoff(nuts_run.out, settings, progress=lambda _: None)
     widths = {key: np.array(value) for key, value in result["widths"].items()}
     assert np.mean(widths["design:1"]) < 0.8 * np.mean(widths["random:1"]), widths
-    assert np.all(widths["design:1"] < 1.03 * widths["random:1"]), widths
+    assert np.all(widths["design:1"] < widths["article:1"]), widths
     assert np.all(widths["design:1"] < 0.7 * widths["initial:0"]), widths
 
 

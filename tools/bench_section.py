@@ -1,6 +1,6 @@
 """Measure one section of the benchmark report again and splice it into the report.
 
-    python tools/bench_section.py sbc|misspec [--report reports/benchmarks.md]
+    python tools/bench_section.py sbc|misspec|design [--report reports/benchmarks.md]
 
 The full benchmark (``brdf-infer bench``) takes long; after a change that touches one study,
 this reruns that study's section as ``brdf-infer bench`` would and replaces the section of the
@@ -44,7 +44,13 @@ def misspec(report: Path) -> list[str]:
     return misspec_section(misspec_rows(load_scene("lya"), quick=False))
 
 
-SECTIONS = {"sbc": sbc, "misspec": misspec}
+def design(report: Path) -> list[str]:
+    from brdf_infer.bench._design_section import design_section
+
+    return design_section(False, report.with_name(f"{report.stem}_design.png"))
+
+
+SECTIONS = {"sbc": sbc, "misspec": misspec, "design": design}
 
 
 def provenance(seconds: float, commit: str) -> str:

@@ -1,228 +1,261 @@
-"""Benchmark of ``brdf-infer design``: its expected posterior sd against NUTS refits.
+"""Benchmark of ``brdf-infer design``: its expected sd ratio against refits of data from an
+independent simulation.
 
-What the design study estimates, E_y[sd(T | D, y)] after one new row at a setting x, has a
-direct check: draw θ from the run's posterior, simulate the new row y from its conditional
-predictive given the measured rows (:mod:`brdf_infer.design._estimate`, the same conditional
-the estimate uses), append it to the measurements, sample the posterior again by NUTS, and
-average the posterior variance of T over the replicates. Done for the best, the median and the
-worst candidate of the grid, each replicate with its own simulated row; every refit runs
-through one compiled NUTS program (the augmented data sets have one shape).
-
-The run's own sd of T is itself an estimate from finitely many correlated draws (about 2 %
-Monte Carlo error on the bundled scene), and a short refit's posterior sd scatters as much, so
-absolute sds compare poorly when one row changes the sd by a few per cent. What design claims
-is the *ratio* to today's sd; its check refits the measured rows alone with the same NUTS keys
-(common random numbers) and compares the estimate's ``sd_ratio`` with the mean over replicates
-of sd(with the row) / sd(without), whose Monte Carlo error (spread over √replicates) is
-reported beside it.
+What design estimates for one new row at a setting x is E_y[sd(T | D, y)] / sd(T | D), from the
+run's posterior draws and its own Gaussian conditional predictive of y. The check here shares
+neither: each replicate draws a truth from the bundled run's posterior (the coating and the
+noise scales), lets a :class:`~brdf_infer.synthetic.SyntheticLab` measure the initial rows D
+(the scene's geometry) and then the new row in a new session (its own reference measurement,
+its own rotation setting, the sample effect of the sample it is taken on — drawn term by term,
+the angle errors moving the angles), fits D alone and D with the row by NUTS with the same keys
+(common random numbers), and asks design the same question on the replicate's posterior of D.
+Per candidate (the best, the median and the worst of design's grid on the run) it reports the
+mean estimate and the mean refit ratio sd(D, y)/sd(D) with their Monte Carlo errors (spread over
+√replicates) and their paired difference; and whether the refits can rank the candidates at all
+(a paired difference of refit ratios beyond two of its standard errors).
 """
 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 
 from brdf_infer.design import (
     Candidates,
     DesignOptions,
+    DesignRun,
     candidate_measurements,
     design,
     load_design_run,
-    predictive,
+    parse_target,
     target_values,
 )
 from brdf_infer.measurements import Measurements
 from brdf_infer.params import PARAM_NAMES, Params
-from brdf_infer.posterior import (
-    NutsProgram,
-    build_model_data,
-    build_posterior_model,
-    chain_keys,
-)
+from brdf_infer.posterior import NutsProgram, build_model_data, build_posterior_model, chain_keys
+from brdf_infer.scene import Scene
+from brdf_infer.synthetic import SyntheticLab
 
 HEADERS = [
     "candidate",
     "θi [deg]",
     "θs [deg]",
-    "estimate: sd [%]",
-    "refits: sd [%] (± MC)",
-    "estimate: sd ratio",
+    "estimate: sd ratio (± MC)",
     "refits: sd ratio (± MC)",
-    "ESS",
+    "refit − estimate (± se)",
     "replicates",
 ]
+NOISE_SITES = ("sample_sd", "repeatability")
 
 
 @dataclass(frozen=True)
 class RefitSettings:
-    """NUTS settings of the refits and replicates per candidate."""
+    """Replicates, the NUTS settings of every fit, and design's settings.
 
-    replicates: int = 4
+    Attributes:
+        initial_series: the initial rows are the scene's rows of this series only (None: all).
+    """
+
+    replicates: int = 8
     chains: int = 2
     warmup: int = 300
-    draws: int = 300
+    draws: int = 500
     seed: int = 0
-    design_draws: int = 1000
     simulations: int = 128
+    initial_series: str | None = None
 
 
-def _augmented(measurements: Measurements, rows: Measurements, log_values) -> Measurements:
-    """``measurements`` with ``rows`` appended at the measured values exp(``log_values``)."""
-    values = np.exp(np.asarray(log_values, float).reshape(-1))
-    scale = values / rows.reflectance
-    fields = {}
-    for name in ("series", "sample", "theta_i_deg", "theta_s_deg"):
-        fields[name] = np.concatenate([getattr(measurements, name), getattr(rows, name)])
-    fields["reflectance"] = np.concatenate([measurements.reflectance, values])
-    fields["reflectance_err"] = (
-        None
-        if measurements.reflectance_err is None
-        else np.concatenate([measurements.reflectance_err, rows.reflectance_err * scale])
-    )
+def concatenated(first: Measurements, second: Measurements) -> Measurements:
+    """The rows of ``first`` then ``second`` (both in the plane)."""
+    fields = {
+        name: np.concatenate([getattr(first, name), getattr(second, name)])
+        for name in ("series", "sample", "theta_i_deg", "theta_s_deg", "reflectance")
+    }
+    error = None
+    if first.reflectance_err is not None and second.reflectance_err is not None:
+        error = np.concatenate([first.reflectance_err, second.reflectance_err])
     return Measurements(
-        path=measurements.path, quantity=measurements.quantity, phi_s_deg=None, **fields
+        path=first.path, quantity=first.quantity, phi_s_deg=None, reflectance_err=error, **fields
     )
 
 
-class _Refits:
-    """NUTS refits of one design run with the same keys per replicate (common random numbers):
-    one compiled program per data shape."""
+def with_sessions(scene: Scene, like: str, names: list[str]) -> Scene:
+    """``scene`` with series ``names`` (new sessions) taking the aperture of series ``like``."""
+    return replace(scene, series={**scene.series, **{n: scene.series[like] for n in names}})
 
-    def __init__(self, run, target, settings: RefitSettings):
-        self.run, self.target, self.settings = run, target, settings
-        self.keys = [
-            chain_keys(settings.seed + 100 * replicate, 1, settings.chains)[0]
-            for replicate in range(settings.replicates)
-        ]
+
+def in_series(rows: Measurements, name: str) -> Measurements:
+    """``rows`` relabelled as measured in series (session) ``name``."""
+    return replace(rows, series=np.full(len(rows), name))
+
+
+class Fitter:
+    """NUTS fits of one scene's data sets, one compiled program per row count."""
+
+    def __init__(self, scene: Scene, chains: int, warmup: int, draws: int):
+        self.scene, self.chains, self.warmup, self.draws = scene, chains, warmup, draws
         self.programs: dict[int, NutsProgram] = {}
 
-    def variance(self, measurements: Measurements, replicate: int) -> float:
-        """Posterior variance of the target from a NUTS refit of ``measurements``."""
-        scene, settings = self.run.scene, self.settings
-        if len(measurements) not in self.programs:
-            model = build_posterior_model(scene, measurements)
-            self.programs[len(measurements)] = NutsProgram(model, warmup=settings.warmup)
-        program = self.programs[len(measurements)]
-        data = build_model_data(scene, measurements)
-        sites = program.run(data, self.keys[replicate], settings.draws).sites
-        params = Params(*(jnp.asarray(np.reshape(sites[n], -1)) for n in PARAM_NAMES))
-        return float(np.var(target_values(self.target, params, scene)[:, 0]))
+    def fit(self, measurements: Measurements, seed: int) -> dict[str, np.ndarray]:
+        """Draws (flattened over chains) of the parameters and the learned noise scales."""
+        rows = len(measurements)
+        if rows not in self.programs:
+            model = build_posterior_model(self.scene, measurements)
+            self.programs[rows] = NutsProgram(model, warmup=self.warmup)
+        output = self.programs[rows].run(
+            build_model_data(self.scene, measurements),
+            chain_keys(seed, 1, self.chains)[0],
+            self.draws,
+        )
+        names = [*PARAM_NAMES, *NOISE_SITES]
+        return {n: np.reshape(output.sites[n], -1) for n in names if n in output.sites}
 
 
-def _candidate(entry: dict) -> Candidates:
-    return Candidates(
-        np.array([entry["series"]]),
-        np.array([entry["theta_i_deg"]]),
-        np.array([entry["theta_s_deg"]]),
-        np.array([np.nan]),
+def truth_lab(scene: Scene, sites: dict, index: int, seed: int) -> SyntheticLab:
+    """A lab whose coating and noise scales are draw ``index`` of ``sites``."""
+    params = Params(*(float(sites[n][index]) for n in PARAM_NAMES))
+    noise = [float(sites[n][index]) if n in sites else 0.0 for n in NOISE_SITES]
+    return SyntheticLab(scene, params, *noise, seed)
+
+
+def target_sd(target, sites: dict, scene: Scene) -> float:
+    """Posterior sd of a one-valued target over ``sites``."""
+    params = Params(*(jnp.asarray(sites[n]) for n in PARAM_NAMES))
+    return float(np.std(target_values(target, params, scene)[:, 0]))
+
+
+def _mean_error(values) -> tuple[float, float]:
+    values = np.asarray(values, float)
+    error = np.std(values, ddof=1) / np.sqrt(len(values)) if len(values) > 1 else np.nan
+    return float(np.mean(values)), float(error)
+
+
+def _picks(run: DesignRun, target, settings: RefitSettings) -> tuple[dict, Candidates]:
+    """Design's best, median and worst grid candidate on the run, as candidates."""
+    options = DesignOptions(budget=1, seed=settings.seed, simulations=settings.simulations)
+    ordered = design(run, target, options=options).candidates
+    picks = {"best": ordered[0], "median": ordered[len(ordered) // 2], "worst": ordered[-1]}
+    entries = list(picks.values())
+    candidates = Candidates(
+        np.array([e["series"] for e in entries]),
+        np.array([e["theta_i_deg"] for e in entries]),
+        np.array([e["theta_s_deg"] for e in entries]),
+        np.full(len(entries), np.nan),
     )
-
-
-def _refit_variances(refits: _Refits, entry: dict, draws: dict, rng, label: str, progress):
-    """Variances of the target over replicates, each refit with the candidate's row simulated
-    from its conditional predictive under a random draw of the posterior."""
-    run, replicates = refits.run, refits.settings.replicates
-    candidate = _candidate(entry)
-    conditional = predictive(run, candidate, draws)
-    loading = np.asarray(conditional.loading[:, 0])
-    sd = np.sqrt(np.asarray(conditional.own[:, 0]) + np.sum(loading**2, 1))
-    new_row = candidate_measurements(candidate, run.measurements)
-    variances = []
-    for replicate in range(replicates):
-        s = int(rng.integers(len(sd)))
-        log_value = float(conditional.mean[s, 0]) + sd[s] * float(rng.standard_normal())
-        augmented = _augmented(run.measurements, new_row, log_value)
-        variances.append(refits.variance(augmented, replicate))
-        progress(f"  design refit {label} {replicate + 1}/{replicates}")
-    return np.array(variances)
-
-
-def _monte_carlo_error(values: np.ndarray) -> float:
-    """Standard error of the mean of ``values`` (NaN for one value)."""
-    if len(values) < 2:
-        return float("nan")
-    return float(np.std(values, ddof=1) / np.sqrt(len(values)))
+    return picks, candidates
 
 
 def refit_check(
     run_dir: str | Path,
     target: str = "tis:70",
-    series: str | None = None,
     settings: RefitSettings = RefitSettings(),
     progress=print,
-) -> list[dict]:
-    """Estimate against refit for the best, median and worst grid candidate (module docstring).
+) -> dict:
+    """Estimate against independent refits (module docstring).
 
     Returns:
-        One dict per candidate: ``pick``, the candidate's settings, ``estimate_sd``,
-        ``estimate_ratio`` (design's ``sd_ratio``), ``refit_sd`` and its ``refit_mc``,
-        ``refit_ratio`` (mean of sd with the row / sd of the measured rows alone, same keys)
-        and its ``refit_ratio_mc``, ``ess``, ``replicates``, ``today_sd``, ``seconds``.
+        ``rows``: per candidate ``pick``, θi, θs, ``estimate`` and ``refit`` (mean ratio, MC
+        error), ``difference`` (refit − estimate: mean, se), ``replicates``; ``ranks``: per pair
+        of candidates the paired difference of refit ratios (mean, se) and whether it ranks
+        them; ``initial_rows``, ``seconds``.
     """
-    run = load_design_run(run_dir)
-    options = DesignOptions(
-        draws=settings.design_draws,
-        simulations=settings.simulations,
-        budget=1,
-        seed=settings.seed,
-    )
-    # the refits below add the row to the series' measured session: design must assume the same
-    # (issue 34 item 3 redoes this check for a new session, from the full generative model)
-    result = design(run, target, options=options, series=series, same_session=series)
-    ordered = result.candidates
-    picks = {"best": 0, "median": len(ordered) // 2, "worst": len(ordered) - 1}
-    total = len(run.sites["brdf0"])
-    keep = np.linspace(0, total - 1, min(settings.design_draws, total)).round().astype(int)
-    draws = {name: values[np.unique(keep)] for name, values in run.sites.items()}
+    start = time.perf_counter()
+    base = load_design_run(run_dir)
+    parsed = parse_target(target)
+    picks, candidates = _picks(base, parsed, settings)
+    series = str(candidates.series[0])
+    scene = with_sessions(base.scene, series, ["N1"])
+    geometry = base.measurements
+    if settings.initial_series is not None:
+        geometry = geometry.subset(geometry.series == settings.initial_series)
+    fitter = Fitter(scene, settings.chains, settings.warmup, settings.draws)
     rng = np.random.default_rng(settings.seed)
-    refits = _Refits(run, result.target, settings)
-    today = np.array([refits.variance(run.measurements, r) for r in range(settings.replicates)])
+    estimates, refits = [], []
+    options = DesignOptions(budget=1, seed=settings.seed, simulations=settings.simulations)
+    for replicate in range(settings.replicates):
+        index = int(rng.integers(len(base.sites["brdf0"])))
+        lab = truth_lab(scene, base.sites, index, 1000 * settings.seed + replicate)
+        initial = lab.measure(geometry)
+        seed = 100 * settings.seed + replicate
+        sites = fitter.fit(initial, seed)
+        today = target_sd(parsed, sites, scene)
+        run = DesignRun(scene, initial, sites, base.path)
+        answers = design(run, parsed, candidates, options, series=series).candidates
+        by_setting = {(a["theta_i_deg"], a["theta_s_deg"]): a["sd_ratio"] for a in answers}
+        estimates.append([by_setting[(e["theta_i_deg"], e["theta_s_deg"])] for e in picks.values()])
+        ratios = []
+        for k in range(len(candidates)):
+            row = in_series(candidate_measurements(candidates.subset([k]), initial), "N1")
+            measured = lab.fork().measure(row)  # each candidate the same lab's next row
+            ratios.append(
+                target_sd(parsed, fitter.fit(concatenated(initial, measured), seed), scene) / today
+            )
+        refits.append(ratios)
+        progress(f"  design refit check {replicate + 1}/{settings.replicates}")
+    estimates, refits = np.array(estimates), np.array(refits)
     rows = []
-    for pick, index in picks.items():
-        entry = ordered[index]
-        start = time.perf_counter()
-        variances = _refit_variances(refits, entry, draws, rng, pick, progress)
-        ratios = np.sqrt(variances / today)
-        refit_sd = float(np.sqrt(np.mean(variances)))
+    for k, (pick, entry) in enumerate(picks.items()):
         rows.append(
             {
                 "pick": pick,
-                **{k: entry[k] for k in ("theta_i_deg", "theta_s_deg", "series")},
-                "estimate_sd": entry["expected_sd"],
-                "estimate_ratio": entry["sd_ratio"],
-                "refit_sd": refit_sd,
-                # the sd's error from the variance's: d sd = d var / (2 sd)
-                "refit_mc": _monte_carlo_error(variances) / (2 * refit_sd),
-                "refit_ratio": float(np.mean(ratios)),
-                "refit_ratio_mc": _monte_carlo_error(ratios),
-                "ess": entry["ess"],
+                "theta_i_deg": entry["theta_i_deg"],
+                "theta_s_deg": entry["theta_s_deg"],
+                "estimate": _mean_error(estimates[:, k]),
+                "refit": _mean_error(refits[:, k]),
+                "difference": _mean_error(refits[:, k] - estimates[:, k]),
                 "replicates": settings.replicates,
-                "today_sd": result.current["sd"],
-                "seconds": time.perf_counter() - start,
             }
         )
-    jax.clear_caches()
-    return rows
+    names = list(picks)
+    ranks = []
+    for a in range(len(names)):
+        for b in range(a + 1, len(names)):
+            mean, error = _mean_error(refits[:, a] - refits[:, b])
+            ranks.append(
+                {
+                    "pair": (names[a], names[b]),
+                    "difference": (mean, error),
+                    "ranked": abs(mean) > 2 * error,
+                }
+            )
+    return {
+        "rows": rows,
+        "ranks": ranks,
+        "initial_rows": len(geometry),
+        "initial_series": settings.initial_series,
+        "seconds": time.perf_counter() - start,
+    }
 
 
-def refit_rows(rows: list[dict], scale: float = 100.0) -> list[list[str]]:
-    """Markdown table rows of :func:`refit_check` (sd in per cent of the target)."""
+def refit_rows(result: dict) -> list[list[str]]:
+    """Markdown table rows of :func:`refit_check`."""
+
+    def pm(pair: tuple[float, float], signed: bool = False) -> str:
+        return f"{pair[0]:{'+' if signed else ''}.3f} ± {pair[1]:.3f}"
+
     return [
         [
             r["pick"],
             f"{r['theta_i_deg']:g}",
             f"{r['theta_s_deg']:g}",
-            f"{scale * r['estimate_sd']:.3f}",
-            f"{scale * r['refit_sd']:.3f} ± {scale * r['refit_mc']:.3f}",
-            f"{r['estimate_ratio']:.3f}",
-            f"{r['refit_ratio']:.3f} ± {r['refit_ratio_mc']:.3f}",
-            f"{r['ess']:.0f}",
+            pm(r["estimate"]),
+            pm(r["refit"]),
+            pm(r["difference"], signed=True),
             str(r["replicates"]),
         ]
-        for r in rows
+        for r in result["rows"]
     ]
+
+
+def rank_line(result: dict) -> str:
+    """Which candidates the refits rank (paired differences of their ratios)."""
+    parts = []
+    for rank in result["ranks"]:
+        mean, error = rank["difference"]
+        verdict = "ranked" if rank["ranked"] else "not ranked by these refits"
+        parts.append(f"{rank['pair'][0]} − {rank['pair'][1]} {mean:+.3f} ± {error:.3f} ({verdict})")
+    return "Refit ratio differences, paired by replicate: " + "; ".join(parts) + "."

@@ -1,20 +1,23 @@
-"""Does ``brdf-infer design`` pay off? A synthetic experiment with a known truth.
+"""Does ``brdf-infer design`` pay off over several rounds? A sequential study with known truths.
 
-Each seed: a truth (the parameters and noise scales of the scene's run, their posterior
-medians), an initial data set simulated from the generative error model at the scene's own
-measured geometry, its NUTS posterior; then K new rows chosen three ways — by ``design``
-(greedy on the joint expected sd of TIS(θ)), at random among the feasible grid settings, and
-at the article's kind of settings (series II's near-specular geometry, θi ∈ {45°, 75°, 80°},
-θs = θi + δ, |δ| ≤ 15°, Table 2) — simulated from the truth *given the initial data* (the new
-rows share the calibration, sample and rotation effects the initial rows carry: the
-conditional of :mod:`brdf_infer.design._estimate` with the truth as the one draw), appended,
-and fitted again by NUTS. Reported per strategy: the mean 95 % width of TIS(θ) and how often
-it covers the true TIS(θ). Every fit of one row count runs through one compiled program.
+Each seed draws a truth from the bundled run's posterior (coating and noise scales), lets a
+:class:`~brdf_infer.synthetic.SyntheticLab` measure an initial data set (the scene's rows of
+one series: the article's first, specular campaign) and fits it by NUTS. Then K rounds, each a
+new session (a reference measurement of its own): three strategies each choose the round's rows
+— ``design`` (greedy on the expected sd of TIS(θ) given that strategy's data so far), ``random``
+(uniform among the reachable grid settings) and ``article`` (a plan like the article's: the
+incidence angles 45°, 75°, 80° in turn, each scanned by δ = θs − θi = 0, −5, +5, −10, … within
+the instrument's reach, Table 2) — the strategy's own copy of the lab measures them, the rows
+join that strategy's data and NUTS fits them again. Every strategy of one seed starts from the
+same initial data and goes on from the same lab state, random numbers and NUTS keys (common
+random numbers), so paired differences between strategies measure where the rows were taken,
+not luck. Reported per number of new rows: the mean 95 % width of TIS(θ), design's paired
+differences to the others with their standard errors, and how often each interval covers the
+true TIS(θ).
 """
 
 from __future__ import annotations
 
-import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -22,9 +25,13 @@ from pathlib import Path
 import jax.numpy as jnp
 import numpy as np
 
-from brdf_infer.bench._design import HEADERS as REFIT_HEADERS
-from brdf_infer.bench._design import RefitSettings, _augmented, refit_check, refit_rows
-from brdf_infer.bench._tables import markdown_table, timed_command
+from brdf_infer.bench._design import (
+    Fitter,
+    concatenated,
+    in_series,
+    truth_lab,
+    with_sessions,
+)
 from brdf_infer.design import (
     Candidates,
     DesignOptions,
@@ -33,23 +40,157 @@ from brdf_infer.design import (
     design,
     grid_candidates,
     load_design_run,
-    predictive,
+    reachable,
 )
 from brdf_infer.measurements import Measurements
 from brdf_infer.model import tis
 from brdf_infer.params import PARAM_NAMES, Params
-from brdf_infer.posterior import (
-    NutsProgram,
-    build_model_data,
-    build_posterior_model,
-    chain_keys,
-    run_posterior,
-)
-from brdf_infer.scene import Scene, load_scene
+from brdf_infer.scene import Scene
 
-STRATEGIES = ("initial", "design", "random", "article")
+STRATEGIES = ("design", "random", "article")
+NAMES = {"design": "design", "random": "random reachable", "article": "the article's plan"}
+ARTICLE_INCIDENCE_DEG = (45.0, 75.0, 80.0)
+ARTICLE_DELTAS_DEG = (0, -5, 5, -10, 10, -15, 15)
+
+
+@dataclass(frozen=True)
+class PayoffSettings:
+    """Seeds, rounds, rows per round and the NUTS settings of every fit."""
+
+    seeds: int = 24
+    rounds: int = 4
+    rows_per_round: int = 2
+    theta_i_deg: float = 70.0
+    initial_series: str = "I"
+    chains: int = 2
+    warmup: int = 300
+    draws: int = 500
+    simulations: int = 128
+
+
+def article_plan(scene: Scene, series: str, count: int) -> Candidates:
+    """The first ``count`` settings of the article-like plan (module docstring) that the
+    instrument reaches."""
+    settings = []
+    for delta in ARTICLE_DELTAS_DEG:
+        for theta_i in ARTICLE_INCIDENCE_DEG:
+            if reachable(scene.design, theta_i, theta_i + delta, np.nan):
+                settings.append((theta_i, theta_i + delta))
+    settings = settings[:count]
+    return Candidates(
+        np.full(len(settings), series),
+        np.array([s[0] for s in settings]),
+        np.array([s[1] for s in settings]),
+        np.full(len(settings), np.nan),
+    )
+
+
+class _Study:
+    """The study's fixed parts: the scene with one new session per round, the truths' source,
+    the grid, the fits."""
+
+    def __init__(self, run_dir: str | Path, settings: PayoffSettings):
+        self.base, self.settings = load_design_run(run_dir), settings
+        series = self.base.scene.design.series or "II"
+        self.series = series
+        self.sessions = [f"S{k + 1}" for k in range(settings.rounds)]
+        self.scene = with_sessions(self.base.scene, series, self.sessions)
+        measurements = self.base.measurements
+        self.geometry = measurements.subset(measurements.series == settings.initial_series)
+        self.grid = grid_candidates(self.scene.design, series)
+        total = settings.rounds * settings.rows_per_round
+        self.plan = article_plan(self.scene, series, total)
+        self.fitter = Fitter(self.scene, settings.chains, settings.warmup, settings.draws)
+
+    def tis(self, sites: dict) -> np.ndarray:
+        params = Params(*(jnp.asarray(sites[n]) for n in PARAM_NAMES))
+        model = self.scene.model
+        angle = jnp.asarray(self.settings.theta_i_deg)
+        return np.asarray(tis(angle, params, model.fold, model.constants)).reshape(-1)
+
+    def interval(self, sites: dict, truth: float) -> tuple[float, bool]:
+        """95 % width of TIS(θ) and whether the interval covers the truth."""
+        low, high = np.quantile(self.tis(sites), [0.025, 0.975])
+        return float(high - low), bool(low <= truth <= high)
+
+    def _choose(self, strategy: str, data: Measurements, sites: dict, step: int, rng) -> Candidates:
+        count = self.settings.rows_per_round
+        if strategy == "design":
+            run = DesignRun(self.scene, data, sites, self.base.path)
+            options = DesignOptions(budget=count, seed=step, simulations=self.settings.simulations)
+            chosen = design(run, f"tis:{self.settings.theta_i_deg:g}", self.grid, options).chosen
+            return Candidates(
+                np.full(count, self.series),
+                np.array([c["theta_i_deg"] for c in chosen]),
+                np.array([c["theta_s_deg"] for c in chosen]),
+                np.full(count, np.nan),
+            )
+        if strategy == "random":
+            return self.grid.subset(rng.choice(len(self.grid), count, replace=False))
+        return self.plan.subset(np.arange(step * count, (step + 1) * count))
+
+    def seed(self, seed: int) -> tuple[dict, list]:
+        """One seed: {(strategy, rows added): (width, covered)} and design's chosen settings."""
+        settings = self.settings
+        rng = np.random.default_rng(seed)
+        index = int(rng.integers(len(self.base.sites["brdf0"])))
+        lab = truth_lab(self.scene, self.base.sites, index, 10_000 + seed)
+        truth = float(self.tis({n: np.array([self.base.sites[n][index]]) for n in PARAM_NAMES})[0])
+        initial = lab.measure(self.geometry)
+        sites = self.fitter.fit(initial, seed)
+        outcomes = {("initial", 0): self.interval(sites, truth)}
+        chosen = []
+        for strategy in STRATEGIES:
+            own_lab, data, draws = lab.fork(), initial, sites
+            own_rng = np.random.default_rng(50_000 + seed)
+            for step, session in enumerate(self.sessions):
+                candidates = self._choose(strategy, data, draws, step, own_rng)
+                if strategy == "design":
+                    chosen += list(zip(candidates.theta_i_deg, candidates.theta_s_deg, strict=True))
+                rows = in_series(candidate_measurements(candidates, data), session)
+                data = concatenated(data, own_lab.measure(rows))
+                draws = self.fitter.fit(data, seed + 7 * (step + 1))
+                added = (step + 1) * settings.rows_per_round
+                outcomes[(strategy, added)] = self.interval(draws, truth)
+        return outcomes, chosen
+
+
+def payoff(
+    run_dir: str | Path, settings: PayoffSettings = PayoffSettings(), progress=print
+) -> dict:
+    """The sequential study (module docstring).
+
+    Returns:
+        ``widths`` and ``covered`` per ``"strategy:rows"`` (one entry per seed), ``rows`` (the
+        numbers of new rows), ``chosen`` (design's settings, all seeds), ``initial_rows``,
+        ``seeds``, ``theta_i_deg``, ``seconds``.
+    """
+    start = time.perf_counter()
+    study = _Study(run_dir, settings)
+    outcomes, chosen = [], []
+    for seed in range(settings.seeds):
+        outcome, picked = study.seed(seed)
+        outcomes.append(outcome)
+        chosen += picked
+        progress(f"  design pay-off seed {seed + 1}/{settings.seeds}")
+    keys = list(outcomes[0])
+    label = {key: f"{key[0]}:{key[1]}" for key in keys}
+    return {
+        "widths": {label[k]: [o[k][0] for o in outcomes] for k in keys},
+        "covered": {label[k]: int(sum(o[k][1] for o in outcomes)) for k in keys},
+        "rows": [settings.rows_per_round * (k + 1) for k in range(settings.rounds)],
+        "chosen": [(float(i), float(s)) for i, s in chosen],
+        "initial_rows": len(study.geometry),
+        "initial_series": settings.initial_series,
+        "series": study.series,
+        "seeds": settings.seeds,
+        "theta_i_deg": settings.theta_i_deg,
+        "seconds": time.perf_counter() - start,
+    }
+
+
 HEADERS = [
-    "rows added",
+    "new rows",
     "chosen by",
     "mean 95 % width of TIS [%]",
     "vs initial",
@@ -59,224 +200,45 @@ HEADERS = [
 ]
 
 
-@dataclass(frozen=True)
-class PayoffSettings:
-    """Seeds, budgets, the initial design and the NUTS settings of every fit.
-
-    Attributes:
-        initial_series: the initial design keeps the scene's measured geometry of this series
-            only (None: every row); new rows join it when set, else ``series``.
-        series: the series new rows join when every row is kept.
-    """
-
-    seeds: int = 5
-    budgets: tuple[int, ...] = (1, 3)
-    theta_i_deg: float = 70.0
-    chains: int = 2
-    warmup: int = 300
-    draws: int = 500
-    series: str = "II"
-    initial_series: str | None = None
-
-
-def _truth(run: DesignRun) -> dict[str, np.ndarray]:
-    """Posterior medians of the run's sites, as one draw."""
-    return {name: np.median(values)[None] for name, values in run.sites.items()}
-
-
-def _simulate(run: DesignRun, candidates: Candidates, truth: dict, normals) -> np.ndarray:
-    """The new rows' ln R from the truth given the run's (initial) rows, jointly; ``normals``
-    are the standard normal deviates (shared by the strategies of one seed)."""
-    conditional = predictive(run, candidates, truth)
-    loading = np.asarray(conditional.loading[0])
-    covariance = loading @ loading.T + np.diag(np.asarray(conditional.own[0]))
-    return np.asarray(conditional.mean[0]) + np.linalg.cholesky(covariance) @ normals
-
-
-def _article(rng, budget: int, series: str) -> Candidates:
-    settings = [(i, i + d) for i in (45.0, 75.0, 80.0) for d in range(-15, 16, 5) if i + d < 90]
-    picked = [settings[k] for k in rng.choice(len(settings), budget, replace=False)]
-    return Candidates(
-        np.full(budget, series),
-        np.array([p[0] for p in picked]),
-        np.array([p[1] for p in picked]),
-        np.full(budget, np.nan),
-    )
-
-
-def _subset(candidates: Candidates, index) -> Candidates:
-    index = np.asarray(index, int)
-    return Candidates(
-        candidates.series[index],
-        candidates.theta_i_deg[index],
-        candidates.theta_s_deg[index],
-        candidates.phi_s_deg[index],
-    )
-
-
-def _design_rows(picked: list[dict]) -> Candidates:
-    return Candidates(
-        np.array([c["series"] for c in picked]),
-        np.array([c["theta_i_deg"] for c in picked]),
-        np.array([c["theta_s_deg"] for c in picked]),
-        np.full(len(picked), np.nan),
-    )
-
-
-class _Experiment:
-    """The pay-off experiment's fixed parts: the scene, the truth, the candidate grid and one
-    compiled NUTS program per data shape."""
-
-    def __init__(self, base: DesignRun, settings: PayoffSettings):
-        self.scene, self.settings = base.scene, settings
-        geometry, self.series = base.measurements, settings.series
-        if settings.initial_series is not None:
-            geometry = geometry.subset(geometry.series == settings.initial_series)
-            self.series = settings.initial_series
-        self.geometry, self.path = geometry, base.path
-        self.truth = _truth(base)
-        self.true_tis = float(self.tis(self.truth)[0])
-        self.grid = grid_candidates(self.scene.design, self.series)
-        self.programs: dict[int, NutsProgram] = {}
-
-    def tis(self, draws: dict) -> np.ndarray:
-        """TIS(θ) of each draw."""
-        params = Params(*(jnp.asarray(draws[n]) for n in PARAM_NAMES))
-        model = self.scene.model
-        angle = jnp.asarray(self.settings.theta_i_deg)
-        return np.asarray(tis(angle, params, model.fold, model.constants))
-
-    def fit(self, measurements: Measurements, seed: int) -> dict[str, np.ndarray]:
-        """NUTS draws of the parameters and noise scales given ``measurements``."""
-        rows, settings = len(measurements), self.settings
-        if rows not in self.programs:
-            model = build_posterior_model(self.scene, measurements)
-            self.programs[rows] = NutsProgram(model, warmup=settings.warmup)
-        output = self.programs[rows].run(
-            build_model_data(self.scene, measurements),
-            chain_keys(seed, 1, settings.chains)[0],
-            settings.draws,
-        )
-        names = [*PARAM_NAMES, "sample_sd", "repeatability"]
-        return {n: np.reshape(output.sites[n], -1) for n in names if n in output.sites}
-
-    def interval(self, draws: dict) -> tuple[float, float, bool]:
-        """95 % width and sd of TIS(θ), and whether the interval covers the true TIS."""
-        values = self.tis(draws)
-        low, high = np.quantile(values, [0.025, 0.975])
-        return float(high - low), float(np.std(values)), bool(low <= self.true_tis <= high)
-
-    def initial_data(self, rng) -> Measurements:
-        """The initial design's rows simulated from the truth by the generative error model."""
-        geometry = self.geometry
-        parts = build_posterior_model(self.scene, geometry).draw_parts(self.truth)
-        noise = np.asarray(parts.factor[0]) @ rng.standard_normal(parts.factor.shape[2])
-        noise += np.sqrt(np.asarray(parts.diagonal[0])) * rng.standard_normal(len(geometry))
-        empty = geometry.subset(np.zeros(len(geometry), bool))
-        return _augmented(empty, geometry, np.asarray(parts.mean[0]) + noise)
-
-    def seed(self, seed: int) -> tuple[dict, list]:
-        """One seed: {(strategy, budget): (width, sd, covered)} and design's chosen settings."""
-        settings, largest = self.settings, max(self.settings.budgets)
-        rng = np.random.default_rng(1000 + seed)
-        initial = self.initial_data(rng)
-        sites = self.fit(initial, seed)
-        run = DesignRun(self.scene, initial, sites, self.path)
-        target = f"tis:{settings.theta_i_deg:g}"
-        options = DesignOptions(budget=largest, seed=seed)
-        picked = design(run, target, self.grid, options).chosen
-        rows_of = {
-            "design": _design_rows(picked),
-            "random": _subset(self.grid, rng.choice(len(self.grid), largest, replace=False)),
-            "article": _article(rng, largest, self.series),
-        }
-        normals = rng.standard_normal(largest)
-        truth_run = DesignRun(self.scene, initial, self.truth, self.path)
-        outcomes = {("initial", 0): self.interval(sites)}
-        for budget in settings.budgets:
-            for name in STRATEGIES[1:]:
-                candidates = _subset(rows_of[name], np.arange(budget))
-                values = _simulate(truth_run, candidates, self.truth, normals[:budget])
-                rows = candidate_measurements(candidates, initial)
-                draws = self.fit(_augmented(initial, rows, values), seed + 7)
-                outcomes[(name, budget)] = self.interval(draws)
-        return outcomes, [(c["theta_i_deg"], c["theta_s_deg"]) for c in picked]
-
-
-def payoff(
-    run_dir: str | Path, settings: PayoffSettings = PayoffSettings(), progress=print
-) -> dict:
-    """The synthetic experiment (module docstring); widths and coverage per strategy and budget.
-
-    Every strategy of one seed sees the same initial data, the same standard normal deviates
-    for its new rows (common random numbers) and the same NUTS keys, so the strategies differ
-    by where the rows are, not by luck; each budget's rows extend the smaller budget's.
-    """
-    start = time.perf_counter()
-    experiment = _Experiment(load_design_run(run_dir), settings)
-    outcomes, chosen = [], []
-    for seed in range(settings.seeds):
-        outcome, picked = experiment.seed(seed)
-        outcomes.append(outcome)
-        chosen.append(picked)
-        progress(f"  design pay-off seed {seed + 1}/{settings.seeds}")
-    labels = {key: f"{key[0]}:{key[1]}" for key in outcomes[0]}
-
-    def collect(index: int) -> dict[str, list]:
-        return {labels[k]: [outcome[k][index] for outcome in outcomes] for k in labels}
-
-    return {
-        "true_tis": experiment.true_tis,
-        "theta_i_deg": settings.theta_i_deg,
-        "budgets": list(settings.budgets),
-        "seeds": settings.seeds,
-        "initial_rows": len(experiment.geometry),
-        "initial_series": settings.initial_series,
-        "series": experiment.series,
-        "widths": collect(0),
-        "sds": collect(1),
-        "covered": {k: int(np.sum(v)) for k, v in collect(2).items()},
-        "chosen": chosen,
-        "seconds": time.perf_counter() - start,
-    }
+def _paired(result: dict, rows: int, strategy: str) -> tuple[float, float, int]:
+    """Design minus ``strategy`` at ``rows`` new rows [per cent TIS]: mean, standard error,
+    and the seeds in which design's width is the smaller."""
+    chosen = np.asarray(result["widths"][f"design:{rows}"])
+    other = np.asarray(result["widths"][f"{strategy}:{rows}"])
+    difference = 100 * (chosen - other)
+    error = np.std(difference, ddof=1) / np.sqrt(len(difference)) if len(difference) > 1 else np.nan
+    return float(np.mean(difference)), float(error), int(np.sum(chosen < other))
 
 
 def payoff_rows(result: dict) -> list[list[str]]:
-    """Markdown table rows of :func:`payoff`: per budget and strategy the mean 95 % width of
-    TIS(θ) [per cent TIS], its ratio to the initial width, and against design the paired
-    difference (design minus the strategy, mean ± standard error over seeds) and the number of
-    seeds in which design's interval is the narrower."""
+    """Markdown table rows of :func:`payoff`."""
     widths = {k: np.asarray(v) for k, v in result["widths"].items()}
-    initial = np.mean(widths["initial:0"])
-    seeds = result["seeds"]
-    names = {"design": "design", "random": "random feasible", "article": "the article's kind"}
+    initial, seeds = float(np.mean(widths["initial:0"])), result["seeds"]
     rows = [
         [
             "0",
-            "none (initial design)",
+            "none (initial data)",
             f"{100 * initial:.3f}",
             "1.000",
             "—",
             "—",
             f"{result['covered']['initial:0']}/{seeds}",
-        ]
+        ],
     ]
-    for budget in result["budgets"]:
-        chosen = widths[f"design:{budget}"]
-        for strategy in STRATEGIES[1:]:
-            key = f"{strategy}:{budget}"
-            paired, narrower = "—", "—"
+    for count in result["rows"]:
+        for strategy in STRATEGIES:
+            key = f"{strategy}:{count}"
+            paired = narrower = "—"
             if strategy != "design":
-                difference = 100 * (chosen - widths[key])
-                error = np.std(difference, ddof=1) / np.sqrt(seeds) if seeds > 1 else np.nan
-                paired = f"{np.mean(difference):+.3f} ± {error:.3f}"
-                narrower = f"{int(np.sum(chosen < widths[key]))}/{seeds}"
+                mean, error, wins = _paired(result, count, strategy)
+                paired, narrower = f"{mean:+.3f} ± {error:.3f}", f"{wins}/{seeds}"
+            mean_width = float(np.mean(widths[key]))
             rows.append(
                 [
-                    str(budget),
-                    names[strategy],
-                    f"{100 * np.mean(widths[key]):.3f}",
-                    f"{np.mean(widths[key]) / initial:.3f}",
+                    str(count),
+                    NAMES[strategy],
+                    f"{100 * mean_width:.3f}",
+                    f"{mean_width / initial:.3f}",
                     paired,
                     narrower,
                     f"{result['covered'][key]}/{seeds}",
@@ -285,130 +247,41 @@ def payoff_rows(result: dict) -> list[list[str]]:
     return rows
 
 
-COMMAND_HEADERS = ["compilation cache", "wall [s]", "design's own seconds", "chosen θi, θs [deg]"]
+def payoff_figure(result: dict) -> bytes:
+    """PNG: the mean 95 % width of TIS(θ) against the number of new rows per strategy (± one
+    standard error over seeds), and design's paired differences to the others (± two)."""
+    from matplotlib.figure import Figure
 
+    from brdf_infer.report import png
 
-def command_rows(run_dir: str | Path, scratch: Path) -> list[list[str]]:
-    """``brdf-infer design RUN_DIR --target tis:70 --budget 3 --json`` in fresh processes,
-    with an empty compilation cache and then the same cache again."""
-    rows = []
-    argv = ["design", str(run_dir), "--target", "tis:70", "--budget", "3"]
-    for state in ("cold", "warm"):
-        wall, payload = timed_command(argv, scratch / "cache", scratch / f"design-{state}")
-        chosen = ", ".join(
-            f"({c['theta_i_deg']:g}, {c['theta_s_deg']:g})" for c in payload["chosen"]
+    figure = Figure(figsize=(11.0, 4.2), layout="constrained")
+    left, right = figure.subplots(1, 2)
+    counts = [0, *result["rows"]]
+    seeds = result["seeds"]
+    for strategy in STRATEGIES:
+        series = [result["widths"]["initial:0"]]
+        series += [result["widths"][f"{strategy}:{n}"] for n in result["rows"]]
+        means = [100 * np.mean(s) for s in series]
+        errors = [100 * np.std(s, ddof=1) / np.sqrt(seeds) if seeds > 1 else 0 for s in series]
+        left.errorbar(counts, means, yerr=errors, marker="o", capsize=3, label=NAMES[strategy])
+    left.set_xticks(counts)
+    left.set_xlabel("new rows (one session per round)")
+    left.set_ylabel(f"mean 95 % width of TIS({result['theta_i_deg']:g}°) [%]")
+    left.legend()
+    for strategy in STRATEGIES[1:]:
+        pairs = [_paired(result, n, strategy) for n in result["rows"]]
+        right.errorbar(
+            result["rows"],
+            [p[0] for p in pairs],
+            yerr=[2 * p[1] for p in pairs],
+            marker="o",
+            capsize=3,
+            label=f"design − {NAMES[strategy]}",
         )
-        rows.append([state, f"{wall:.1f}", f"{payload['seconds']:.1f}", chosen])
-    return rows
-
-
-def _first_campaign_scene(scene, folder: Path):
-    """The scene with its series-I rows only (the article's first, specular campaign), as a
-    scene file of its own in ``folder`` (a design run is tied to its scene's rows)."""
-    import csv
-
-    folder.mkdir()
-    source = scene.path.parent
-    for name in ("lya_tis_reference.csv",):
-        (folder / name).write_bytes((source / name).read_bytes())
-    with (source / "lya_measurements.csv").open(newline="") as handle:
-        rows = list(csv.DictReader(handle))
-    with (folder / "lya_measurements.csv").open("w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(row for row in rows if row["series"] == "I")
-    (folder / scene.path.name).write_text(scene.path.read_text())
-    return load_scene(folder / scene.path.name)
-
-
-def _reduced_run(scene: Scene, out: Path, quick: bool) -> int:
-    """A NUTS run of ``scene`` into ``out`` at the benchmark's reduced settings; its draws."""
-    chains, draws = (2, 500) if quick else (4, 1000)
-    measurements = scene.load_measurements()
-    warmup = 300 if quick else 500
-    run_posterior(
-        scene, measurements, chains=chains, warmup=warmup, draws=draws, out=out, progress=False
-    )
-    return chains * draws
-
-
-def _refits(run_dir: Path, series: str, quick: bool, progress) -> list[list[str]]:
-    """Estimate against refit rows, seeds in turn."""
-    rows = []
-    for seed in range(1 if quick else 2):
-        settings = RefitSettings(replicates=2 if quick else 8, seed=seed)
-        rows += refit_rows(refit_check(run_dir, "tis:70", series, settings, progress))
-    return rows
-
-
-def _payoff_lines(result: dict) -> list[str]:
-    if result["initial_series"] is not None:
-        first = (
-            f"series {result['series']}'s {result['initial_rows']} measured rows only "
-            "(the first campaign: specular geometry), new rows in the same series"
-        )
-    else:
-        first = (
-            f"the scene's {result['initial_rows']} measured rows, new rows in series "
-            f"{result['series']}"
-        )
-    return [
-        f"Pay-off from {first}: a known truth (the run's posterior medians, true "
-        f"TIS({result['theta_i_deg']:g}°) = {100 * result['true_tis']:.2f} %), the initial "
-        "data simulated from it, K rows added three ways and every data set refitted by "
-        f"NUTS; {result['seeds']} seeds with common random numbers "
-        f"({result['seconds']:.0f} s).",
-        "",
-        markdown_table(HEADERS, payoff_rows(result)),
-        "",
-    ]
-
-
-def design_section(quick: bool, progress=print) -> list[str]:
-    """The benchmark report's section: the command's time, estimate against refit (several
-    seeds, from the bundled scene and from its first campaign alone) and the pay-off experiment
-    from both, on reduced NUTS runs made here."""
-    scene = load_scene("lya")
-    seeds = 2 if quick else 8
-    with tempfile.TemporaryDirectory() as folder:
-        base, first = Path(folder) / "lya", Path(folder) / "series-I"
-        draws = _reduced_run(scene, base, quick)
-        refits = _refits(base, "II", quick, progress)
-        _reduced_run(_first_campaign_scene(scene, Path(folder) / "scene-I"), first, quick)
-        first_refits = _refits(first, "I", quick, progress)
-        # from the scene's rows one row changes the width by a few per cent: three times the
-        # seeds there to resolve design against random
-        results = [
-            payoff(base, PayoffSettings(seeds=count, initial_series=initial), progress)
-            for initial, count in (("I", seeds), (None, 3 * seeds))
-        ]
-        progress("  design command, cold and warm ...")
-        commands = command_rows(base, Path(folder) / "scratch")
-    lines = [
-        "## Experimental design (`brdf-infer design`)",
-        "",
-        f"The command on this section's run ({draws} draws of the bundled scene), "
-        "fresh processes, wall time from start to exit:",
-        "",
-        markdown_table(COMMAND_HEADERS, commands),
-        "",
-        "Estimate against refit: the expected posterior sd of TIS(70°) after one more row at "
-        "the best, median and worst grid candidate, against NUTS refits with that row "
-        "simulated from the posterior (8 replicates, 2 × (300 + 300) draws). The sd is in per "
-        "cent TIS; the ratio is to today's sd — the estimate's from the run's draws, the "
-        "refits' over a refit of the measured rows alone with the same keys (what design "
-        "claims; absolute sds also carry the run's own Monte Carlo error of about 2 %). "
-        "Seeds in turn, each a row per candidate.",
-        "",
-        "The bundled scene (42 rows), a new series-II row:",
-        "",
-        markdown_table(REFIT_HEADERS, refits),
-        "",
-        "Series I's 24 specular rows alone (the first campaign), a new series-I row:",
-        "",
-        markdown_table(REFIT_HEADERS, first_refits),
-        "",
-    ]
-    for result in results:
-        lines += _payoff_lines(result)
-    return lines
+    right.axhline(0.0, color="0.5", lw=0.8)
+    right.set_xticks(result["rows"])
+    right.set_xlabel("new rows (one session per round)")
+    right.set_ylabel("paired width difference [% TIS] (± 2 se)")
+    right.legend()
+    figure.suptitle(f"Sequential design study: {seeds} truths from the bundled posterior")
+    return png(figure)

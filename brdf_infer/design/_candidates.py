@@ -64,6 +64,18 @@ class Candidates:
         """The session of every row (None taken as continuing its series')."""
         return self.series.astype(str) if self.session is None else self.session
 
+    def subset(self, index) -> Candidates:
+        """The candidates at positions ``index`` (their sessions kept; no grid counts)."""
+        index = np.asarray(index, int)
+        session = None if self.session is None else self.session[index]
+        return Candidates(
+            self.series[index],
+            self.theta_i_deg[index],
+            self.theta_s_deg[index],
+            self.phi_s_deg[index],
+            session,
+        )
+
     def in_sessions(self, same_session: str | None) -> Candidates:
         """The candidates, each row in a new session unless its series is ``same_session``
         (rows whose session is already said keep it)."""
