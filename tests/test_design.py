@@ -145,6 +145,7 @@ def test_design_json_contract_and_map(nuts_run, candidates_csv, tmp_path, capsys
 
     section = "".join(design_section(out))
     assert "Where to measure next" in section and "<img" in section
+    assert "a new session" in section and "reachable: θi 18–80°" in section
 
 
 @pytest.mark.parametrize(

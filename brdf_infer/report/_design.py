@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from brdf_infer.design import DESIGN_HEADERS, design_rows, target_scale
+from brdf_infer.design import DESIGN_HEADERS, design_rows, reach_line, target_scale
 from brdf_infer.report import _html
 
 
@@ -26,13 +26,21 @@ def design_section(run: Path) -> list[str]:
             f" Today: {k * current['median']:.4g}{unit} ({k * current['lo95']:.4g}–"
             f"{k * current['hi95']:.4g}{unit}, 95 %), sd {k * current['sd']:.3g}{unit}."
         )
+    session = payload.get("same_session")
+    session = (
+        f"each row continuing series {session}'s session (its reference measurement)"
+        if session
+        else "each round of rows a new session, with a reference measurement of its own"
+    )
+    reach = reach_line(payload)
+    reach = f" The instrument's {reach}." if reach else ""
     parts = [
         "<h2>Where to measure next</h2>",
         f"<p>The settings that, measured together, are expected to shrink "
         f"{_html.escape(payload.get('target_label', payload['target']))} most "
-        f"(budget {payload['budget']}; each row's predictive given the rows measured so far, "
-        f"by importance reweighting of the posterior draws; <code>design.json</code> lists "
-        f"every candidate).{today}</p>",
+        f"(budget {payload['budget']}; {session}; each row's predictive given the rows "
+        f"measured so far, by importance reweighting of the posterior draws; "
+        f"<code>design.json</code> lists every candidate).{today}{_html.escape(reach)}</p>",
         _html.table(DESIGN_HEADERS, design_rows(payload)),
     ]
     figure = run / DESIGN_FIGURE
