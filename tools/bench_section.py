@@ -1,6 +1,6 @@
 """Measure one section of the benchmark report again and splice it into the report.
 
-    python tools/bench_section.py sbc|misspec|design [--report reports/benchmarks.md]
+    python tools/bench_section.py sbc|misspec|design|design-time [--report reports/benchmarks.md]
 
 The full benchmark (``brdf-infer bench``) takes long; after a change that touches one study,
 this reruns that study's section as ``brdf-infer bench`` would and replaces the section of the
@@ -50,7 +50,13 @@ def design(report: Path) -> list[str]:
     return design_section(False, report.with_name(f"{report.stem}_design.png"))
 
 
-SECTIONS = {"sbc": sbc, "misspec": misspec, "design": design}
+def design_time(report: Path) -> list[str]:
+    from brdf_infer.bench._design_section import command_section
+
+    return command_section(False)
+
+
+SECTIONS = {"sbc": sbc, "misspec": misspec, "design": design, "design-time": design_time}
 
 
 def provenance(seconds: float, commit: str) -> str:
@@ -76,13 +82,15 @@ def provenance(seconds: float, commit: str) -> str:
 
 
 def splice(report: Path, lines: list[str]) -> None:
-    """Replace the section whose ``## `` heading is ``lines[0]`` in ``report``."""
+    """Replace the section whose ``## `` heading is ``lines[0]`` in ``report`` (a section the
+    report does not have yet is added at its end)."""
     text = report.read_text()
     heading = lines[0]
     pattern = re.compile(rf"^{re.escape(heading)}\n.*?(?=^## |\Z)", re.S | re.M)
-    if not pattern.search(text):
-        raise SystemExit(f"{report}: no section {heading!r}")
     new = "\n".join(lines).rstrip("\n") + "\n\n"
+    if not pattern.search(text):
+        atomic_write_bytes(report, (text.rstrip("\n") + "\n\n" + new).encode())
+        return
     atomic_write_bytes(report, pattern.sub(lambda _: new, text, count=1).encode())
 
 

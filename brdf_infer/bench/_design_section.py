@@ -80,16 +80,35 @@ def _refit_lines(result: dict, label: str) -> list[str]:
     ]
 
 
+def command_section(quick: bool, progress=print) -> list[str]:
+    """The section on the command's wall time (its own, so that it can be measured again on a
+    quiet machine without the studies)."""
+    with tempfile.TemporaryDirectory() as folder:
+        base = Path(folder) / "lya"
+        draws = _reduced_run(load_scene("lya"), base, quick)
+        progress("  design command, cold and warm ...")
+        commands = command_rows(base, Path(folder) / "scratch")
+    return [
+        "## Experimental design: the command's time",
+        "",
+        f"`brdf-infer design RUN --target tis:70` on a run of the bundled scene ({draws} draws; "
+        "design thins to 1000), fresh processes, wall time from start to exit; every chosen "
+        "row in a new session unless `--same-session` says otherwise:",
+        "",
+        markdown_table(COMMAND_HEADERS, commands),
+        "",
+    ]
+
+
 def design_section(quick: bool, figure: Path, progress=print) -> list[str]:
-    """The section (module docstring); the pay-off figure written to ``figure``."""
+    """The section on design's estimates and pay-off (module docstring); the pay-off figure
+    written to ``figure``."""
     scene = load_scene("lya")
     replicates = 2 if quick else 8
     settings = PayoffSettings(seeds=3, rounds=2) if quick else PayoffSettings()
     with tempfile.TemporaryDirectory() as folder:
         base = Path(folder) / "lya"
-        draws = _reduced_run(scene, base, quick)
-        progress("  design command, cold and warm ...")
-        commands = command_rows(base, Path(folder) / "scratch")
+        _reduced_run(scene, base, quick)
         refits = [
             refit_check(base, "tis:70", RefitSettings(replicates, initial_series=s), progress)
             for s in (None, "I")
@@ -99,12 +118,6 @@ def design_section(quick: bool, figure: Path, progress=print) -> list[str]:
     fit = f"{settings.chains} × ({settings.warmup} + {settings.draws}) draws"
     return [
         "## Experimental design (`brdf-infer design`)",
-        "",
-        f"The command on this section's run ({draws} draws of the bundled scene), fresh "
-        "processes, wall time from start to exit; every chosen row in a new session unless "
-        "`--same-session` says otherwise:",
-        "",
-        markdown_table(COMMAND_HEADERS, commands),
         "",
         "Estimate against refit, from an independent simulation: per replicate a truth drawn "
         "from the bundled posterior, a virtual lab (`brdf_infer.synthetic.SyntheticLab`: every "

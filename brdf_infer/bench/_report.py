@@ -8,7 +8,7 @@ from pathlib import Path
 from brdf_infer._atomic import atomic_write_bytes
 from brdf_infer.bench._batch import batch_rows
 from brdf_infer.bench._cache import cache_rows
-from brdf_infer.bench._design_section import design_section
+from brdf_infer.bench._design_section import command_section, design_section
 from brdf_infer.bench._export import abg_rows, grid_rows
 from brdf_infer.bench._families import comparison_row, quadrature_rows
 from brdf_infer.bench._fits import fit_rows
@@ -106,6 +106,7 @@ def write_report(out: Path, quick: bool, progress=print) -> Path:
     misspecified = misspec_rows(scene, quick, progress)
     progress("benchmark: experimental design (estimate against refit, pay-off) ...")
     design_lines = design_section(quick, out.with_name(out.stem + "_design.png"), progress)
+    design_lines += command_section(quick, progress)
     progress("benchmark 8/12: exports ...")
     grids, abgs = grid_rows(quick), abg_rows(quick)
     progress("benchmark 9/12: model families ...")
