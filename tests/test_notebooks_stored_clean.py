@@ -10,6 +10,7 @@ def test_notebooks_have_no_outputs():
     assert [n.name for n in notebooks] == [
         "lyman_alpha_analysis.ipynb",
         "vis_532nm_validation.ipynb",
+        "where_to_measure_next.ipynb",
     ]
     for notebook in notebooks:
         for cell in json.loads(notebook.read_text())["cells"]:
