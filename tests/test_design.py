@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from brdf_infer.design import (
+    Candidates,
     DesignOptions,
     design,
     load_design_run,
@@ -26,6 +27,7 @@ CONTRACT_KEYS = {
     "phi_s_deg",
     "series",
     "session",
+    "sample",
     "expected_sd",
     "sd_ratio",
     "eig_nats",
@@ -298,6 +300,35 @@ def test_same_session_continues_its_series_only(nuts_run, candidates_csv):
     payload = design(run, "tis:70", candidates, options, same_session="II").as_json()
     sessions = {(c["series"], c["session"]) for c in payload["candidates"]}
     assert sessions == {("II", "II"), ("I", "new")} and payload["same_session"] == "II"
+
+
+def test_design_never_repeats_a_setting_a_table_already_holds(nuts_run):
+    """One row per setting, as the measurement loader requires: continuing series II's session
+    the grid leaves out its 18 measured settings (counted), and a budget never picks one setting
+    twice; a budget above the candidates is refused."""
+    run = load_design_run(nuts_run.out)
+    options = DesignOptions(draws=100, simulations=16, budget=6)
+    payload = design(run, "pi_brdf0", options=options, same_session="II").as_json()
+    measured = {
+        (i, s)
+        for n, i, s in zip(
+            run.measurements.series,
+            run.measurements.theta_i_deg,
+            run.measurements.theta_s_deg,
+            strict=True,
+        )
+        if n == "II"
+    }
+    settings = [(c["theta_i_deg"], c["theta_s_deg"]) for c in payload["chosen"]]
+    assert len(set(settings)) == 6 and not measured & set(settings)
+    assert payload["left_out"]["measured"] == len(measured) == 18
+    assert len(payload["candidates"]) == 302 - 18
+    assert {c["sample"] for c in payload["chosen"]} == {"40x40"}
+    two = Candidates(
+        np.array(["II", "II"]), np.array([50.0, 60.0]), np.array([70.0, 70.0]), np.full(2, np.nan)
+    )
+    with pytest.raises(BadInputError, match="a budget of 3 rows, but 2 candidate settings"):
+        design(run, "tis:70", two, DesignOptions(draws=100, simulations=16, budget=3))
 
 
 def test_candidates_the_instrument_cannot_reach_name_file_row_and_field(nuts_run, tmp_path):

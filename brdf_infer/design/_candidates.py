@@ -47,7 +47,8 @@ class Candidates:
             :func:`~brdf_infer.design.predictive` takes every row as continuing its series).
         left_out: for a grid, ``{"grid", "reachable", "theta_i_deg", "theta_s_deg",
             "source_clearance_deg"}``: the grid's settings, those kept, and those left out
-            by each limit; None for a CSV.
+            by each limit (and ``"measured"``: reachable ones a continued session holds,
+            :meth:`without_measured`); None for a CSV.
     """
 
     series: np.ndarray
@@ -75,6 +76,42 @@ class Candidates:
             self.phi_s_deg[index],
             session,
         )
+
+    def without_measured(self, measurements: Measurements) -> Candidates:
+        """The candidates less those that would repeat a measured row of the session they
+        continue (same series, sample and angles: a table holds one row per setting, and the
+        measurement loader refuses a second)."""
+        taken = set(
+            zip(
+                measurements.series.astype(str),
+                measurements.sample.astype(str),
+                np.round(measurements.theta_i_deg, 9),
+                np.round(measurements.theta_s_deg, 9),
+                strict=True,
+            )
+        )
+        rows = self.as_measurements(measurements)
+        keep = np.array(
+            [
+                session == "new"
+                or (str(s), str(m), round(float(i), 9), round(float(t), 9)) not in taken
+                for session, s, m, i, t in zip(
+                    self.sessions(),
+                    rows.series,
+                    rows.sample,
+                    rows.theta_i_deg,
+                    rows.theta_s_deg,
+                    strict=True,
+                )
+            ],
+            bool,
+        )
+        if keep.all():
+            return self
+        left_out = None
+        if self.left_out is not None:
+            left_out = {**self.left_out, "measured": int(np.sum(~keep))}
+        return replace(self.subset(np.flatnonzero(keep)), left_out=left_out)
 
     def in_sessions(self, same_session: str | None) -> Candidates:
         """The candidates, each row in a new session unless its series is ``same_session``
@@ -150,7 +187,8 @@ def design_series(
         raise BadInputError(
             f"no measured series {name!r} in scene '{scene.name}' (known: "
             f"{', '.join(measured)}), and no aperture for a new one (a [series.{name}] table "
-            "in the scene, or --aperture D_MM,R_MM)",
+            "in the scene — the copy the run recorded, unless --scene names the file as it is "
+            "now — or --aperture D_MM,R_MM)",
             field="series",
         )
     return name
@@ -179,6 +217,23 @@ def design_sample(measurements: Measurements, series: str) -> str:
         measurements.sample[mask if np.any(mask) else slice(None)], return_counts=True
     )
     return str(samples[int(np.argmax(counts))])
+
+
+def candidate_measurements(candidates: Candidates, measurements: Measurements) -> Measurements:
+    """The candidates as rows whose σ is the median relative σ of their series' rows (for a
+    new series, the largest such median of the measured series: its noise is not known)."""
+    rows = candidates.as_measurements(measurements)
+    if measurements.reflectance_err is None:
+        return rows
+    relative = measurements.reflectance_err / measurements.reflectance
+    median = {
+        s: float(np.median(relative[measurements.series == s]))
+        for s in dict.fromkeys(measurements.series)
+    }
+    widest = max(median.values())  # a new series: the noisiest measured series' (unknown)
+    median = {s: median.get(s, widest) for s in set(rows.series)}
+    error = np.array([median[s] for s in rows.series]) * rows.reflectance
+    return Measurements(**{**rows.__dict__, "reflectance_err": error})
 
 
 REACH_LIMITS = ("theta_i_deg", "theta_s_deg", "source_clearance_deg")

@@ -34,6 +34,8 @@ from brdf_infer._design_target import DesignTarget, parse_target
 from brdf_infer.design._candidates import (
     REACH_LIMITS,
     Candidates,
+    candidate_measurements,
+    design_sample,
     design_series,
     grid_candidates,
     session_scene,
@@ -148,23 +150,6 @@ def target_values(target: DesignTarget, params: Params, scene: Scene) -> np.ndar
     else:
         return np.stack([np.asarray(getattr(params, n)) for n in scene.free_parameters], axis=1)
     return np.asarray(values, float).reshape(-1, 1)
-
-
-def candidate_measurements(candidates: Candidates, measurements: Measurements) -> Measurements:
-    """The candidates as rows whose σ is the median relative σ of their series' rows (for a
-    new series, the largest such median of the measured series: its noise is not known)."""
-    rows = candidates.as_measurements(measurements)
-    if measurements.reflectance_err is None:
-        return rows
-    relative = measurements.reflectance_err / measurements.reflectance
-    median = {
-        s: float(np.median(relative[measurements.series == s]))
-        for s in dict.fromkeys(measurements.series)
-    }
-    widest = max(median.values())  # a new series: the noisiest measured series' (unknown)
-    median = {s: median.get(s, widest) for s in set(rows.series)}
-    error = np.array([median[s] for s in rows.series]) * rows.reflectance
-    return Measurements(**{**rows.__dict__, "reflectance_err": error})
 
 
 def _shared_column(keys: list, key) -> int:
@@ -383,7 +368,13 @@ def design(
     scene = run.scene
     if candidates is None:
         candidates = grid_candidates(scene.design, name)
-    candidates = candidates.in_sessions(same_session)
+    candidates = candidates.in_sessions(same_session).without_measured(measurements)
+    if options.budget > len(candidates):
+        raise BadInputError(
+            f"a budget of {options.budget} rows, but {len(candidates)} candidate settings "
+            "(one row per setting)",
+            field="budget",
+        )
     total = len(run.sites["brdf0"])
     keep = np.unique(np.linspace(0, total - 1, min(options.draws, total)).round().astype(int))
     draws = {name: values[keep] for name, values in run.sites.items()}
@@ -395,6 +386,9 @@ def design(
     chosen, single = _greedy(
         row_predictive_, candidates, target, jnp.asarray(values / scale), float(scale[0]), options
     )
+    samples = {name: design_sample(measurements, name) for name in set(candidates.series)}
+    for entry in [*chosen, *single]:  # the sample a row is to be taken on
+        entry["sample"] = samples[entry["series"]]
     current = _current(target, run, scene, scale)
     measured = [
         {
@@ -457,8 +451,10 @@ def _greedy(
         order = _order(entries, target)
         if step == 0:
             single = [entries[i] for i in order]
-        chosen_index.append(order[0])
-        chosen.append({**entries[order[0]], "step": step + 1})
+        # one row per setting (a table holds one; a repeat goes on another sample or session)
+        best = next(i for i in order if i not in chosen_index)
+        chosen_index.append(best)
+        chosen.append({**entries[best], "step": step + 1})
     return chosen, single
 
 

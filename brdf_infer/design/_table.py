@@ -55,8 +55,13 @@ def reach_line(payload: dict) -> str:
     if not left:
         return text + " (candidates from a file, each checked)"
     out = left["grid"] - left["reachable"]
+    measured = (
+        f"; {left['measured']} reachable ones already measured in the session continued"
+        if left.get("measured")
+        else ""
+    )
     return (
         f"{text}; of {left['grid']} grid settings {out} left out: θi out of range "
         f"{left['theta_i_deg']}, θs out of range {left['theta_s_deg']}, camera too near the "
-        f"beam {left['source_clearance_deg']}"
+        f"beam {left['source_clearance_deg']}{measured}"
     )
