@@ -150,10 +150,52 @@ def _residual_sum(design: np.ndarray, y: np.ndarray) -> tuple[float, int]:
     return float(left @ left), basis.shape[1]
 
 
-def _whitener(covariance: np.ndarray):
-    """A map a → L⁻¹ a with L Lᵀ = ``covariance``; for a singular covariance (rows that share
-    every noise source, e.g. one incidence angle of one sample) the map onto its range,
+class LowRankNoise(NamedTuple):
+    """A rows' noise covariance D + W Wᵀ held as its parts (never rows × rows).
+
+    Attributes:
+        diagonal: D, each row's own variance (rows,) [ln R²].
+        factor: W, one column per shared effect (rows × effects) [ln R].
+    """
+
+    diagonal: np.ndarray
+    factor: np.ndarray
+
+    def dense(self) -> np.ndarray:
+        """D + W Wᵀ (rows × rows; small tables only)."""
+        return np.diag(self.diagonal) + self.factor @ self.factor.T
+
+
+def _low_rank_whitener(noise: LowRankNoise):
+    """a → A a with Aᵀ A = (D + W Wᵀ)⁻¹, in O(rows × effects²) time and memory: with
+    V = D^(-1/2) W = Q S Pᵀ (thin SVD), (I + V Vᵀ)^(-1/2) = I + Q ((1 + S²)^(-1/2) − 1) Qᵀ and
+    A = (I + V Vᵀ)^(-1/2) D^(-1/2) (a symmetric square root; any A with that Gram gives the
+    same generalised least squares)."""
+    scale = 1.0 / np.sqrt(np.asarray(noise.diagonal, float))
+    factor = np.asarray(noise.factor, float) * scale[:, None]
+    if factor.shape[1] == 0:
+        return lambda a: scale.reshape((-1,) + (1,) * (np.ndim(a) - 1)) * np.asarray(a, float)
+    basis, values, _ = np.linalg.svd(factor, full_matrices=False)
+    shrink = 1.0 / np.sqrt(1.0 + values**2) - 1.0
+
+    def whiten(a):
+        a = scale.reshape((-1,) + (1,) * (np.ndim(a) - 1)) * np.asarray(a, float)
+        projected = basis.T @ a
+        return a + basis @ (shrink.reshape((-1,) + (1,) * (np.ndim(a) - 1)) * projected)
+
+    return whiten
+
+
+def _whitener(noise: np.ndarray | LowRankNoise):
+    """A map a → L⁻¹ a with L Lᵀ the covariance (a dense one, or D + W Wᵀ with D > 0 held as
+    :class:`LowRankNoise`); for a singular covariance (rows that share every noise source,
+    e.g. one incidence angle of one sample, no row noise of their own) the map onto its range,
     eigenvalues below 1e-12 of the largest left out (fewer rows then count)."""
+    if isinstance(noise, LowRankNoise):
+        if np.all(np.asarray(noise.diagonal) > 0):
+            return _low_rank_whitener(noise)
+        noise = noise.dense()
+    covariance = np.asarray(noise, float)
     try:
         factor = np.linalg.cholesky(covariance)
     except np.linalg.LinAlgError:
@@ -166,7 +208,7 @@ def _whitener(covariance: np.ndarray):
 
 def residual_trends(
     residuals: np.ndarray,
-    covariance: np.ndarray,
+    covariance: np.ndarray | LowRankNoise,
     absorbed: np.ndarray,
     regressors: Mapping[str, np.ndarray],
 ) -> dict[str, float]:
@@ -182,8 +224,8 @@ def residual_trends(
 
     Args:
         residuals: ln R residuals (model − data) [ln R].
-        covariance: the rows' noise covariance (rows × rows) [ln R²], e.g. diag(σᵢ²) plus the
-            calibration factors.
+        covariance: the rows' noise covariance [ln R²], e.g. diag(σᵢ²) plus the calibration
+            factors: rows × rows, or its parts (:class:`LowRankNoise`, linear in the rows).
         absorbed: the fit's Jacobian of ln R in its free parameters, or any basis of its
             column space.
         regressors: name → trend columns (rows × k), e.g. :func:`trend_regressors`.
@@ -192,7 +234,7 @@ def residual_trends(
         name → p-value for every group and ``"joint"`` (NaN where a group adds no rank or no
         degrees of freedom are left).
     """
-    whiten = _whitener(np.asarray(covariance, float))
+    whiten = _whitener(covariance)
     y = whiten(residuals)
     rows = len(y)
     base = whiten(np.column_stack([np.ones(len(residuals)), np.asarray(absorbed, float)]))

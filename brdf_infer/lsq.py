@@ -44,6 +44,7 @@ from brdf_infer._reweighting import paule_mandel as paule_mandel
 from brdf_infer.error_model import noise_layout
 from brdf_infer.errors import BadInputError
 from brdf_infer.fit_quality import (
+    LowRankNoise,
     RepeatabilityCheck,
     repeatability_check,
     residual_trends,
@@ -414,22 +415,24 @@ def _residual_trends(scene, measurements, residuals, sigma, absorbed, reweight: 
     if reweight.dof <= 0:
         return {}
     layout = noise_layout(scene.errors, measurements)
-
-    def shared(members, alone) -> np.ndarray:
-        members = np.asarray(members, float)
-        return members @ members.T + np.diag(np.asarray(alone, float))
-
     rotation = reweight.rotation_slope * scene.errors.rotation_deg
-    covariance = (
-        np.diag(sigma**2 - rotation**2)
-        + np.outer(rotation, rotation) * shared(layout.rotation_members, layout.rotation_alone)
-        + float(layout.calibration_sd) ** 2
-        * shared(layout.calibration_members, layout.calibration_alone)
+    calibration = float(layout.calibration_sd)
+    rotation_alone = np.asarray(layout.rotation_alone, float)
+    noise = LowRankNoise(  # no rows × rows object: the parts of D + W Wᵀ
+        diagonal=sigma**2
+        - rotation**2 * (1.0 - rotation_alone)
+        + calibration**2 * np.asarray(layout.calibration_alone, float),
+        factor=np.column_stack(
+            [
+                rotation[:, None] * np.asarray(layout.rotation_members, float),
+                calibration * np.asarray(layout.calibration_members, float),
+            ]
+        ),
     )
     regressors = trend_regressors(
         measurements.theta_i_deg, measurements.theta_s_deg, np.asarray(measurements.series)
     )
-    return residual_trends(residuals, covariance, sigma[:, None] * absorbed, regressors)
+    return residual_trends(residuals, noise, sigma[:, None] * absorbed, regressors)
 
 
 def _internal_covariance(residuals_free, z_best, reduced_chi2):
