@@ -125,16 +125,20 @@ def test_design_json_contract_and_map(nuts_run, candidates_csv, tmp_path, capsys
         # information, so an estimate at either clip is a broken estimator (uniform weights
         # give exactly 1 and 0, and fail here; the old `<= 1`, `>= 0` passed them);
         # measured 0.96-0.99 and 0.16-0.56 nats
-        assert 0 < entry["sd_ratio"] < 1 and entry["eig_nats"] > 0, entry
-        # I(T; y) <= I(θ; y) (T a function of θ), and I(T; y) = -ln(sd ratio) for a normal T:
-        # the target's gain cannot exceed the whole EIG (measured 0.01-0.04 against 0.16-0.56)
-        assert -np.log(entry["sd_ratio"]) < entry["eig_nats"], entry
+        assert 0 < entry["sd_ratio"] < 1, entry
+        # the EIG estimate keeps the simulated draw in its inner sum (module docstring of
+        # brdf_infer.design._estimate): a lower bound, at most ln(draws); no ordering against
+        # -ln(sd ratio) holds for it (the true I(T; y) <= I(θ; y) does)
+        assert entry["eig_nats"] < np.log(300), entry
         # one target: its expected sd is the ratio times today's sd over the same draws (an sd
         # over all 4000 draws instead, planted, is 0.3 % off and fails)
         assert entry["expected_sd"] == pytest.approx(entry["sd_ratio"] * sd_today, rel=1e-12)
         # the Kish ESS of 300 draws; the importance estimate only above the ESS floor
         assert 1 <= entry["ess"] <= 300
         assert (entry["method"] == "importance") == (entry["ess"] >= payload["ess_floor"])
+    # an uninformative row's EIG may clip to 0 by Monte Carlo error (0.01 ± 0.08 nats at 32
+    # simulations for (45°, −85°)); uniform weights would clip every one
+    assert all(c["eig_nats"] > 0 for c in payload["chosen"]), payload["chosen"]
     expected = [c["expected_sd"] for c in payload["candidates"]]
     assert expected == sorted(expected)
     assert payload["chosen"][0]["expected_sd"] == expected[0]
@@ -467,3 +471,17 @@ def test_the_design_table_shows_tis_and_pi_brdf0_in_per_cent():
     chosen |= {"expected_sd": 0.00388, "sd_ratio": 0.968, "eig_nats": 0.07}
     assert design_rows({"target": "tis_70deg", "chosen": [chosen]})[0][5] == "0.388 %"
     assert design_rows({"target": "alpha", "chosen": [chosen]})[0][5] == "0.00388"
+
+
+def test_a_larger_budget_extends_a_smaller_ones_picks(nuts_run):
+    """Each greedy step's simulated outcomes come from a key of its own, so ``--budget 4``
+    begins with ``--budget 2``'s rows at the same expected sd (the ratios were drawn anew per
+    budget before: the first pick differed between --budget 3 and --budget 8 on the bundled run)."""
+    run = load_design_run(nuts_run.out)
+    picks = {
+        budget: design(
+            run, "tis:70", options=DesignOptions(draws=100, simulations=16, budget=budget)
+        ).chosen
+        for budget in (2, 4)
+    }
+    assert picks[4][:2] == picks[2]

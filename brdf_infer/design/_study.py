@@ -390,15 +390,10 @@ def design(
     for entry in [*chosen, *single]:  # the sample a row is to be taken on
         entry["sample"] = samples[entry["series"]]
     current = _current(target, run, scene, scale)
+    rows = measurements.series, measurements.theta_i_deg, measurements.theta_s_deg
     measured = [
-        {
-            "series": str(s),
-            "theta_i_deg": float(i),
-            "theta_s_deg": float(t),
-        }
-        for s, i, t in zip(
-            measurements.series, measurements.theta_i_deg, measurements.theta_s_deg, strict=True
-        )
+        {"series": str(s), "theta_i_deg": float(i), "theta_s_deg": float(t)}
+        for s, i, t in zip(*rows, strict=True)
     ]
     return DesignResult(
         target=target,
@@ -431,7 +426,15 @@ def _greedy(
     values per draw over ``scale`` (its sd), the entries back in its units."""
     count = standardised.shape[0]
     key_simulate, key_draws = jax.random.split(jax.random.PRNGKey(options.seed))
-    standard = jax.random.normal(key_simulate, (options.simulations, options.budget))
+    # one column of outcomes per step, each from its own key: a larger budget extends a smaller
+    # one's picks instead of drawing them anew
+    standard = jnp.stack(
+        [
+            jax.random.normal(jax.random.fold_in(key_simulate, step), (options.simulations,))
+            for step in range(options.budget)
+        ],
+        axis=1,
+    )
     simulated = (jnp.arange(options.simulations) * count) // options.simulations
     simulated = (simulated + jax.random.randint(key_draws, (), 0, count)) % count
     chosen_index: list[int] = []
