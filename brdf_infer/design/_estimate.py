@@ -53,8 +53,13 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
-import jax.scipy.linalg as jsl
 from jax.scipy.special import logsumexp
+
+# unrolled small factorisations, not LAPACK: batched LAPACK kernels split their batch over
+# XLA's intra-op pool and wait for it, and two of them running at once can each hold a pool
+# thread the other waits for (a hang of `design --budget 8`, seen in gdb: dpotrf and dtrsm in
+# ParallelBatchMap, every other pool thread idle)
+from brdf_infer.posterior import cholesky, solve_lower, solve_upper_transposed
 
 ESS_FLOOR = 30.0  # mean Kish ESS below which the linear-Gaussian estimate is used
 
@@ -99,8 +104,8 @@ def shared_effects(residual, factor, diagonal) -> tuple[jnp.ndarray, jnp.ndarray
     """
     scaled = factor / diagonal[:, None]
     capacitance = jnp.eye(factor.shape[1]) + factor.T @ scaled
-    lower = jnp.linalg.cholesky(capacitance)
-    mean = jsl.cho_solve((lower, True), scaled.T @ residual)
+    lower = cholesky(capacitance)
+    mean = solve_upper_transposed(lower, solve_lower(lower, scaled.T @ residual))
     return mean, lower
 
 
@@ -114,7 +119,7 @@ def row_predictive(residual, factor, diagonal, new_mean, new_factor, new_own) ->
         new_own: (C,) d_c.
     """
     mean_z, lower = shared_effects(residual, factor, diagonal)
-    loading = jsl.solve_triangular(lower, new_factor.T, lower=True).T  # W_new L_C⁻ᵀ
+    loading = solve_lower(lower, new_factor.T).T  # W_new L_C⁻ᵀ
     return RowPredictive(new_mean + new_factor @ mean_z, loading, new_own)
 
 
@@ -144,13 +149,13 @@ def set_outcome(
         simulated_draws: (J,) the draw each outcome is simulated from.
     """
     mean, covariance = _set_moments(predictive, rows)
-    lower = jnp.linalg.cholesky(covariance)  # (S, k, k)
+    lower = jax.vmap(cholesky)(covariance)  # (S, k, k)
     outcomes = mean[simulated_draws] + jnp.einsum(
         "jkl,jl->jk", lower[simulated_draws], standard
     )  # (J, k)
     log_det = jnp.sum(jnp.log(jnp.diagonal(lower, axis1=1, axis2=2)), axis=1)  # (S,)
-    identity = jnp.broadcast_to(jnp.eye(lower.shape[-1]), lower.shape)
-    inverse = jsl.solve_triangular(lower, identity, lower=True)  # L⁻¹ of every draw, once
+    identity = jnp.eye(lower.shape[-1])
+    inverse = jax.vmap(lambda factor: solve_lower(factor, identity))(lower)  # L⁻¹ per draw
 
     def log_density(outcome):  # ln p(y_j | θ_s) for every s, up to a constant
         whitened = jnp.einsum("skl,sl->sk", inverse, outcome[None, :] - mean)
@@ -180,7 +185,7 @@ def _linear_variance(mean, covariance, targets) -> jnp.ndarray:
     count = targets.shape[0]
     cross = centred_y.T @ centred_t / count  # (k, P)
     total = centred_y.T @ centred_y / count + jnp.mean(covariance, axis=0)  # (k, k)
-    explained = jnp.sum(cross * jnp.linalg.solve(total, cross), axis=0)
+    explained = jnp.sum(solve_lower(cholesky(total), cross) ** 2, axis=0)  # crossᵀ total⁻¹ cross
     return jnp.maximum(jnp.mean(centred_t**2, axis=0) - explained, 0.0)
 
 

@@ -12,6 +12,7 @@ from brdf_infer.posterior._bands import (
 )
 from brdf_infer.posterior._likelihood import ModelData, build_model_data
 from brdf_infer.posterior._loo import pointwise_loo_terms
+from brdf_infer.posterior._lowrank import cholesky, solve_lower, solve_upper_transposed
 from brdf_infer.posterior._model import LINEAR, NOISE_SITES, PosteriorModel, build_posterior_model
 from brdf_infer.posterior._nuts import (
     Cancelled,
@@ -86,6 +87,7 @@ __all__ = [
     "build_model_data",
     "build_posterior_model",
     "chain_keys",
+    "cholesky",
     "complete_run",
     "diagnostics",
     "draws_params",
@@ -113,6 +115,8 @@ __all__ = [
     "run_nuts",
     "run_posterior",
     "run_scene",
+    "solve_lower",
+    "solve_upper_transposed",
     "stack_data",
     "tis_band",
 ]
