@@ -23,8 +23,8 @@ settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci" if os.environ.ge
 # Fixtures computed once per module or session whose work is worth sharing (a NUTS or emcee
 # run, a batch, ray traces, a least-squares fit, compiled potentials), most shared first.
 SHARED_FIXTURES = (
-    "calibration_study",  # before nuts_run: its report test needs both
     "nuts_run",
+    "calibration_study",
     "emcee_run",
     "batch_run",
     "abg_run",
@@ -34,6 +34,9 @@ SHARED_FIXTURES = (
     "lya_potentials",
     "image_experiment",
 )
+# Fixtures whose tests go to another's group: the sensitivity study's report test needs both
+# the study and ``nuts_run`` (a group of its own would build ``nuts_run`` on a second worker)
+SAME_GROUP = {"calibration_study": "nuts_run"}
 
 
 @pytest.hookimpl(tryfirst=True)
@@ -47,7 +50,7 @@ def pytest_collection_modifyitems(items):
         names = getattr(item, "fixturenames", ())
         shared = next((name for name in SHARED_FIXTURES if name in names), None)
         if shared is not None:
-            item.add_marker(pytest.mark.xdist_group(shared))
+            item.add_marker(pytest.mark.xdist_group(SAME_GROUP.get(shared, shared)))
 
 
 @pytest.hookimpl(trylast=True)
