@@ -73,6 +73,8 @@ def test_batch_json_contract_and_a_broken_scene_is_skipped(batch_run):
     np.testing.assert_allclose(ratio, 1.3, rtol=0.1)
 
 
+# the single runs without width refits, as a batch scene's (refit=False): the draws compared
+@pytest.mark.usefixtures("width_refit_off")
 def test_a_batch_scene_has_the_draws_of_its_own_posterior_run(batch_run, tmp_path, capsys):
     folder, out, _ = batch_run
     single = tmp_path / "single"
@@ -86,6 +88,7 @@ def test_a_batch_scene_has_the_draws_of_its_own_posterior_run(batch_run, tmp_pat
         np.testing.assert_array_equal(np.asarray(ours[name]), np.asarray(theirs[name]))
 
 
+@pytest.mark.usefixtures("width_refit_off")  # a refit of c's shape would be another compile
 def test_a_padded_scene_samples_its_own_posterior_and_reports_its_own_rows(
     batch_run, tmp_path, capsys
 ):

@@ -135,6 +135,7 @@ def _comparable(payload: dict, out: Path) -> str:
     return json.dumps(scrub(payload)).replace(str(out), "OUT")
 
 
+@pytest.mark.usefixtures("width_refit_off")  # the same path either way; a refit is a sampler
 def test_workflow_run_and_the_command_line_give_the_same_result(
     lya, nuts_run, tmp_path, capsys, monkeypatch
 ):
@@ -150,7 +151,8 @@ def test_workflow_run_and_the_command_line_give_the_same_result(
         return out / "report.html", Verdict.from_json(summary["verdict"])
 
     monkeypatch.setattr("brdf_infer.report.write_report", recorded_verdict)
-    settings = {"chains": 1, "warmup": SUITE_WARMUP, "draws": 50, "seed": 3}
+    # 1 × 20 draws: the shapes of test_report's small runs, whose compiled programs are reused
+    settings = {"chains": 1, "warmup": SUITE_WARMUP, "draws": 20, "seed": 3}
     library = tmp_path / "library"
     result = run(*lya, library, RunSettings(**settings))
     command = tmp_path / "command"

@@ -341,3 +341,12 @@ def read_candidates(
     if not names:
         raise BadInputError("no candidate rows", file=path)
     return Candidates(np.array(names), np.array(theta_i), np.array(theta_s), np.array(phi))
+
+
+def check_budget(budget: int, candidates: int) -> None:
+    """Refuse a budget above the candidates (one row per setting)."""
+    if budget > candidates:
+        raise BadInputError(
+            f"a budget of {budget} rows, but {candidates} candidate settings (one row per setting)",
+            field="budget",
+        )

@@ -35,6 +35,7 @@ from brdf_infer.design._candidates import (
     REACH_LIMITS,
     Candidates,
     candidate_measurements,
+    check_budget,
     design_sample,
     design_series,
     grid_candidates,
@@ -369,12 +370,7 @@ def design(
     if candidates is None:
         candidates = grid_candidates(scene.design, name)
     candidates = candidates.in_sessions(same_session).without_measured(measurements)
-    if options.budget > len(candidates):
-        raise BadInputError(
-            f"a budget of {options.budget} rows, but {len(candidates)} candidate settings "
-            "(one row per setting)",
-            field="budget",
-        )
+    check_budget(options.budget, len(candidates))
     total = len(run.sites["brdf0"])
     keep = np.unique(np.linspace(0, total - 1, min(options.draws, total)).round().astype(int))
     draws = {name: values[keep] for name, values in run.sites.items()}
