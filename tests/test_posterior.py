@@ -257,7 +257,8 @@ def test_emcee_resume_after_kill_reproduces_the_uninterrupted_run(tmp_path):
     assert not checkpoint.exists()
 
 
-# the two emcee tests of 16 walkers share one compiled program: on one worker, one compile
+# the emcee tests of 16 walkers on lya (these two, test_posterior_records' emcee run) share one
+# compiled program: on one worker, one compile
 @pytest.mark.xdist_group("emcee16")
 def test_sigterm_leaves_a_resumable_checkpoint_and_exit_130(tmp_path):
     command = emcee_command(200000, "--out", str(tmp_path))

@@ -2,6 +2,8 @@
 
 import json
 
+import pytest
+
 from brdf_infer.posterior import Bands, PosteriorSummary, run_posterior
 from tests.helpers import record_mismatches
 
@@ -13,9 +15,19 @@ def test_a_nuts_runs_files_are_its_records(nuts_run):
     assert record_mismatches(nuts_run.summary, PosteriorSummary) == []
 
 
+# 16 walkers on lya: the emcee programs (MAP search, potential) of test_posterior's emcee16
+# tests, which compile the data in; in their group, one compile for the three
+@pytest.mark.xdist_group("emcee16")
 def test_an_emcee_runs_summary_is_its_record(lya, tmp_path):
     run = run_posterior(
-        *lya, sampler="emcee", steps=300, warmup=100, out=tmp_path, progress=False, seed=1
+        *lya,
+        sampler="emcee",
+        walkers=16,
+        steps=300,
+        warmup=100,
+        out=tmp_path,
+        progress=False,
+        seed=1,
     )
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert record_mismatches(summary, PosteriorSummary) == []
