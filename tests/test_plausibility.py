@@ -26,7 +26,7 @@ from brdf_infer.scene import load_scene, scene_file
 from brdf_infer.verdict import ALL_PASS, FORCED, IMPLAUSIBLE, Verdict, posterior_verdict
 from tests.helpers import run_cli
 
-FORCED_NUTS = ["--chains", "4", "--warmup", "500", "--draws", "100"]  # the shared compile
+FORCED_NUTS = ["--chains", "2", "--warmup", "500", "--draws", "150"]  # batch's shapes
 
 
 def bundled_copy(folder, name: str, *, scale=None, radians: bool = False):
