@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from brdf_infer.errors import BadInputError
+from brdf_infer.table_screening import TableScreening
 
 COLUMNS: tuple[str, ...] = (
     "series",
@@ -53,6 +54,8 @@ class Measurements:
         quantity: ``raw_reflectance`` or ``brdf`` (from the columns of the file).
         phi_s_deg: azimuth of each out-of-plane row [deg] (NaN for in-plane rows), or None
             when every row is in the plane.
+        screening: what reading a .BSDF table left out, counted by its rules
+            (:class:`brdf_infer.table_screening.TableScreening`); None for a CSV.
     """
 
     path: Path
@@ -64,6 +67,7 @@ class Measurements:
     reflectance_err: np.ndarray | None
     quantity: str = "raw_reflectance"
     phi_s_deg: np.ndarray | None = None
+    screening: TableScreening | None = None
 
     @property
     def out_of_plane(self) -> np.ndarray:
@@ -87,6 +91,7 @@ class Measurements:
             reflectance_err=None if self.reflectance_err is None else self.reflectance_err[mask],
             quantity=self.quantity,
             phi_s_deg=None if self.phi_s_deg is None else self.phi_s_deg[mask],
+            screening=self.screening,
         )
 
 

@@ -146,6 +146,8 @@ class PosteriorSummary(TypedDict):
     reference: NotRequired[list[Reference]]  # the scene's [reference] values
     seconds: dict[str, Any]  # sampling, compile, after_sampling (per step), total
     forced: list[str]  # plausibility checks the run went past
+    # a .BSDF table's zero cells and dropouts left out, by rule (brdf_infer.table_screening)
+    table: NotRequired[dict[str, Any]]
     fingerprint: dict[str, str]  # what ran, for a resume
     verdict: VerdictRecord
 

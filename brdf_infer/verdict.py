@@ -18,7 +18,9 @@ Empty, the verdict is "every diagnostic passes". Beside these failures it states
 reader of the answer must know, which are not failures: an assumption of the error model that
 alone carries more than a third of a headline 95 % width (TIS(70°), π·BRDF0;
 :mod:`brdf_infer.posterior._width`), a learned noise scale the data do not contract (set by
-its prior), and a published reference value outside the 95 % interval.
+its prior), a published reference value outside the 95 % interval, and, first, how many cells
+of a .BSDF table each reading rule left out (zero cells, dropouts, positive cells below the
+horizon; :mod:`brdf_infer.table_screening`; nothing for a CSV or a table no rule touched).
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ import numpy as np
 
 from brdf_infer.plausibility import answer_checks
 from brdf_infer.run_records import Bands, PosteriorSummary
+from brdf_infer.table_screening import table_facts
 
 PARETO_K_LIMIT = 0.7
 ALL_PASS = "every diagnostic passes"
@@ -171,12 +174,13 @@ def value_words(name: str, value: float) -> str:
 
 
 def answer_facts(summary: PosteriorSummary) -> list[str]:
-    """The facts of the verdict (module docstring) from the run's ``width``, ``learned`` and
-    ``reference`` records (a run written before they existed has none)."""
+    """The facts of the verdict (module docstring) from the run's ``table``, ``width``,
+    ``learned`` and ``reference`` records (a run written before they existed has none)."""
     carried: dict[str, list[str]] = {}
     for quantity, words, share in carried_shares(summary.get("width", {}), HEADLINE):
         carried.setdefault(words, []).append(f"{100 * share:.0f} % of {quantity_words(quantity)}'s")
-    facts = [
+    facts = table_facts(summary.get("table"))
+    facts += [
         f"{words} assumption alone carries {' and '.join(parts)} 95 % width"
         for words, parts in carried.items()
     ]

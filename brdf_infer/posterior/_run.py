@@ -445,6 +445,8 @@ def complete_run(
         **answer,  # width, learned, reference
         "seconds": dict(result.seconds),
         "forced": list(forced),
+        # what reading a .BSDF table left out, by rule (brdf_infer.table_screening); a CSV: none
+        **({} if measurements.screening is None else {"table": measurements.screening.as_json()}),
         "fingerprint": run_fingerprint(model, measurements),  # what ran: for a resume
     }
     summary["verdict"] = posterior_verdict(summary, bands, theta_i_band, forced).as_json()
