@@ -45,7 +45,7 @@ Schema (keys other than these are errors; defaults in brackets)::
     theta_s0_deg = -12.0                     # [-12.0] fixed θs0 [deg]
     selection = "paper"                      # ["paper"] see brdf_infer.selections.SELECTIONS
     [outputs]
-    theta_i_deg = [18, 45, 60, 75, 80]       # [the measured θi, at most 6] BRDF bands [deg]
+    theta_i_deg = [18, 45, 60, 75, 80]       # [every measured θi] BRDF bands [deg]
     tis = true                               # [true] TIS band (needs out_of_plane)
     maps = true                              # [true] hemisphere maps (needs out_of_plane)
     tis_reference = "reference.csv"          # [none] theta_i_deg,tis,label points to compare
@@ -107,7 +107,6 @@ from brdf_infer.scene._errors import parse_errors
 from brdf_infer.scene._load import BUILTIN_SCENES, DEFAULT_SCENE, load_scene, scene_file
 from brdf_infer.scene._parse import parse_scene
 from brdf_infer.scene._records import (
-    MAX_DEFAULT_BAND_ANGLES,
     DesignSettings,
     InstrumentSettings,
     ModelSettings,
@@ -124,7 +123,6 @@ from brdf_infer.scene._setups import check_instrument
 __all__ = [
     "BUILTIN_SCENES",
     "DEFAULT_SCENE",
-    "MAX_DEFAULT_BAND_ANGLES",
     "DesignSettings",
     "InstrumentSettings",
     "ModelSettings",

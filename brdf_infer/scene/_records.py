@@ -16,8 +16,6 @@ from brdf_infer.measurements import Measurements, load_measurements
 from brdf_infer.params import PAPER_CONSTANTS, PARAM_NAMES, HemisphereConstants
 from brdf_infer.priors import DEFAULT_PRIORS, Prior
 
-MAX_DEFAULT_BAND_ANGLES = 6
-
 
 @dataclass(frozen=True)
 class SeriesGeometry:
@@ -276,14 +274,11 @@ class Scene:
 
     def band_theta_i_deg(self, measurements: Measurements) -> tuple[float, ...]:
         """Incidence angles of the in-plane BRDF bands [deg]: the scene's ``[outputs]
-        theta_i_deg``, else the measured ones (at most six, spread over their range)."""
+        theta_i_deg``, else every measured one, in increasing order (no cap: a table of 18
+        angles of incidence has 18 bands, 18 TIS rows in the result)."""
         if self.outputs.theta_i_deg is not None:
             return self.outputs.theta_i_deg
-        angles = np.unique(measurements.theta_i_deg)
-        if angles.size > MAX_DEFAULT_BAND_ANGLES:
-            picks = np.round(np.linspace(0, angles.size - 1, MAX_DEFAULT_BAND_ANGLES)).astype(int)
-            angles = angles[picks]
-        return tuple(float(a) for a in angles)
+        return tuple(float(a) for a in np.unique(measurements.theta_i_deg))
 
     def load_tis_reference(self) -> list[tuple[float, float, str]]:
         """Reference TIS points (θi [deg], TIS [-], label) of the scene, possibly none."""
