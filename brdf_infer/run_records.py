@@ -121,6 +121,27 @@ class Reference(TypedDict):
     inside95: bool
 
 
+class Dropout(TypedDict):
+    """One dropout of a .BSDF table, left out (:mod:`brdf_infer.table_screening`)."""
+
+    theta_i_deg: float
+    theta_s_deg: float  # signed in the plane of incidence [deg]
+    phi_s_deg: NotRequired[float]  # out-of-plane rows only [deg]
+    value: float  # [sr⁻¹]
+    neighbours: float  # the median of its table neighbours [sr⁻¹]
+
+
+class TableRecord(TypedDict):
+    """What reading a .BSDF table left out, by rule (:mod:`brdf_infer.table_screening`)."""
+
+    zero_cells: int
+    detection_limit: float  # the table's smallest positive value [sr⁻¹]
+    below_horizon: int
+    dropouts: list[Dropout]
+    zero_rule: str
+    dropout_rule: str
+
+
 class PosteriorSummary(TypedDict):
     """``summary.json``: what ran, the answer and how far to trust it."""
 
@@ -147,7 +168,7 @@ class PosteriorSummary(TypedDict):
     seconds: dict[str, Any]  # sampling, compile, after_sampling (per step), total
     forced: list[str]  # plausibility checks the run went past
     # a .BSDF table's zero cells and dropouts left out, by rule (brdf_infer.table_screening)
-    table: NotRequired[dict[str, Any]]
+    table: NotRequired[TableRecord]
     fingerprint: dict[str, str]  # what ran, for a resume
     verdict: VerdictRecord
 

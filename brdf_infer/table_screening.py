@@ -35,9 +35,10 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
+
+from brdf_infer.run_records import Dropout, TableRecord
 
 MIN_NEIGHBOURS = 3
 DROPOUT_SDS = 5.0
@@ -65,10 +66,10 @@ class TableScreening:
     zero_cells: int
     detection_limit: float
     below_horizon: int = 0
-    dropouts: tuple[dict[str, float], ...] = ()
+    dropouts: tuple[Dropout, ...] = ()
     zero_directions: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
 
-    def as_json(self) -> dict[str, Any]:
+    def as_json(self) -> TableRecord:
         """The record of summary.json's ``"table"``: the counts, the rules in words and every
         dropout."""
         return {
@@ -134,7 +135,7 @@ def neighbour_median(values: np.ndarray, above: np.ndarray) -> np.ndarray:
         return np.exp(np.nanmedian(neighbours, axis=0))
 
 
-def dropout_words(row: dict[str, float]) -> str:
+def dropout_words(row: Dropout) -> str:
     """One dropout in words: θi, θs (φs) [deg], its value and its neighbours' [sr⁻¹]."""
     phi = row.get("phi_s_deg")
     where = "" if phi is None else f", φs {phi:.4g}°"
@@ -144,7 +145,7 @@ def dropout_words(row: dict[str, float]) -> str:
     )
 
 
-def table_facts(record: dict[str, Any] | None) -> list[str]:
+def table_facts(record: TableRecord | None) -> list[str]:
     """The verdict's facts about the table read (summary.json's ``"table"``): how many rows
     each rule left out; none when no rule touched a row (and for a CSV, which has no such
     record)."""

@@ -37,6 +37,7 @@ from brdf_infer.report._raytrace import figure_png, plot_detector_images, plot_r
 from brdf_infer.report._results import fold_note, result_box, tis_fold, tis_table
 from brdf_infer.report._run_tables import run_section, summary_table
 from brdf_infer.report._sensitivity import sensitivity_section
+from brdf_infer.report._table_views import residual_hemisphere, value_words
 from brdf_infer.report._traces import raytrace_table
 from brdf_infer.sensitivity import tis_angles
 from brdf_infer.verdict import PARETO_K_LIMIT, Verdict
@@ -126,10 +127,21 @@ def _write_report(run: Path, loaded, started: float, progress) -> tuple[Path, Ve
 def _fit_figures(add: AddFigure, run: Path, idata, summary, bands, scene, rows, loo) -> None:
     """The BRDF bands against the data, the sampler's diagnostics and the fit to the data."""
     reference = scene.outputs.reference_params
+    out_of_plane = int(rows.out_of_plane.sum())
     add(
         "brdf_bands",
-        "In-plane BRDF at the scene's incidence angles: posterior median, 68 % and 95 % bands, "
-        "and the measured raw reflectance converted by Eq. (6)"
+        "In-plane BRDF at every incidence angle of the bands: posterior median, 68 % and 95 % "
+        "bands, and the measured rows in the plane of incidence (φs 0° or 180°)"
+        + (
+            " as BRDF values"
+            if rows.quantity == "brdf"
+            else ", raw reflectance converted by Eq. (6)"
+        )
+        + (
+            f"; the {out_of_plane} out-of-plane rows are in the residual map"
+            if out_of_plane
+            else ""
+        )
         + (f"; dashed: the reference parameter set '{reference}'" if reference else "")
         + ".",
         lambda: _figures.brdf_bands(bands, scene, rows),
@@ -146,9 +158,24 @@ def _fit_figures(add: AddFigure, run: Path, idata, summary, bands, scene, rows, 
         add("energy", "NUTS energy plot.", lambda: _figures.energy(idata))
     add(
         "predictive",
-        "Posterior predictive against the measured raw reflectance, per series (cf. Figs. 4, 6).",
-        lambda: _figures.posterior_predictive(idata, rows.series),
+        f"Posterior predictive against the measured {value_words(rows.quantity)} of the rows in "
+        "the plane of incidence, per series (cf. Figs. 4, 6)"
+        + (
+            f"; the {out_of_plane} out-of-plane rows are in the residual map."
+            if out_of_plane
+            else "."
+        ),
+        lambda: _figures.posterior_predictive(idata, rows),
     )
+    if out_of_plane or summary.get("table"):
+        add(
+            "residual_map",
+            "Every row's residual on the hemisphere, one panel per incidence angle: ln value − "
+            "the median of its posterior-predictive replicates (red: the data lie above the "
+            "model); the table's zero cells and dropouts, left out by the rules of the Data "
+            "section, are marked where they lie.",
+            lambda: residual_hemisphere(idata, rows, summary.get("table")),
+        )
     pits = loo_pits(run, summary)
     if pits:
         add(
@@ -257,7 +284,7 @@ def _diagnostics(run: Path, idata, summary, loo, figures) -> list[str]:
         "<h2>Diagnostics</h2>",
         *_shown(figures, "trace", "rank", "pair", "energy"),
         "<h2>Fit against the data</h2>",
-        *_shown(figures, "predictive", "pareto_k"),
+        *_shown(figures, "predictive", "residual_map", "pareto_k"),
         "<h2>Error model</h2>",
         error_model_table(summary),
         *_shown(figures, "loo_pit", "spread_check"),

@@ -7,10 +7,12 @@ import json
 import jax
 import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.colors import BoundaryNorm, ListedColormap
 
 from brdf_infer._arviz import az
 from brdf_infer.model import ModelFamily, brdf_inplane, family, run_family_name
 from brdf_infer.params import PARAM_NAMES, PARAMETER_SETS
+from brdf_infer.report._table_views import in_plane, panel_grid, value_label
 from brdf_infer.run_records import Bands
 from brdf_infer.scene import Scene
 
@@ -160,29 +162,35 @@ def energy(idata: az.InferenceData):
     return figure
 
 
-def posterior_predictive(idata: az.InferenceData, series: np.ndarray):
-    """Measured raw reflectance against the 95 % posterior predictive, per series."""
+def posterior_predictive(idata: az.InferenceData, rows) -> plt.Figure:
+    """The measured in-plane rows (out-of-plane rows have their own view) against their 95 %
+    posterior predictive, per series; colours by θi, a colour bar beyond eight angles."""
     observed = np.exp(np.asarray(idata.observed_data["obs"]))
     replicated = np.exp(np.asarray(idata.posterior_predictive["obs"]).reshape(-1, observed.size))
     low, median, high = np.quantile(replicated, [0.025, 0.5, 0.975], axis=0)
     theta_i = np.asarray(idata.constant_data["theta_i_deg"])
     theta_s = np.asarray(idata.constant_data["theta_s_deg"])
     sigma = np.asarray(idata.constant_data["sigma_row"])
-    names = list(dict.fromkeys(series))
-    figure, axes = plt.subplots(1, len(names), figsize=(5.5 * len(names), 4.2), squeeze=False)
+    plane = in_plane(rows)
+    names = list(dict.fromkeys(rows.series[plane]))
+    figure, axes = plt.subplots(
+        1, len(names), figsize=(5.5 * len(names), 4.2), squeeze=False, layout="constrained"
+    )
     for axis, name in zip(axes[0], names, strict=True):
-        rows = np.flatnonzero(series == name)
-        specular = np.allclose(theta_s[rows], theta_i[rows])
-        x = theta_i[rows] if specular else theta_s[rows] - theta_i[rows]
-        colours = plt.cm.viridis(np.linspace(0, 0.9, len(np.unique(theta_i[rows]))))
-        for colour, angle in zip(colours, np.unique(theta_i[rows]), strict=True):
-            chosen = rows[theta_i[rows] == angle]
-            xs = x[np.isin(rows, chosen)]
+        shown = np.flatnonzero((rows.series == name) & plane)
+        specular = np.allclose(theta_s[shown], theta_i[shown])
+        x = theta_i if specular else theta_s - theta_i
+        angles = np.unique(theta_i[shown])
+        colours = _ANGLE_COLOURS(np.linspace(0.0, 1.0, len(angles)))
+        for colour, angle in zip(colours, angles, strict=True):
+            chosen = shown[theta_i[shown] == angle]
             offset = 0.6  # predictive bars beside the data points
-            axis.vlines(xs + offset, low[chosen], high[chosen], color=colour, alpha=0.5, lw=3)
-            axis.plot(xs + offset, median[chosen], "_", color=colour, ms=8)
+            axis.vlines(
+                x[chosen] + offset, low[chosen], high[chosen], color=colour, alpha=0.5, lw=3
+            )
+            axis.plot(x[chosen] + offset, median[chosen], "_", color=colour, ms=8)
             axis.errorbar(
-                xs,
+                x[chosen],
                 observed[chosen],
                 yerr=observed[chosen] * sigma[chosen],  # the value's own 1σ
                 fmt="o",
@@ -192,11 +200,28 @@ def posterior_predictive(idata: az.InferenceData, series: np.ndarray):
             )
         axis.set_yscale("log")
         axis.set_xlabel("θi [deg] (specular, θs = θi)" if specular else "δ = θs − θi [deg]")
-        axis.set_ylabel("raw reflectance R [-]")
+        axis.set_ylabel(value_label(rows.quantity))
         axis.set_title(f"series {name}: measured (points, 1σ), 95 % predictive (bars)")
-        axis.legend(fontsize=8)
-    figure.tight_layout()
+        _angle_key(figure, axis, angles)
     return figure
+
+
+_ANGLE_COLOURS = ListedColormap(plt.cm.viridis(np.linspace(0.0, 0.9, 256)))
+
+
+def _angle_key(figure, axis, angles: np.ndarray) -> None:
+    """Which colour is which θi: a legend up to eight angles, else a colour bar (its ticks the
+    angles, one colour step each)."""
+    if len(angles) <= 8:
+        axis.legend(fontsize=8)
+        return
+    steps = BoundaryNorm(np.arange(len(angles) + 1) - 0.5, len(angles))
+    colours = ListedColormap(_ANGLE_COLOURS(np.linspace(0.0, 1.0, len(angles))))
+    bar = figure.colorbar(
+        plt.cm.ScalarMappable(norm=steps, cmap=colours), ax=axis, label="incidence angle θi [deg]"
+    )
+    bar.set_ticks(np.arange(len(angles)), labels=[f"{a:g}" for a in angles])
+    bar.ax.tick_params(labelsize=7)
 
 
 def pareto_k(loo: dict) -> plt.Figure:
@@ -214,56 +239,70 @@ def pareto_k(loo: dict) -> plt.Figure:
 
 
 def brdf_bands(bands: Bands, scene: Scene, rows) -> plt.Figure:
-    """In-plane BRDF median and bands per θi on a log axis, data and paper curve (Fig. 11)."""
+    """In-plane BRDF median and bands per θi on a log axis, the in-plane rows (φs 0° or 180°;
+    out-of-plane rows have their own view, ``_table_views.residual_hemisphere``) and the
+    reference
+    curve (Fig. 11); small multiples that stay legible at 18 angles (:func:`panel_grid`)."""
     band = bands["brdf_inplane"]
     theta_s = np.asarray(band["theta_s_deg"])
     angles = band["theta_i_deg"]
+    plane = in_plane(rows)
     measured = np.exp(scene.measured_log_brdf(rows))
-    columns = min(3, len(angles))
-    lines = int(np.ceil(len(angles) / columns))
-    figure, axes = plt.subplots(lines, columns, figsize=(5 * columns, 3.8 * lines), squeeze=False)
+    lines, columns, (width, height) = panel_grid(len(angles))
+    many = len(angles) > 6
+    figure, axes = plt.subplots(
+        lines,
+        columns,
+        figsize=(width * columns, height * lines + 0.6 * many),
+        squeeze=False,
+        sharex=many,
+        sharey=many,
+        layout="constrained",
+    )
     for index, angle in enumerate(angles):
         axis = axes.ravel()[index]
-        axis.fill_between(
-            theta_s,
-            band["lo95"][index],
-            band["hi95"][index],
-            alpha=0.2,
-            color="tab:blue",
-            label="95 %",
-        )
-        axis.fill_between(
-            theta_s,
-            band["lo68"][index],
-            band["hi68"][index],
-            alpha=0.35,
-            color="tab:blue",
-            label="68 %",
-        )
-        axis.plot(theta_s, band["median"][index], color="tab:blue", label="posterior median")
+        _band(axis, theta_s, band, index)
         reference = scene.outputs.reference_params
         if reference is not None:
             curve = brdf_inplane(angle, theta_s, PARAMETER_SETS[reference], scene.model.fold)
             axis.plot(theta_s, np.asarray(curve), "k--", lw=1, label=f"reference ({reference})")
-        here = rows.theta_i_deg == angle
+        here = plane & (rows.theta_i_deg == angle)
         if here.any():
             axis.plot(
                 rows.theta_s_deg[here],
                 measured[here],
                 "o",
                 color="tab:orange",
-                ms=4,
-                label="data (Eq. 6)",
+                ms=3 if many else 4,
+                label="in-plane data" + ("" if rows.quantity == "brdf" else " (Eq. 6)"),
             )
         axis.set_yscale("log")
         axis.set_xlabel("θs [deg]")
         axis.set_ylabel("BRDF [sr⁻¹]")
-        axis.set_title(f"θi = {angle:g}°")
+        axis.set_title(f"θi = {angle:g}°", fontsize=9 if many else None)
+        if many:
+            axis.label_outer()
+            axis.tick_params(labelsize=8)
     for axis in axes.ravel()[len(angles) :]:
         axis.set_visible(False)
-    axes.ravel()[0].legend(fontsize=7)
-    figure.tight_layout()
+    for axis in axes.ravel()[max(0, len(angles) - columns) : len(angles)]:
+        axis.xaxis.set_tick_params(labelbottom=True)  # the lowest panel of its column
+        axis.set_xlabel("θs [deg]")
+    if many:  # a legend in a small panel hides data: above the grid
+        handles, labels = axes.ravel()[0].get_legend_handles_labels()
+        figure.legend(handles, labels, loc="outside upper center", ncols=len(labels), fontsize=8)
+    else:
+        axes.ravel()[0].legend(fontsize=7)
     return figure
+
+
+def _band(axis, theta_s: np.ndarray, band: dict, index: int) -> None:
+    """One angle's 95 % and 68 % bands and median [sr⁻¹] against θs [deg]."""
+    for low, high, alpha, label in (("lo95", "hi95", 0.2, "95 %"), ("lo68", "hi68", 0.35, "68 %")):
+        axis.fill_between(
+            theta_s, band[low][index], band[high][index], alpha=alpha, color="tab:blue", label=label
+        )
+    axis.plot(theta_s, band["median"][index], color="tab:blue", label="posterior median")
 
 
 def tis_band(bands: Bands, reference: list[tuple[float, float, str]] = ()) -> plt.Figure:

@@ -5,10 +5,13 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
+
 from brdf_infer._arviz import az
 from brdf_infer.model import fold_statement
 from brdf_infer.report import _html
 from brdf_infer.report._instruments import MEANINGS
+from brdf_infer.report._table_views import table_section
 from brdf_infer.run_records import PosteriorSummary
 
 PRIOR_COORDINATES = {
@@ -106,20 +109,32 @@ def run_table(scene, rows, idata, summary: PosteriorSummary, member) -> str:
 
 
 def data_table(rows) -> str:
-    """The measured rows: series, sample, θi and θs [deg], raw reflectance R and its σ [-]."""
+    """The measured rows: series, sample, θi, θs and (with out-of-plane rows) φs [deg], the
+    value (raw reflectance R [-] or BRDF [sr⁻¹]) and its σ."""
+    name, unit = ("BRDF", "[sr⁻¹]") if rows.quantity == "brdf" else ("R", "[-]")
+    phi = rows.phi_s_deg
+    errors = [None] * len(rows) if rows.reflectance_err is None else rows.reflectance_err
     return _html.table(
-        ["series", "sample", "θi [deg]", "θs [deg]", "R [-]", "σ_R [-]"],
         [
-            [s, m, f"{i:g}", f"{t:g}", f"{r:.3e}", "–" if e is None else f"{e:.2e}"]
-            for s, m, i, t, r, e in zip(
-                rows.series,
-                rows.sample,
-                rows.theta_i_deg,
-                rows.theta_s_deg,
-                rows.reflectance,
-                [None] * len(rows) if rows.reflectance_err is None else rows.reflectance_err,
-                strict=True,
-            )
+            "series",
+            "sample",
+            "θi [deg]",
+            "θs [deg]",
+            *(["φs [deg]"] if phi is not None else []),
+            f"{name} {unit}",
+            f"σ_{name} {unit}",
+        ],
+        [
+            [
+                rows.series[i],
+                rows.sample[i],
+                f"{rows.theta_i_deg[i]:g}",
+                f"{rows.theta_s_deg[i]:g}",
+                *([] if phi is None else ["in plane" if np.isnan(phi[i]) else f"{phi[i]:.4g}"]),
+                f"{rows.reflectance[i]:.3e}",
+                "–" if errors[i] is None else f"{errors[i]:.2e}",
+            ]
+            for i in range(len(rows))
         ],
     )
 
@@ -156,5 +171,6 @@ def run_section(scene, rows, idata, summary: PosteriorSummary, member) -> list[s
             else "</p>" + family_priors_table(member, summary)
         ),
         "<h3>Data</h3>",
+        *table_section(summary),
         data_table(rows),
     ]
