@@ -130,8 +130,8 @@ def _fit_figures(add: AddFigure, run: Path, idata, summary, bands, scene, rows, 
     out_of_plane = int(rows.out_of_plane.sum())
     add(
         "brdf_bands",
-        "In-plane BRDF at every incidence angle of the bands: posterior median, 68 % and 95 % "
-        "bands, and the measured rows in the plane of incidence (φs 0° or 180°)"
+        "In-plane BRDF at the scene's incidence angles, each of them: posterior median, 68 % "
+        "and 95 % bands, and the measured rows in the plane of incidence (φs 0° or 180°)"
         + (
             " as BRDF values"
             if rows.quantity == "brdf"
