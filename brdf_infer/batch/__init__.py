@@ -49,6 +49,7 @@ from brdf_infer.batch._entries import (
 from brdf_infer.batch._folders import OLD_MARK, PARTIAL_MARK, remove_stale_partials
 from brdf_infer.batch._groups import expand_sources, structure_key
 from brdf_infer.batch._signals import GRACE_SECONDS, run_batch_until_signalled
+from brdf_infer.batch._team import PeerFailed, Team, join_processes
 from brdf_infer.settings import BatchSettings as BatchSettings  # as before: bench imports it here
 
 __all__ = [
@@ -60,8 +61,11 @@ __all__ = [
     "Batch",
     "BatchInterrupted",
     "BatchResult",
+    "PeerFailed",
     "SceneEntry",
+    "Team",
     "expand_sources",
+    "join_processes",
     "remove_stale_partials",
     "run_batch",
     "run_batch_until_signalled",
