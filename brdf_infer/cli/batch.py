@@ -120,6 +120,8 @@ def main(args: argparse.Namespace) -> int:
 
     check_family_name(args.model)
     settings = record_from_args(BatchSettings, args)
+    if not hasattr(args, "processes"):  # called without brdf_infer.cli.main
+        prepare(args)
     if args.processes.several:
         return _main_together(args, settings)
     out = claimed_output_dir(args, args.out or Path("reports") / "batch", "batch")
