@@ -254,3 +254,26 @@ def test_a_failing_coordinator_stops_the_other_with_one_line(pair_run, tmp_path)
     assert not (resumed / "b").exists()
     assert not [p for p in resumed.iterdir() if ".batch-" in p.name or ".partial-" in p.name]
     print(f"\nboth processes ended {seconds:.1f} s after they started")
+
+
+@pytest.mark.slow  # starts two processes (no compile: process 0 stops before any work)
+def test_a_coordinator_that_cannot_hold_the_folder_stops_both(tmp_path):
+    """Another writer holds --out: process 0 says so (exit 2), process 1 that process 0 could
+    not start the batch (exit 1); nothing is written."""
+    from brdf_infer._outlock import writing
+
+    out = tmp_path / "out"
+    with writing(out, "test"):
+        clock = time.monotonic()
+        started = _start_pair(tmp_path, out)
+        codes = _wait(started, timeout=120)
+        seconds = time.monotonic() - clock
+    errors = [stderr.read_text() for _, stderr in started]
+    assert codes == [2, 1], errors
+    assert "Traceback" not in errors[0] + errors[1]
+    assert "is being written by 'brdf-infer test'" in errors[0].strip().splitlines()[-1]
+    assert errors[1].strip().splitlines()[-1] == (
+        "brdf-infer: error: process 0 of 2 could not start the batch (process 1 stopped)"
+    )
+    assert list(out.iterdir()) == []
+    print(f"\nboth processes ended {seconds:.1f} s after they started")

@@ -93,7 +93,10 @@ class Team:
         Raises:
             PeerFailed: (processes other than 0) process 0 could not start the batch.
         """
-        ours = secrets.randbits(62) if processes.index == 0 and problem is None else 0
+        ours = secrets.randbits(62) | 1 if processes.index == 0 and problem is None else 0
+        if ours:  # process 0 holds ``out``: a run's folder there is a killed batch's
+            for stale in out.glob(".batch-*"):
+                shutil.rmtree(stale, ignore_errors=True)
         from jax.experimental import multihost_utils
 
         with _stdout_to_stderr():  # gloo greets on stdout when it connects

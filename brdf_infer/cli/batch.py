@@ -159,7 +159,10 @@ def _main_together(args: argparse.Namespace, settings: BatchSettings) -> int:
             remove_stale_partials(out)  # before the others start
         except BadInputError as error:
             problem = error
-    team = Team.start(processes, out, None if problem is None else str(problem))
+    try:
+        team = Team.start(processes, out, None if problem is None else str(problem))
+    except PeerFailed as failure:
+        _end(f"brdf-infer: error: {failure} (process {processes.index} stopped)", 1)
     if team is None:
         raise problem
     try:
