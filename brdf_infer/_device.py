@@ -28,4 +28,4 @@ def placement(command: str, requested: str = "auto") -> contextlib.AbstractConte
     """
     if requested == "accelerator" or (requested == "auto" and command in ACCELERATED_COMMANDS):
         return contextlib.nullcontext()
-    return jax.default_device(jax.devices("cpu")[0])
+    return jax.default_device(jax.local_devices(backend="cpu")[0])  # this process's own

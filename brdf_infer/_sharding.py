@@ -10,13 +10,14 @@ import numpy as np
 BATCH_AXIS = "batch"
 
 
-def shard_batch(tree):
+def shard_batch(tree, devices: list | None = None):
     """``tree``'s leaves (one leading batch axis) padded to a multiple of the number of devices
-    (by repeating the last entry) and sharded over every device JAX sees along that axis
-    (``jax.sharding``: a 1-D ``Mesh`` and ``NamedSharding``), so that a vmapped program runs a
-    part of the batch on each device; unchanged on one device. Callers drop the padding from
-    the results (the first ``n`` entries are the original batch)."""
-    devices = jax.devices()
+    (by repeating the last entry) and sharded over ``devices`` (default every device JAX sees,
+    those of other processes included) along that axis (``jax.sharding``: a 1-D ``Mesh`` and
+    ``NamedSharding``), so that a vmapped program runs a part of the batch on each device;
+    unchanged on one device. Callers drop the padding from the results (the first ``n``
+    entries are the original batch)."""
+    devices = jax.devices() if devices is None else devices
     if len(devices) == 1:
         return tree
     from jax.sharding import Mesh, NamedSharding, PartitionSpec
@@ -40,8 +41,12 @@ def shard_batch(tree):
 
 
 def gather_batch(tree):
-    """The whole of sharded results on every process (several hosts: ``process_allgather``)."""
-    if jax.process_count() == 1:
+    """The whole of sharded results on every process (several hosts: ``process_allgather``;
+    results on this process's devices alone: ``device_get``)."""
+    leaves = jax.tree_util.tree_leaves(tree)
+    if jax.process_count() == 1 or all(
+        getattr(leaf, "is_fully_addressable", True) for leaf in leaves
+    ):
         return jax.device_get(tree)
     from jax.experimental import multihost_utils
 

@@ -32,6 +32,13 @@ run is refused, not replaced. The rest of a group run through the program of the
 (padded to the same shape, the same keys), so on one CPU device the resumed scenes get the
 draws an uninterrupted batch gives them, bit for bit (in vmap mode, to rounding).
 
+Over several processes (``team``: :class:`Team`, connected by :func:`join_processes`,
+``brdf-infer batch --num-processes N``) scene ``k`` belongs to process ``k mod N``: every
+process loads and groups every scene and runs its own through the group's program, so each
+run folder is written once, by its owner, with the draws a batch in one process gives it;
+process 0 writes ``batch.json`` from every process's part. A process that fails stops the
+others (:class:`PeerFailed`), also one that stops sending heartbeats.
+
 A scene that fails to load or validate is reported with its error and skipped; it never takes
 the batch down. So is a scene whose rows fail a plausibility check (values that look like
 percent, angles that look like radians; :mod:`brdf_infer.plausibility`), unless
@@ -49,6 +56,7 @@ from brdf_infer.batch._entries import (
 from brdf_infer.batch._folders import OLD_MARK, PARTIAL_MARK, remove_stale_partials
 from brdf_infer.batch._groups import expand_sources, structure_key
 from brdf_infer.batch._signals import GRACE_SECONDS, run_batch_until_signalled
+from brdf_infer.batch._team import PeerFailed, Team, join_processes
 from brdf_infer.settings import BatchSettings as BatchSettings  # as before: bench imports it here
 
 __all__ = [
@@ -60,8 +68,11 @@ __all__ = [
     "Batch",
     "BatchInterrupted",
     "BatchResult",
+    "PeerFailed",
     "SceneEntry",
+    "Team",
     "expand_sources",
+    "join_processes",
     "remove_stale_partials",
     "run_batch",
     "run_batch_until_signalled",

@@ -3,6 +3,7 @@ folders."""
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
 import os
@@ -17,6 +18,7 @@ import numpy as np
 
 from brdf_infer._atomic import atomic_write_json
 from brdf_infer._outlock import note_written, require_complete, writing
+from brdf_infer._processes import Processes
 from brdf_infer.batch._entries import (
     BATCH_FILE,
     BatchInterrupted,
@@ -32,6 +34,7 @@ from brdf_infer.batch._folders import (
     remove_stale_partials,
 )
 from brdf_infer.batch._groups import _site_shapes, expand_sources, structure_key
+from brdf_infer.batch._team import Team
 from brdf_infer.errors import BadInputError
 from brdf_infer.plausibility import measurement_checks, require_plausible
 from brdf_infer.posterior import (
@@ -61,7 +64,13 @@ def _silent(message: str) -> None:
 
 class Batch:
     """One batch run (:func:`run_batch`), its state readable from another thread: the entries,
-    the groups and the run folders being written."""
+    the groups and the run folders being written.
+
+    With a ``team`` (a batch over several processes) this process runs and writes only the
+    scenes it owns (:meth:`Processes.owns`), through the same padded group programs and keys
+    as a batch in one process; process 0 holds the output folder, removes what killed batches
+    left there, and writes ``batch.json`` from every process's part.
+    """
 
     def __init__(
         self,
@@ -73,11 +82,17 @@ class Batch:
         progress: Callable[[str], None] = _silent,
         cancel: threading.Event | None = None,
         resume: bool = False,
+        team: Team | None = None,
     ):
         self.sources, self.out, self.settings = sources, Path(out), settings
         self.resume = resume
+        self.team = team
+        self.processes = team.processes if team is not None else Processes()
         self.family, self.progress = model, progress
         self.cancel = cancel if cancel is not None else threading.Event()
+        if team is not None:
+            team.cancel = self.cancel  # another process's failure stops this batch
+        self._numbers: dict[int, int] = {}  # id(entry) -> its scene number
         self.entries: list[SceneEntry] = []
         self.groups = 0
         self.compile_seconds = 0.0
@@ -88,20 +103,35 @@ class Batch:
     # ------------------------------------------------------------------------------ state
 
     def result(self, interrupted: bool = False) -> BatchResult:
+        """The batch so far; with a team, the scenes the other processes posted included."""
+        remote: dict[int, dict[str, Any]] = {}
+        compile_seconds = self.compile_seconds
+        if self.team is not None:
+            for part in self.team.parts():
+                remote.update({int(k): v for k, v in part["scenes"].items()})
+                compile_seconds += part["compile_seconds"]
         return BatchResult(
             entries=self.entries,
             groups=self.groups,
             devices=jax.device_count(),
             seconds=time.perf_counter() - self.started,
-            compile_seconds=self.compile_seconds,
+            compile_seconds=compile_seconds,
             interrupted=interrupted,
+            processes=self.processes.count,
+            remote=remote,
         )
 
     def write_summary(self, interrupted: bool = False) -> BatchResult:
+        """``batch.json`` (process 0 only: the others' result is returned, not written)."""
         result = self.result(interrupted)
-        self.out.mkdir(parents=True, exist_ok=True)
-        atomic_write_json(self.out / BATCH_FILE, result.as_json())
+        if self.processes.index == 0:
+            self.out.mkdir(parents=True, exist_ok=True)
+            atomic_write_json(self.out / BATCH_FILE, result.as_json())
         return result
+
+    def owns(self, entry: SceneEntry) -> bool:
+        """This process runs ``entry`` (always, in a batch of one process)."""
+        return self.processes.owns(self._numbers[id(entry)])
 
     def abandon(self) -> None:
         """Remove every run folder still being written (from any thread; the batch is then
@@ -119,7 +149,9 @@ class Batch:
 
     def run(self) -> BatchResult:
         """Sample and write every scene; raises :class:`BatchInterrupted` when cancelled."""
-        with writing(self.out, "batch"):  # one writer; an interrupted batch leaves it marked
+        # one writer (process 0 for all); an interrupted batch leaves the folder marked
+        first = self.processes.index == 0
+        with writing(self.out, "batch") if first else contextlib.nullcontext():
             return self._run()
 
     def _run(self) -> BatchResult:
@@ -128,6 +160,8 @@ class Batch:
             for number, members in enumerate(groups.values(), start=1):
                 self._check()
                 self._run_group(number, len(groups), members)
+            if self.team is not None:
+                return self._finish_together()
         except _Stop:
             self.abandon()
             raise BatchInterrupted(self.write_summary(interrupted=True)) from None
@@ -140,6 +174,7 @@ class Batch:
 
     def _load(self) -> dict[str, list[tuple[SceneEntry, Any, Any]]]:
         self.entries = [SceneEntry(source) for source in expand_sources(self.sources)]
+        self._numbers = {id(entry): number for number, entry in enumerate(self.entries)}
         groups: dict[str, list[tuple[SceneEntry, Any, Any]]] = {}
         for entry in self.entries:
             self._check()
@@ -162,10 +197,12 @@ class Batch:
         for entry, folder in zip(self.entries, _folder_names(self.entries), strict=True):
             entry.out = self.out / folder if entry.error is None else None
         self.groups = len(groups)
-        remove_stale_partials(self.out)
+        if self.team is None:  # a team's process 0 did it before the others started
+            remove_stale_partials(self.out)
         if self.resume:
             for entry, member_model, measurements in (m for g in groups.values() for m in g):
-                self._keep_if_complete(entry, member_model, measurements)
+                if self.owns(entry):
+                    self._keep_if_complete(entry, member_model, measurements)
             kept = sum(entry.done for entry in self.entries)
             self.progress(f"resume: {kept} scene(s) complete in {self.out}, kept")
         return groups
@@ -218,8 +255,11 @@ class Batch:
             datasets = pad_datasets(datasets)  # the whole group's shape, also on a resume
         padded = sum(d is not m.data for d, (_, m, _) in zip(datasets, members, strict=True))
         padded = f", {padded} padded to {row_count(datasets[0])} rows" if padded else ""
-        todo = [index for index, (entry, _, _) in enumerate(members) if not entry.done]
-        kept = f", {len(members) - len(todo)} complete already" if len(todo) < len(members) else ""
+        ours = [index for index, (entry, _, _) in enumerate(members) if self.owns(entry)]
+        todo = [index for index in ours if not members[index][0].done]
+        kept = f", {len(ours) - len(todo)} complete already" if len(todo) < len(ours) else ""
+        if self.processes.several:
+            kept += f", {len(ours)} of them here (process {self.processes.index})"
         self.progress(
             f"group {number}/{count}: {len(members)} scene(s){kept}, {model_name(first)}{padded}, "
             f"{settings.chains} chains x ({settings.warmup} warmup + {settings.draws} draws)"
@@ -233,8 +273,13 @@ class Batch:
             program_model, warmup=settings.warmup, target_accept=settings.target_accept
         )
         keys = np.stack([chain_keys(settings.seed, 1, settings.chains)[0] for _ in members])
-        output = program.run_many(
-            stack_data(datasets), keys, settings.draws, mode=settings.mode, cancel=self.cancel
+        output = program.run_many(  # this process's devices: the others run their own scenes
+            stack_data(datasets),
+            keys,
+            settings.draws,
+            mode=settings.mode,
+            cancel=self.cancel,
+            devices=jax.local_devices(),
         )
         self._check()
         self.compile_seconds += output.seconds["compile"]
@@ -309,6 +354,27 @@ class Batch:
         entry.done = True
         self.progress(f"  {entry.scene.name}: {entry.out}")
 
+    def _finish_together(self) -> BatchResult:
+        """Post this process's part; process 0 waits for every part and writes
+        ``batch.json``, the others wait until it is written."""
+        team = self.team
+        scenes = {
+            str(number): entry.as_json()
+            for number, entry in enumerate(self.entries)
+            if entry.done and self.owns(entry)
+        }
+        team.post_part({"scenes": scenes, "compile_seconds": self.compile_seconds})
+        if self.processes.index != 0:
+            team.wait_for(team.written, self._stop)
+            return self.result()
+        team.wait_for(team.all_parts_posted, self._stop)
+        result = self.write_summary()
+        team.mark_written()
+        return result
+
+    def _stop(self) -> None:
+        raise _Stop
+
     def _publish(self, partial: Path, target: Path) -> None:
         """Rename the complete folder ``partial`` to ``target`` (an earlier run's folder there
         is replaced)."""
@@ -344,6 +410,7 @@ def run_batch(
     progress: Callable[[str], None] = _silent,
     cancel: threading.Event | None = None,
     resume: bool = False,
+    team: Team | None = None,
 ) -> BatchResult:
     """Sample the posterior of every scene in ``sources`` (names, TOML paths or globs) into
     ``out/<scene>/`` and write ``out/batch.json`` (module docstring).
@@ -352,6 +419,7 @@ def run_batch(
         model: the family of every scene (default: each scene's ``[model] family``).
         cancel: when set, the batch stops between sampling chunks and between run folders.
         resume: keep the scenes whose run folders this batch already wrote (module docstring).
+        team: this process's place in a batch over several processes (:class:`Batch`).
 
     Raises:
         BadInputError: settings out of range, another process writing ``out``, or (``resume``)
@@ -360,6 +428,13 @@ def run_batch(
             and ``batch.json`` lists every scene (the unfinished ones as interrupted).
     """
     batch = Batch(
-        sources, out, settings, model=model, progress=progress, cancel=cancel, resume=resume
+        sources,
+        out,
+        settings,
+        model=model,
+        progress=progress,
+        cancel=cancel,
+        resume=resume,
+        team=team,
     )
     return batch.run()

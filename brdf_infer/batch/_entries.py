@@ -53,7 +53,13 @@ class SceneEntry:
 @dataclass
 class BatchResult:
     """Every scene's entry, the number of compiled groups and devices, and the wall time
-    (``interrupted``: the batch was cancelled; entries not ``done`` have no run folder)."""
+    (``interrupted``: the batch was cancelled; entries not ``done`` have no run folder).
+
+    Attributes:
+        processes: the processes that ran the batch (:mod:`brdf_infer.batch._processes`).
+        remote: the ``batch.json`` entries of scenes another process ran, by scene number.
+        compile_seconds: [s] compiling, summed over the processes.
+    """
 
     entries: list[SceneEntry]
     groups: int
@@ -61,17 +67,22 @@ class BatchResult:
     seconds: float
     compile_seconds: float
     interrupted: bool = False
+    processes: int = 1
+    remote: dict[int, dict[str, Any]] = field(default_factory=dict)
 
     @property
     def complete(self) -> int:
         """Scenes whose run folder is complete."""
-        return sum(entry.done for entry in self.entries)
+        done = [entry.done or k in self.remote for k, entry in enumerate(self.entries)]
+        return sum(done)
 
     def as_json(self) -> dict[str, Any]:
+        scenes = [self.remote.get(k) or e.as_json() for k, e in enumerate(self.entries)]
         return {
-            "scenes": [entry.as_json() for entry in self.entries],
+            "scenes": scenes,
             "groups": self.groups,
             "devices": self.devices,
+            "processes": self.processes,
             "seconds": self.seconds,
             "compile_seconds": self.compile_seconds,
             "interrupted": self.interrupted,

@@ -91,6 +91,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
         disable_compilation_cache()
     try:
+        if getattr(args, "prepare", None) is not None:  # before JAX starts its backend
+            args.prepare(args)
         require_float64()
         # args.claims: the output folders the command holds (one writer per folder)
         with contextlib.ExitStack() as args.claims, placement(args.command, args.device):

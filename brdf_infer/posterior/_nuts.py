@@ -230,6 +230,7 @@ class NutsProgram:
         cancel: threading.Event | None = None,
         progress: bool = False,
         description: str = "NUTS",
+        devices: list | None = None,
     ) -> NutsOutput:
         """Every chain of many data sets of one shape with the same compiled program.
 
@@ -252,6 +253,9 @@ class NutsProgram:
                 vmapped program starts; :class:`Cancelled` is raised.
             progress: a progress bar (per data set) on stderr.
             description: the progress bar's label.
+            devices: the devices of ``vmap`` mode and of ``auto``'s choice (default every
+                device JAX sees, those of other processes included; ``jax.local_devices()``
+                for a process that runs data sets of its own).
 
         Returns:
             Draws of shape (data sets, chains, draws, ...).
@@ -259,7 +263,8 @@ class NutsProgram:
         if mode not in ("auto", "threads", "vmap"):
             raise ValueError(f"unknown mode {mode!r} (auto, threads, vmap)")
         if mode == "auto":
-            single_cpu = jax.default_backend() == "cpu" and jax.device_count() == 1
+            count = jax.device_count() if devices is None else len(devices)
+            single_cpu = jax.default_backend() == "cpu" and count == 1
             mode = "threads" if single_cpu else "vmap"
         count = int(keys.shape[0])
         total = self.warmup + draws
@@ -271,7 +276,7 @@ class NutsProgram:
             else:
                 if cancel is not None and cancel.is_set():
                     raise Cancelled
-                outputs = [self._vmapped(datasets, keys, draws, total)]
+                outputs = [self._vmapped(datasets, keys, draws, total, devices)]
                 if bar is not None:
                     bar.update(count)
             seconds = time.perf_counter() - clock
@@ -305,9 +310,9 @@ class NutsProgram:
 
         return _side_by_side(one, list(range(int(keys.shape[0]))), workers or 0, cancel)
 
-    def _vmapped(self, datasets, keys, draws, total) -> NutsOutput:
+    def _vmapped(self, datasets, keys, draws, total, devices=None) -> NutsOutput:
         count = int(keys.shape[0])
-        datasets, keys = shard_batch((datasets, keys))
+        datasets, keys = shard_batch((datasets, keys), devices)
         start = jax.vmap(jax.vmap(self._start, (0, None)), (0, 0))
         steps = jax.vmap(jax.vmap(lambda s, d: self._steps(s, d, total), (0, None)), (0, 0))
         state = self._compile("vstart", start, keys, datasets)(keys, datasets)
