@@ -175,7 +175,7 @@ def leave_one_out_conditionals(
     Q = D⁻¹ − D^(-1/2) Vᵀ V D^(-1/2), V = L_C⁻¹ Bᵀ (q, n).
     """
     whitened = Whitened(factor, diagonal, disjoint)
-    projection = whitened.project(jnp.eye(value.shape[-1]))  # V
+    projection = whitened.capacitance.solve_lower(whitened.scaled_factor.T)  # V, (q, n)
     residual = whitened.scale(value - mean)
     precision_residual = (residual - projection.T @ (projection @ residual)) / whitened.root
     precision_diagonal = (1.0 - jnp.sum(projection**2, axis=0)) / diagonal

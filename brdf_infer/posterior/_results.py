@@ -50,37 +50,88 @@ def flatten_draws(sites: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     return {k: v.reshape(v.shape[0] * v.shape[1], *v.shape[2:]) for k, v in sites.items()}
 
 
+CHUNK_VALUES = 2**24  # likelihood-part values of one block of draws (128 MiB of float64)
+FLOAT64_TERMS_BYTES = 2**28  # pointwise terms above 256 MiB are held in float32
+STORED_TERMS_VALUES = 10**6  # log_likelihood kept in posterior.nc up to chains × draws × rows
+PREDICTIVE_VALUES = 10**6  # replicated rows kept in posterior.nc: at most these many values
+PREDICTIVE_MIN_DRAWS = 20  # ... but at least these many draws (thinned evenly in each chain)
+
+
+def draw_blocks(count: int, rows: int, columns: int) -> int:
+    """Draws per block when a computation holds ``columns`` values per row and draw
+    (:data:`CHUNK_VALUES` at most; every draw at once where they fit)."""
+    return int(max(1, min(count, CHUNK_VALUES // max(1, rows * columns))))
+
+
+def factor_columns(noise) -> int:
+    """Columns of the likelihood's low-rank factor W (samples, calibration groups, rotation
+    settings with two or more rows) of a :class:`~brdf_infer.error_model.NoiseLayout`."""
+    names = ("sample_members", "calibration_members", "rotation_members")
+    return sum(int(np.shape(getattr(noise, name))[-1]) for name in names if hasattr(noise, name))
+
+
 def loo_terms(model, sites: dict[str, np.ndarray]):
     """(log p(yᵢ | y₋ᵢ, θ), P(ỹᵢ ≤ yᵢ | y₋ᵢ, θ)) of every draw and row, each (chain, draw, row),
     for any posterior model with ``draw_parts`` and ``data`` (every family's).
 
     The leave-one-out conditionals of the model's (possibly correlated) normal likelihood
     (:mod:`brdf_infer.posterior._loo`); for independent rows the ordinary pointwise terms.
+    Computed a block of draws at a time (the likelihood's low-rank factor is rows × columns
+    per draw; the last block padded to the others' shape, so one program serves them all);
+    held in float32 where the two arrays would exceed :data:`FLOAT64_TERMS_BYTES` each.
     """
     chains, n_draws = next(iter(sites.values())).shape[:2]
-    parts = model.draw_parts(flatten_draws(sites))
-    log_lik, cdf = pointwise_loo_terms(
-        model.data.rows.log_reflectance,
-        parts.mean,
-        parts.factor,
-        parts.diagonal,
-        disjoint=disjoint_columns(model.data),
-    )
-    shape = (chains, n_draws, -1)
-    return np.asarray(log_lik).reshape(shape), np.asarray(cdf).reshape(shape)
+    flat = flatten_draws(sites)
+    count = chains * n_draws
+    y = model.data.rows.log_reflectance
+    rows = int(np.shape(y)[-1])
+    size = draw_blocks(count, rows, 4 + factor_columns(model.data.noise))
+    dtype = np.float64 if count * rows * 8 <= FLOAT64_TERMS_BYTES else np.float32
+    log_lik, cdf = np.empty((count, rows), dtype), np.empty((count, rows), dtype)
+    disjoint = disjoint_columns(model.data)
+    for start in range(0, count, size):
+        index = np.minimum(np.arange(start, start + size), count - 1)  # pad with the last draw
+        parts = model.draw_parts({k: v[index] for k, v in flat.items()})
+        terms = pointwise_loo_terms(y, parts.mean, parts.factor, parts.diagonal, disjoint=disjoint)
+        kept = min(size, count - start)
+        log_lik[start : start + kept] = np.asarray(terms[0])[:kept]
+        cdf[start : start + kept] = np.asarray(terms[1])[:kept]
+    shape = (chains, n_draws, rows)
+    return log_lik.reshape(shape), cdf.reshape(shape)
+
+
+def thinned_draws(n_draws: int, rows: int, chains: int) -> np.ndarray:
+    """Indices of the draws of each chain whose replicated data posterior.nc keeps: every
+    draw where chains × draws × rows ≤ :data:`PREDICTIVE_VALUES`, else evenly spaced ones,
+    at least :data:`PREDICTIVE_MIN_DRAWS` a chain."""
+    keep = max(PREDICTIVE_MIN_DRAWS, PREDICTIVE_VALUES // max(1, chains * rows))
+    if keep >= n_draws:
+        return np.arange(n_draws)
+    return np.unique(np.linspace(0, n_draws - 1, keep).round().astype(int))
 
 
 def replicated_data(model: PosteriorModel, sites: dict[str, np.ndarray], seed: int) -> np.ndarray:
-    """One replicated data set (ln R of every row) per draw, shape (chain, draw, row)."""
+    """One replicated data set (ln R of every row) per draw that posterior.nc keeps
+    (:func:`thinned_draws`: every draw of a small run), shape (chain, kept draw, row)."""
     chains, n_draws = next(iter(sites.values())).shape[:2]
-    flat = {k: jnp.asarray(v) for k, v in flatten_draws(sites).items() if k != "obs"}
+    rows = int(np.shape(model.data.rows.log_reflectance)[-1])
+    keep = thinned_draws(n_draws, rows, chains)
+    kept = {k: np.asarray(v)[:, keep] for k, v in sites.items() if k != "obs"}
+    flat = {k: jnp.asarray(v) for k, v in flatten_draws(kept).items()}
 
     def draw(key, samples, data):  # data and draws as arguments: compiled once per shape
         predictive = Predictive(model, posterior_samples=samples, return_sites=["obs"])
         return predictive(key, data, mode="predict")["obs"]
 
     replicated = jax.jit(draw)(jax.random.PRNGKey(seed + 7), flat, model.data)
-    return np.asarray(replicated).reshape(chains, n_draws, -1)
+    return np.asarray(replicated).reshape(chains, keep.size, -1)
+
+
+def stored_log_likelihood(log_lik: np.ndarray) -> dict[str, dict[str, np.ndarray]]:
+    """The ``log_likelihood`` group posterior.nc keeps: the pointwise terms of a run of at
+    most :data:`STORED_TERMS_VALUES` values (for ``az.loo`` on the file), none for a larger
+    one, whose PSIS-LOO is in summary.json's ``predictive`` record."""
+    return {"log_likelihood": {"obs": log_lik}} if log_lik.size <= STORED_TERMS_VALUES else {}
 
 
 def sample_index(model: PosteriorModel) -> np.ndarray:
@@ -93,14 +144,16 @@ def inference_data(
     model: PosteriorModel, draws: Draws, seed: int, log_lik: np.ndarray
 ) -> az.InferenceData:
     """ArviZ InferenceData with posterior, sample_stats, log_likelihood (``log_lik``: the
-    leave-one-out conditionals of :func:`loo_terms`, for PSIS-LOO), posterior_predictive,
+    leave-one-out conditionals of :func:`loo_terms`, for PSIS-LOO; only for a run of at most
+    :data:`STORED_TERMS_VALUES` values), posterior_predictive (the draws
+    :func:`thinned_draws` keeps, their indices as the group's ``draw`` coordinate),
     observed_data and constant_data; the six ``Params`` fields in paper units in the
     posterior."""
     rows, noise = model.data.rows, model.data.noise
     idata = az.from_dict(
         posterior=dict(draws.sites),
         sample_stats=draws.stats,
-        log_likelihood={"obs": log_lik},
+        **stored_log_likelihood(log_lik),
         posterior_predictive={"obs": replicated_data(model, draws.sites, seed)},
         observed_data={"obs": np.asarray(rows.log_reflectance)},
         constant_data={
@@ -125,6 +178,10 @@ def inference_data(
             "rotation_alone_error_std": ["row"],
         },
     )
+    sizes = idata.posterior.sizes
+    kept = thinned_draws(sizes["draw"], int(np.shape(rows.theta_i_deg)[-1]), sizes["chain"])
+    if kept.size < sizes["draw"]:  # the replicated draws' own indices
+        idata.posterior_predictive = idata.posterior_predictive.assign_coords(draw=kept)
     scene = model.scene
     idata.posterior.attrs.update(
         {

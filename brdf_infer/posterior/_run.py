@@ -26,7 +26,7 @@ from brdf_infer.posterior._bands import (
     interval95,
     posterior_bands,
 )
-from brdf_infer.posterior._loo import loo_pit, uniformity_p_value
+from brdf_infer.posterior._loo import psis_loo, relative_efficiency, uniformity_p_value
 from brdf_infer.posterior._model import NOISE_SITES, PosteriorModel, build_posterior_model
 from brdf_infer.posterior._potential import FlatPotential
 from brdf_infer.posterior._results import diagnostics, inference_data, loo_terms, write_results
@@ -158,25 +158,21 @@ def predictive_checks(
     number of rows above :data:`~brdf_infer.verdict.PARETO_K_LIMIT` and, given
     ``measurements``, those rows by name) and the LOO-PIT of every row with a
     Kolmogorov–Smirnov test of its uniformity, from the leave-one-out terms of
-    :func:`loo_terms` (``idata`` holds the same ``log_lik``)."""
-    import warnings
-
-    with warnings.catch_warnings():  # high Pareto k are reported in the verdict instead
-        warnings.simplefilter("ignore", UserWarning)
-        loo = az.loo(idata, pointwise=True)
-    pit = loo_pit(log_lik.reshape(-1, log_lik.shape[-1]), cdf.reshape(-1, cdf.shape[-1]))
-    pareto_k = np.asarray(loo.pareto_k, float)
+    :func:`loo_terms` (``idata``: the run's draws, for their relative efficiency), a block of
+    rows at a time (:func:`~brdf_infer.posterior._loo.psis_loo`)."""
+    loo = psis_loo(log_lik, cdf, relative_efficiency(idata.posterior))
+    pareto_k = loo.pareto_k
     named = {} if measurements is None else {"pareto_k_rows": high_k_rows(measurements, pareto_k)}
     return {
         **named,
-        "elpd_loo": float(loo.elpd_loo),
-        "se": float(loo.se),
-        "p_loo": float(loo.p_loo),
-        "pareto_k_max": float(np.max(loo.pareto_k)),
-        "pareto_k_high": int(np.sum(np.asarray(loo.pareto_k) > PARETO_K_LIMIT)),
-        "pareto_k": np.asarray(loo.pareto_k, float).tolist(),  # per row, for the report
-        "loo_pit": pit.tolist(),
-        "loo_pit_ks_p": uniformity_p_value(pit),
+        "elpd_loo": loo.elpd_loo,
+        "se": loo.se,
+        "p_loo": loo.p_loo,
+        "pareto_k_max": float(np.max(pareto_k)),
+        "pareto_k_high": int(np.sum(pareto_k > PARETO_K_LIMIT)),
+        "pareto_k": pareto_k.tolist(),  # per row, for the report
+        "loo_pit": loo.pit.tolist(),
+        "loo_pit_ks_p": uniformity_p_value(loo.pit),
     }
 
 

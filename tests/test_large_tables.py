@@ -1,0 +1,88 @@
+"""Whole instrument tables: the leave-one-out terms, PSIS-LOO and the stored draws hold no
+rows × rows object and no draws × rows × columns block beyond a bounded size, and give the
+numbers of the direct computation (ArviZ's ``loo``, one block of every draw)."""
+
+from __future__ import annotations
+
+import warnings
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from brdf_infer._arviz import az
+from brdf_infer.posterior import _results as results
+from brdf_infer.posterior._loo import loo_pit, psis_loo, relative_efficiency
+from brdf_infer.posterior._lowrank import leave_one_out_conditionals
+from brdf_infer.posterior._prior import prior_draws
+from brdf_infer.posterior._run import build_model
+
+
+def _posterior_like(rng, chains: int, draws: int, rows: int):
+    """Correlated chains of two variables and pointwise log likelihoods with a heavy row."""
+    walk = np.cumsum(rng.normal(size=(chains, draws, 2)), axis=1) * 0.05
+    log_lik = -0.5 * (rng.normal(size=(chains, draws, rows)) + walk[..., :1]) ** 2
+    log_lik[..., 0] *= 6.0  # a row the posterior fits badly: large Pareto k
+    return az.from_dict(
+        posterior={"a": walk[..., 0], "b": walk[..., 1]}, log_likelihood={"obs": log_lik}
+    )
+
+
+@pytest.mark.parametrize("rows_per_chunk", [1, 7, 4096])
+def test_blockwise_psis_loo_is_arviz_loo_and_the_loo_pit(rows_per_chunk):
+    rng = np.random.default_rng(3)
+    idata = _posterior_like(rng, chains=4, draws=300, rows=23)
+    log_lik = idata.log_likelihood["obs"].values
+    cdf = rng.uniform(size=log_lik.shape)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        expected = az.loo(idata, pointwise=True)
+    got = psis_loo(log_lik, cdf, relative_efficiency(idata.posterior), rows_per_chunk)
+    assert got.elpd_loo == pytest.approx(float(expected.elpd_loo), rel=1e-12)
+    assert got.se == pytest.approx(float(expected.se), rel=1e-10)
+    assert got.p_loo == pytest.approx(float(expected.p_loo), rel=1e-10)
+    np.testing.assert_allclose(got.pareto_k, np.asarray(expected.pareto_k), atol=1e-12)
+    assert got.pareto_k[0] > 0.7  # the planted heavy row is seen
+    np.testing.assert_allclose(got.pit, loo_pit(log_lik.reshape(-1, 23), cdf.reshape(-1, 23)))
+
+
+def test_leave_one_out_conditionals_hold_no_rows_by_rows_matrix():
+    """At 20 000 rows a rows × rows float64 matrix is 3.2 GB; the program's scratch memory must
+    stay linear in the rows (it held the identity matrix before)."""
+    rows, columns = 20_000, 12
+    args = (
+        jnp.zeros(rows),
+        jnp.zeros(rows),
+        jnp.zeros((rows, columns)),
+        jnp.ones(rows),
+    )
+    compiled = jax.jit(leave_one_out_conditionals).lower(*args).compile()
+    scratch = compiled.memory_analysis().temp_size_in_bytes
+    assert scratch < 256 * rows * 8, scratch  # linear; rows × rows would be 3.2e9
+
+
+def test_leave_one_out_terms_by_blocks_of_draws_are_those_of_one_block(lya, monkeypatch):
+    scene, measurements = lya
+    model = build_model(scene, measurements)
+    draws = prior_draws(model, 24, seed=5)
+    sites = {k: v.reshape(2, 12, *v.shape[1:]) for k, v in draws.items() if k != "obs"}
+    whole = results.loo_terms(model, sites)
+    monkeypatch.setattr(results, "CHUNK_VALUES", 5 * 42 * 20)  # blocks of 5 draws, last padded
+    assert results.draw_blocks(24, 42, 20) == 5
+    blocks = results.loo_terms(model, sites)
+    for a, b in zip(whole, blocks, strict=True):
+        assert a.shape == (2, 12, 42)
+        np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-300)
+
+
+def test_posterior_nc_keeps_every_draw_of_a_small_run_and_bounded_values_of_a_table():
+    assert results.thinned_draws(1000, 42, 4).size == 1000  # the bundled run: all
+    vendor = results.thinned_draws(1000, 2043, 4)
+    assert 4 * vendor.size * 2043 <= results.PREDICTIVE_VALUES
+    assert vendor[0] == 0 and vendor[-1] == 999 and np.all(np.diff(vendor) > 0)
+    table = results.thinned_draws(1000, 59_585, 4)
+    assert table.size == results.PREDICTIVE_MIN_DRAWS
+    small, large = np.zeros((4, 1000, 42)), np.zeros((4, 1000, 2043), np.float32)
+    assert "log_likelihood" in results.stored_log_likelihood(small)
+    assert results.stored_log_likelihood(large) == {}
