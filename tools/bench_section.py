@@ -1,6 +1,8 @@
 """Measure one section of the benchmark report again and splice it into the report.
 
-    python tools/bench_section.py sbc|misspec|design|design-time [--report reports/benchmarks.md]
+    python tools/bench_section.py SECTION [--report reports/benchmarks.md]
+
+(SECTION: sbc, misspec, design, design-time or cost-curve.)
 
 The full benchmark (``brdf-infer bench``) takes long; after a change that touches one study,
 this reruns that study's section as ``brdf-infer bench`` would and replaces the section of the
@@ -56,7 +58,19 @@ def design_time(report: Path) -> list[str]:
     return command_section(False)
 
 
-SECTIONS = {"sbc": sbc, "misspec": misspec, "design": design, "design-time": design_time}
+def cost_curve(report: Path) -> list[str]:
+    from brdf_infer.bench._cost_curve import cost_rows, cost_section
+
+    return cost_section(cost_rows(quick=False))
+
+
+SECTIONS = {
+    "sbc": sbc,
+    "misspec": misspec,
+    "design": design,
+    "design-time": design_time,
+    "cost-curve": cost_curve,
+}
 
 
 def provenance(seconds: float, commit: str) -> str:

@@ -27,9 +27,16 @@ from brdf_infer.posterior._bands import (
     posterior_bands,
 )
 from brdf_infer.posterior._loo import psis_loo, relative_efficiency, uniformity_p_value
+from brdf_infer.posterior._memory import check_memory
 from brdf_infer.posterior._model import NOISE_SITES, PosteriorModel, build_posterior_model
 from brdf_infer.posterior._potential import FlatPotential
-from brdf_infer.posterior._results import diagnostics, inference_data, loo_terms, write_results
+from brdf_infer.posterior._results import (
+    diagnostics,
+    factor_columns,
+    inference_data,
+    loo_terms,
+    write_results,
+)
 from brdf_infer.posterior._samplers import (
     Draws,
     emcee_settings,
@@ -255,6 +262,10 @@ def run_posterior(
         model = build_model(scene, measurements, name)
         what = _describe(
             model, measurements, sampler, chains, draws, warmup, walkers, steps, seed, out, resume
+        )
+        total = chains * draws if sampler == "nuts" else (walkers or 24) * steps
+        check_memory(
+            len(measurements), total, chains, factor_columns(model.data.noise), measurements.path
         )
         if announce is not None:
             announce(f"posterior of scene '{scene.name}' ({name}) with {sampler}: {what}")

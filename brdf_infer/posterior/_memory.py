@@ -1,0 +1,66 @@
+"""What a posterior run will hold in memory, estimated before it samples, and a clear refusal
+when the machine does not have it (a whole instrument table with every draw, say).
+
+The estimate adds the parts that grow with rows × draws or rows × chains (the run's other
+arrays are a few MiB): the leave-one-out terms of every draw and row (two arrays, float64 up
+to 256 MiB each, float32 above; :func:`brdf_infer.posterior._results.loo_terms`), one block
+of draws' likelihood parts (:data:`~brdf_infer.posterior._results.CHUNK_VALUES` values and
+their temporaries), the sampler's per-chain gradient intermediates (rows × (columns of the
+low-rank factor + 16) values, eight-fold for reverse mode) and the process itself (JAX,
+NumPyro, ArviZ and the compiled programs: :data:`PROCESS_BYTES`).
+"""
+
+from __future__ import annotations
+
+import os
+
+from brdf_infer.errors import BadInputError
+from brdf_infer.posterior._results import CHUNK_VALUES, FLOAT64_TERMS_BYTES
+
+PROCESS_BYTES = 1.0 * 2**30  # the interpreter, the libraries and the compiled programs
+GIB = 2**30
+
+
+def estimated_bytes(rows: int, draws: int, chains: int, columns: int) -> float:
+    """Peak memory of a posterior run [bytes] (module docstring)."""
+    width = 8 if draws * rows * 8 <= FLOAT64_TERMS_BYTES else 4
+    loo = 2 * draws * rows * width
+    block = 4 * CHUNK_VALUES * 8
+    sampler = 8 * chains * rows * (columns + 16) * 8
+    return PROCESS_BYTES + loo + block + sampler
+
+
+def available_bytes() -> float | None:
+    """Memory this process may still take [bytes]: MemAvailable (Linux), else the physical
+    memory, else None (unknown: no check)."""
+    try:
+        with open("/proc/meminfo", encoding="ascii") as handle:
+            for line in handle:
+                if line.startswith("MemAvailable:"):
+                    return float(line.split()[1]) * 1024
+    except OSError:
+        pass
+    try:
+        return float(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def check_memory(rows: int, draws: int, chains: int, columns: int, file=None) -> float:
+    """The run's estimated peak memory [bytes], after checking that the machine has it.
+
+    Raises:
+        BadInputError: the estimate exceeds the available memory (one line: rows, draws, the
+            estimate, what is available and what to change).
+    """
+    needed = estimated_bytes(rows, draws, chains, columns)
+    available = available_bytes()
+    if available is not None and needed > available:
+        raise BadInputError(
+            f"{rows} rows × {draws} draws need about {needed / GIB:.1f} GiB of memory and "
+            f"{available / GIB:.1f} GiB is available: thin the table ([bsdf] "
+            "keep_every_radial, keep_every_azimuth), use fewer rows, or sample fewer draws "
+            "(--chains, --draws)",
+            file=file,
+        )
+    return needed
