@@ -45,6 +45,8 @@ class Draws:
             burn-in and steps), of the emcee MAP search ("initialise"), and the JAX "compile"
             time, which the others exclude.
         extra: sampler-specific results (emcee: autocorrelation times, acceptance).
+        program: the NUTS program that drew them (None for emcee): a variant of the model
+            that differs in data only samples through it, its programs already compiled.
     """
 
     sites: dict[str, np.ndarray]
@@ -53,6 +55,7 @@ class Draws:
     settings: dict
     seconds: dict[str, float]
     extra: dict = field(default_factory=dict)
+    program: NutsProgram | None = field(default=None, repr=False, compare=False)
 
 
 def _progress_enabled(progress: bool | None) -> bool:
@@ -68,10 +71,13 @@ def run_nuts(
     seed: int = 0,
     target_accept: float = 0.8,
     progress: bool | None = None,
+    program: NutsProgram | None = None,
 ) -> Draws:
     """NUTS with a dense mass matrix (:class:`brdf_infer.posterior._nuts.NutsProgram`): the
-    chains run one after another through one compiled program."""
-    program = NutsProgram(model, warmup=warmup, target_accept=target_accept)
+    chains run through one compiled program, that of ``program`` where it serves ``model``
+    with these settings (:meth:`~brdf_infer.posterior._nuts.NutsProgram.serves`)."""
+    if program is None or not program.serves(model, warmup, target_accept):
+        program = NutsProgram(model, warmup=warmup, target_accept=target_accept)
     output = program.run(
         model.data, chain_keys(seed, 1, chains)[0], draws, progress=_progress_enabled(progress)
     )
@@ -83,7 +89,9 @@ def run_nuts(
         "dense_mass": True,
         "target_accept": target_accept,
     }
-    return nuts_draws(output.sites, output.stats, settings, output.seconds)
+    result = nuts_draws(output.sites, output.stats, settings, output.seconds)
+    result.program = program
+    return result
 
 
 def nuts_draws(sites: dict, stats: dict, settings: dict, seconds: dict[str, float]) -> Draws:
