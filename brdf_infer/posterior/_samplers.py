@@ -18,11 +18,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, NamedTuple
 
-import emcee
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optimistix as optx
 
 from brdf_infer._atomic import atomic_write_bytes
 from brdf_infer._compile_clock import compile_clock
@@ -132,6 +130,8 @@ class _LogDensity:
 
     def maximum_a_posteriori(self, starts: int = 8) -> np.ndarray:
         """The MAP on the unconstrained space: BFGS from ``starts`` dispersed points, vmapped."""
+        import optimistix as optx  # only emcee's start needs it (≈ 0.2 s to import)
+
         keys = jax.random.split(self._init_key, starts)
         potential, flat, data = self._potential, self.flat, self._data
         solver = optx.BFGS(rtol=1e-9, atol=1e-9)
@@ -324,6 +324,8 @@ class _EmceeStart(NamedTuple):
 def _emcee_start(density, settings, identity, seed, checkpoint, resume, compile_seconds):
     """The run's start (:func:`run_emcee`): from ``checkpoint`` with ``resume``, else the
     walkers in a small ball around the MAP (its search timed, less ``compile_seconds``)."""
+    import emcee  # imported when an emcee run needs it (not by NUTS runs)
+
     walkers = settings["walkers"]
     chain_parts, log_prob_parts, accepted, done = [], [], np.zeros(walkers), 0
     initialise_seconds = 0.0
@@ -354,6 +356,8 @@ def _emcee_chunks(
 ):
     """Sample from ``initial`` to ``steps`` in chunks of ``checkpoint_every`` steps, each
     chunk's chain appended to ``initial``'s and checkpointed; the accepted counts."""
+    import emcee  # imported when an emcee run needs it (not by NUTS runs)
+
     walkers = settings["walkers"]
     state, chain_parts, log_prob_parts = initial.state, initial.chain_parts, initial.log_prob_parts
     accepted, done = initial.accepted, initial.done
@@ -397,6 +401,8 @@ def _emcee_chunks(
 
 def _emcee_draws(density, initial, accepted, settings, seconds, steps, burn) -> Draws:
     """The draws after ``burn``, thinned by ⌈τ_max/2⌉, the walkers as chains."""
+    import emcee  # imported when an emcee run needs it (not by NUTS runs)
+
     walkers = settings["walkers"]
     chain_parts, log_prob_parts = initial.chain_parts, initial.log_prob_parts
     chain = np.concatenate(chain_parts)[burn:]  # (steps − burn, walkers, ndim)
