@@ -50,8 +50,10 @@ marginalised over u, κ, ε, η (no funnels; PSIS-LOO from the leave-one-out con
 
 Where each option enters, once: ``images_per_row`` and ``reflectance_rel`` in σ_i,
 ``calibration`` in the calibration columns of W (which rows share a factor),
-``calibration_rel`` in their scale σ_cal, ``rotation_coupling`` in s of g_rot. All of them are
-data of the compiled likelihood (:class:`NoiseLayout`), not constants of the model: one
+``calibration_rel`` in their scale σ_cal, ``rotation_coupling`` in s of g_rot,
+``rotation_deg`` and ``camera_deg`` (``angle_deg`` their default) in the scales σ_rot, σ_cam of
+the angle terms (0 where the angle errors are off). All of them are data of the compiled
+likelihood (:class:`NoiseLayout`), not constants of the model: one
 compiled program samples, and simulates from, every combination of them, and data simulated
 under one layout can be fitted under another (misspecification studies).
 
@@ -86,6 +88,9 @@ DATA_OPTIONS = (
     "calibration_rel",
     "rotation_coupling",
     "images_per_row",
+    "angle_deg",
+    "rotation_deg",
+    "camera_deg",
 )
 
 
@@ -209,6 +214,8 @@ class NoiseLayout(NamedTuple):
         rotation_alone: 1 where the row is its rotation setting's only row.
         theta_s_per_rotation: s = ∂θs/∂ε of each row: +1 when the camera follows the specular
             beam, −1 when it stays put (``errors.rotation_coupling``).
+        rotation_deg: σ_rot of a sample rotation [deg] (a scalar; 0: the angle errors off).
+        camera_deg: σ_cam of a camera position [deg] (a scalar; 0: the angle errors off).
     """
 
     sigma_row: jnp.ndarray
@@ -220,6 +227,8 @@ class NoiseLayout(NamedTuple):
     rotation_members: jnp.ndarray
     rotation_alone: jnp.ndarray
     theta_s_per_rotation: jnp.ndarray
+    rotation_deg: jnp.ndarray
+    camera_deg: jnp.ndarray
 
 
 class NoiseScales(NamedTuple):
@@ -348,6 +357,8 @@ def noise_layout(settings: ErrorSettings, measurements: Measurements) -> NoiseLa
         rotation_members=jnp.asarray(rotations[0]),
         rotation_alone=jnp.asarray(rotations[1]),
         theta_s_per_rotation=jnp.asarray(theta_s_per_rotation(settings, len(measurements))),
+        rotation_deg=jnp.asarray(settings.rotation_deg if settings.angles_on else 0.0),
+        camera_deg=jnp.asarray(settings.camera_deg if settings.angles_on else 0.0),
     )
 
 

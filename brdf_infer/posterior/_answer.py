@@ -13,8 +13,6 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-import numpy as np
-
 from brdf_infer.measurements import Measurements
 from brdf_infer.posterior._bands import draws_physical
 from brdf_infer.posterior._learned import learned_record
@@ -23,9 +21,18 @@ from brdf_infer.posterior._power_scaling import log_likelihood_draws
 from brdf_infer.posterior._prior import prior_draws
 from brdf_infer.posterior._reference import reference_record
 from brdf_infer.posterior._samplers import Draws, run_nuts
-from brdf_infer.posterior._width import HEADLINE_TIS_DEG, headline_draws, width_attribution
+from brdf_infer.posterior._width import (
+    HEADLINE_TIS_DEG,
+    Refitted,
+    headline_draws,
+    width_attribution,
+)
 
 PRIOR_DRAWS = 4000  # the prior predictive's 2.5 % quantile from ~100 draws beyond it
+# A refit's size (brdf_infer.posterior._width, "Monte Carlo error"): 2 × 500 draws, ESS ≈ 800
+# for the 95 % endpoints on lya, put the MC standard error of a width ratio near 0.03
+REFIT_CHAINS = 2
+REFIT_DRAWS = 500
 
 
 def headline_angles(model: PosteriorModel, band_angles: Sequence[float]) -> list[float]:
@@ -38,24 +45,31 @@ def headline_angles(model: PosteriorModel, band_angles: Sequence[float]) -> list
 
 
 def _refit(draws: Draws, seed: int, tis_angles: Sequence[float]):
-    """A variant's headline draws from a NUTS run with the run's settings (None: the run was
-    not NUTS; such a variant is reported unreliable)."""
+    """A variant's headline draws from a NUTS run (:class:`Refitted`) of
+    :data:`REFIT_CHAINS` × (the run's warmup + :data:`REFIT_DRAWS`), at most the run's chains
+    and draws, through the run's own compiled program where it serves the variant (None: the
+    run was not NUTS; such a variant is reported unreliable)."""
     if draws.sampler != "nuts":
         return None
     settings = draws.settings
+    chains = min(REFIT_CHAINS, settings["chains"])
+    count = min(REFIT_DRAWS, settings["draws"])
 
-    def refit(variant: PosteriorModel) -> dict[str, np.ndarray]:
+    def refit(variant: PosteriorModel) -> Refitted:
         sampled = run_nuts(
             variant,
-            chains=settings["chains"],
+            chains=chains,
             warmup=settings["warmup"],
-            draws=settings["draws"],
+            draws=count,
             seed=seed,
             target_accept=settings["target_accept"],
             progress=False,
+            program=draws.program,
         )
         physical = draws_physical(sampled.sites, variant.family)
-        return headline_draws(variant.family, physical, tis_angles)
+        flat = headline_draws(variant.family, physical, tis_angles)
+        headline = {name: values.reshape(chains, count) for name, values in flat.items()}
+        return Refitted(headline, {"chains": chains, "warmup": settings["warmup"], "draws": count})
 
     return refit
 

@@ -133,13 +133,12 @@ def sample_noise_scales(errors: ErrorSettings, noise: NoiseLayout) -> NoiseScale
         )
     else:
         repeatability = jnp.asarray(0.0 if not generative else float(errors.repeatability))
-    angles = errors.angles_on
     return NoiseScales(
         sample_sd=sample_sd,
         repeatability=repeatability,
         calibration=jnp.asarray(noise.calibration_sd),
-        rotation_deg=jnp.asarray(errors.rotation_deg if angles else 0.0),
-        camera_deg=jnp.asarray(errors.camera_deg if angles else 0.0),
+        rotation_deg=jnp.asarray(noise.rotation_deg),
+        camera_deg=jnp.asarray(noise.camera_deg),
     )
 
 
@@ -149,7 +148,6 @@ def drawn_noise_scales(
     """The noise scales of ``count`` posterior draws (learned ones from ``sites``, the
     calibration's from the data, ``noise``)."""
     generative = errors.model == "generative"
-    angles = errors.angles_on
     return NoiseScales(
         sample_sd=jnp.asarray(sites.get("sample_sd", jnp.zeros(count))),
         repeatability=jnp.asarray(
@@ -158,8 +156,8 @@ def drawn_noise_scales(
             else jnp.full(count, float(errors.repeatability) if generative else 0.0)
         ),
         calibration=jnp.full(count, noise.calibration_sd),
-        rotation_deg=jnp.full(count, errors.rotation_deg if angles else 0.0),
-        camera_deg=jnp.full(count, errors.camera_deg if angles else 0.0),
+        rotation_deg=jnp.full(count, noise.rotation_deg),
+        camera_deg=jnp.full(count, noise.camera_deg),
     )
 
 

@@ -55,6 +55,8 @@ _NOISE_FILL: dict[str, tuple[float | None, bool]] = {
     "rotation_members": (0.0, True),
     "rotation_alone": (0.0, False),
     "theta_s_per_rotation": (1.0, False),
+    "rotation_deg": (None, False),
+    "camera_deg": (None, False),
 }
 MEMBER_FIELDS = tuple(name for name, (_, members) in _NOISE_FILL.items() if members)
 

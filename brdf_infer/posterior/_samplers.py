@@ -18,11 +18,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, NamedTuple
 
-import emcee
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optimistix as optx
 
 from brdf_infer._atomic import atomic_write_bytes
 from brdf_infer._compile_clock import compile_clock
@@ -45,6 +43,8 @@ class Draws:
             burn-in and steps), of the emcee MAP search ("initialise"), and the JAX "compile"
             time, which the others exclude.
         extra: sampler-specific results (emcee: autocorrelation times, acceptance).
+        program: the NUTS program that drew them (None for emcee): a variant of the model
+            that differs in data only samples through it, its programs already compiled.
     """
 
     sites: dict[str, np.ndarray]
@@ -53,6 +53,7 @@ class Draws:
     settings: dict
     seconds: dict[str, float]
     extra: dict = field(default_factory=dict)
+    program: NutsProgram | None = field(default=None, repr=False, compare=False)
 
 
 def _progress_enabled(progress: bool | None) -> bool:
@@ -68,10 +69,13 @@ def run_nuts(
     seed: int = 0,
     target_accept: float = 0.8,
     progress: bool | None = None,
+    program: NutsProgram | None = None,
 ) -> Draws:
     """NUTS with a dense mass matrix (:class:`brdf_infer.posterior._nuts.NutsProgram`): the
-    chains run one after another through one compiled program."""
-    program = NutsProgram(model, warmup=warmup, target_accept=target_accept)
+    chains run through one compiled program, that of ``program`` where it serves ``model``
+    with these settings (:meth:`~brdf_infer.posterior._nuts.NutsProgram.serves`)."""
+    if program is None or not program.serves(model, warmup, target_accept):
+        program = NutsProgram(model, warmup=warmup, target_accept=target_accept)
     output = program.run(
         model.data, chain_keys(seed, 1, chains)[0], draws, progress=_progress_enabled(progress)
     )
@@ -83,7 +87,9 @@ def run_nuts(
         "dense_mass": True,
         "target_accept": target_accept,
     }
-    return nuts_draws(output.sites, output.stats, settings, output.seconds)
+    result = nuts_draws(output.sites, output.stats, settings, output.seconds)
+    result.program = program
+    return result
 
 
 def nuts_draws(sites: dict, stats: dict, settings: dict, seconds: dict[str, float]) -> Draws:
@@ -124,6 +130,8 @@ class _LogDensity:
 
     def maximum_a_posteriori(self, starts: int = 8) -> np.ndarray:
         """The MAP on the unconstrained space: BFGS from ``starts`` dispersed points, vmapped."""
+        import optimistix as optx  # only emcee's start needs it (≈ 0.2 s to import)
+
         keys = jax.random.split(self._init_key, starts)
         potential, flat, data = self._potential, self.flat, self._data
         solver = optx.BFGS(rtol=1e-9, atol=1e-9)
@@ -316,6 +324,8 @@ class _EmceeStart(NamedTuple):
 def _emcee_start(density, settings, identity, seed, checkpoint, resume, compile_seconds):
     """The run's start (:func:`run_emcee`): from ``checkpoint`` with ``resume``, else the
     walkers in a small ball around the MAP (its search timed, less ``compile_seconds``)."""
+    import emcee  # imported when an emcee run needs it (not by NUTS runs)
+
     walkers = settings["walkers"]
     chain_parts, log_prob_parts, accepted, done = [], [], np.zeros(walkers), 0
     initialise_seconds = 0.0
@@ -346,6 +356,8 @@ def _emcee_chunks(
 ):
     """Sample from ``initial`` to ``steps`` in chunks of ``checkpoint_every`` steps, each
     chunk's chain appended to ``initial``'s and checkpointed; the accepted counts."""
+    import emcee  # imported when an emcee run needs it (not by NUTS runs)
+
     walkers = settings["walkers"]
     state, chain_parts, log_prob_parts = initial.state, initial.chain_parts, initial.log_prob_parts
     accepted, done = initial.accepted, initial.done
@@ -389,6 +401,8 @@ def _emcee_chunks(
 
 def _emcee_draws(density, initial, accepted, settings, seconds, steps, burn) -> Draws:
     """The draws after ``burn``, thinned by ⌈τ_max/2⌉, the walkers as chains."""
+    import emcee  # imported when an emcee run needs it (not by NUTS runs)
+
     walkers = settings["walkers"]
     chain_parts, log_prob_parts = initial.chain_parts, initial.log_prob_parts
     chain = np.concatenate(chain_parts)[burn:]  # (steps − burn, walkers, ndim)
