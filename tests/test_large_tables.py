@@ -12,9 +12,11 @@ import numpy as np
 import pytest
 
 from brdf_infer._arviz import az
+from brdf_infer.posterior import _blocks as blocks
 from brdf_infer.posterior import _results as results
 from brdf_infer.posterior._loo import loo_pit, psis_loo, relative_efficiency
 from brdf_infer.posterior._lowrank import leave_one_out_conditionals
+from brdf_infer.posterior._power_scaling import log_likelihood_draws
 from brdf_infer.posterior._prior import prior_draws
 from brdf_infer.posterior._run import build_model
 
@@ -68,10 +70,15 @@ def test_leave_one_out_terms_by_blocks_of_draws_are_those_of_one_block(lya, monk
     draws = prior_draws(model, 24, seed=5)
     sites = {k: v.reshape(2, 12, *v.shape[1:]) for k, v in draws.items() if k != "obs"}
     whole = results.loo_terms(model, sites)
-    monkeypatch.setattr(results, "CHUNK_VALUES", 5 * 42 * 20)  # blocks of 5 draws, last padded
-    assert results.draw_blocks(24, 42, 20) == 5
-    blocks = results.loo_terms(model, sites)
-    for a, b in zip(whole, blocks, strict=True):
+    whole_joint = log_likelihood_draws(model, sites)
+    columns = 4 + blocks.factor_columns(model.data.noise)
+    monkeypatch.setattr(blocks, "CHUNK_VALUES", 5 * 42 * columns)  # blocks of 5, last padded
+    assert blocks.draw_blocks(24, 42, columns) == 5
+    by_blocks = results.loo_terms(model, sites)
+    joint = log_likelihood_draws(model, sites)
+    assert joint.shape == (2, 12)
+    np.testing.assert_allclose(joint, whole_joint, rtol=1e-12)
+    for a, b in zip(whole, by_blocks, strict=True):
         assert a.shape == (2, 12, 42)
         np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-300)
 
@@ -86,3 +93,28 @@ def test_posterior_nc_keeps_every_draw_of_a_small_run_and_bounded_values_of_a_ta
     small, large = np.zeros((4, 1000, 42)), np.zeros((4, 1000, 2043), np.float32)
     assert "log_likelihood" in results.stored_log_likelihood(small)
     assert results.stored_log_likelihood(large) == {}
+
+
+def test_prior_draws_of_the_posterior_sites_are_the_same_draws_without_the_rows(lya):
+    """The answer records draw 4000 prior draws: with every row's simulated ``obs`` that is
+    4000 × rows values twice over (3.8 GB for a 60 000-row table); asked for the posterior's
+    sites only, the draws are the same and no ``obs`` is made."""
+    scene, measurements = lya
+    model = build_model(scene, measurements)
+    full = prior_draws(model, 40, seed=7)
+    sites = frozenset({"brdf0", "repeatability", "sample_sd"})
+    lean = prior_draws(model, 40, seed=7, sites=sites)
+    assert "obs" in full and "obs" not in lean
+    assert set(model.family.parameters) | sites == set(lean)
+    for name, values in lean.items():
+        np.testing.assert_array_equal(values, full[name])
+
+
+def test_a_run_the_machine_cannot_hold_is_refused_in_one_line_before_it_samples():
+    from brdf_infer.errors import BadInputError
+    from brdf_infer.posterior._memory import check_memory, estimated_bytes
+
+    assert estimated_bytes(42, 4000, 4, 12) < 2 * 2**30  # the bundled run: nothing to refuse
+    assert check_memory(42, 4000, 4, 12) > 0
+    with pytest.raises(BadInputError, match=r"10000000 rows × 4000 draws need about .* GiB"):
+        check_memory(10_000_000, 4000, 4, 20)

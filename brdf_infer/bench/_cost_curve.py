@@ -138,8 +138,7 @@ def cost_row(label: str, scene: str, scratch: Path, cache: Path) -> CostRow:
     import json
 
     from brdf_infer.bench._speed import gradient_microseconds
-    from brdf_infer.posterior import build_model
-    from brdf_infer.posterior._potential import FlatPotential
+    from brdf_infer.posterior import FlatPotential, build_model
     from brdf_infer.scene import load_scene
 
     loaded = load_scene(scene)

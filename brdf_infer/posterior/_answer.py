@@ -99,7 +99,7 @@ def answer_records(
     member = model.family
     physical = draws_physical(draws.sites, member)
     headline = headline_draws(member, physical, angles)
-    prior = prior_draws(model, PRIOR_DRAWS, seed + 11)
+    prior = prior_draws(model, PRIOR_DRAWS, seed + 11, frozenset(draws.sites))
     prior_headline = headline_draws(member, draws_physical(prior, member), angles)
     resample = _refit(draws, seed, angles) if refit else None
     log_likelihood = log_likelihood_draws(model, draws.sites)  # once, for both records

@@ -4,7 +4,7 @@ when the machine does not have it (a whole instrument table with every draw, say
 The estimate adds the parts that grow with rows × draws or rows × chains (the run's other
 arrays are a few MiB): the leave-one-out terms of every draw and row (two arrays, float64 up
 to 256 MiB each, float32 above; :func:`brdf_infer.posterior._results.loo_terms`), one block
-of draws' likelihood parts (:data:`~brdf_infer.posterior._results.CHUNK_VALUES` values and
+of draws' likelihood parts (:data:`~brdf_infer.posterior._blocks.CHUNK_VALUES` values and
 their temporaries), the sampler's per-chain gradient intermediates (rows × (columns of the
 low-rank factor + 16) values, eight-fold for reverse mode) and the process itself (JAX,
 NumPyro, ArviZ and the compiled programs: :data:`PROCESS_BYTES`).
@@ -15,7 +15,8 @@ from __future__ import annotations
 import os
 
 from brdf_infer.errors import BadInputError
-from brdf_infer.posterior._results import CHUNK_VALUES, FLOAT64_TERMS_BYTES
+from brdf_infer.posterior._blocks import CHUNK_VALUES
+from brdf_infer.posterior._results import FLOAT64_TERMS_BYTES
 
 PROCESS_BYTES = 1.0 * 2**30  # the interpreter, the libraries and the compiled programs
 GIB = 2**30

@@ -36,6 +36,7 @@ from brdf_infer._arviz import az
 from brdf_infer.coordinates import ANGLE_SCALE_DEG
 from brdf_infer.model import energy_log_factor
 from brdf_infer.params import PARAM_NAMES, Params
+from brdf_infer.posterior._blocks import factor_columns, over_draw_blocks
 from brdf_infer.posterior._likelihood import disjoint_columns
 from brdf_infer.posterior._lowrank import low_rank_normal_log_density
 from brdf_infer.posterior._model import (
@@ -85,16 +86,19 @@ def log_likelihood_draws(model: PosteriorModel, sites: dict[str, np.ndarray]) ->
         for k, v in sites.items()
         if k != ENERGY_SITE  # the physical prior's factor: no value to reshape
     }
-    parts = model.draw_parts(flat)
     y = model.data.rows.log_reflectance
-    if model.errors.model == "spread":
-        values = jnp.sum(
-            jax.scipy.stats.norm.logpdf(y, parts.mean, jnp.sqrt(parts.diagonal)), axis=-1
-        )
-    else:
-        program = _density_program(disjoint_columns(model.data))
-        values = program(y, parts.mean, parts.factor, parts.diagonal)
-    return np.asarray(values).reshape(shape)
+    program = _density_program(disjoint_columns(model.data))
+
+    def joint(block):
+        parts = model.draw_parts(block)
+        if model.errors.model == "spread":
+            normal = jax.scipy.stats.norm.logpdf(y, parts.mean, jnp.sqrt(parts.diagonal))
+            return (jnp.sum(normal, axis=-1),)
+        return (program(y, parts.mean, parts.factor, parts.diagonal),)
+
+    rows = int(np.shape(y)[-1])
+    (values,) = over_draw_blocks(joint, flat, rows, factor_columns(model.data.noise))
+    return values.reshape(shape)
 
 
 @functools.cache

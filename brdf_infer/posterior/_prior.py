@@ -26,9 +26,20 @@ from brdf_infer.posterior._model import ENERGY_SITE, PosteriorModel
 MAX_BATCHES = 50  # of twice the draws asked for; the bundled priors accept 63 %
 
 
-def _simulated(model: PosteriorModel, count: int, key) -> dict[str, np.ndarray]:
+def _simulated(
+    model: PosteriorModel, count: int, key, sites: frozenset[str] | None = None
+) -> dict[str, np.ndarray]:
+    """``count`` draws of the untruncated model; ``sites``: only these (and the parameters),
+    the rest — ``obs``, count × rows values — never computed (the compiled program drops what
+    it does not return; the kept sites' values are the same)."""
     predictive = Predictive(model, num_samples=count)
-    draws = jax.device_get(jax.jit(lambda k: predictive(k, mode="simulate"))(key))
+    wanted = None if sites is None else sites | set(model.family.parameters)
+
+    def simulate(k):
+        draws = predictive(k, mode="simulate")
+        return {n: v for n, v in draws.items() if wanted is None or n in wanted}
+
+    draws = jax.device_get(jax.jit(simulate)(key))
     return {name: values for name, values in draws.items() if name != ENERGY_SITE}
 
 
@@ -41,9 +52,12 @@ def accepted(model: PosteriorModel, draws: dict[str, np.ndarray]) -> np.ndarray:
     return np.asarray(conserves_energy(params, model.family.constants))
 
 
-def prior_draws(model: PosteriorModel, count: int, seed: int) -> dict[str, np.ndarray]:
+def prior_draws(
+    model: PosteriorModel, count: int, seed: int, sites: frozenset[str] | None = None
+) -> dict[str, np.ndarray]:
     """``count`` draws of every site of the physical prior and a simulated ``obs`` (ln R of
-    every row) each, leading axis the draws.
+    every row) each, leading axis the draws; ``sites``: only these sites and the family's
+    parameters (the same values; no count × rows ``obs`` computed or held).
 
     Raises:
         RuntimeError: fewer than ``count`` accepted after :data:`MAX_BATCHES` batches (a prior
@@ -53,7 +67,8 @@ def prior_draws(model: PosteriorModel, count: int, seed: int) -> dict[str, np.nd
     kept: dict[str, list[np.ndarray]] = {}
     total = 0
     for batch in range(MAX_BATCHES):
-        draws = _simulated(model, 2 * count, key if batch == 0 else jax.random.fold_in(key, batch))
+        batch_key = key if batch == 0 else jax.random.fold_in(key, batch)
+        draws = _simulated(model, 2 * count, batch_key, sites)
         keep = accepted(model, draws)
         for name, values in draws.items():
             kept.setdefault(name, []).append(np.asarray(values)[keep])

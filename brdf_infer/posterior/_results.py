@@ -20,6 +20,7 @@ from brdf_infer._outlock import require_complete
 from brdf_infer.errors import BadInputError
 from brdf_infer.model import ModelFamily, family, run_family_name
 from brdf_infer.params import PARAM_NAMES
+from brdf_infer.posterior._blocks import factor_columns, over_draw_blocks
 from brdf_infer.posterior._likelihood import disjoint_columns
 from brdf_infer.posterior._loo import pointwise_loo_terms
 from brdf_infer.posterior._model import NOISE_SITES, PosteriorModel
@@ -50,24 +51,10 @@ def flatten_draws(sites: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     return {k: v.reshape(v.shape[0] * v.shape[1], *v.shape[2:]) for k, v in sites.items()}
 
 
-CHUNK_VALUES = 2**24  # likelihood-part values of one block of draws (128 MiB of float64)
 FLOAT64_TERMS_BYTES = 2**28  # pointwise terms above 256 MiB are held in float32
 STORED_TERMS_VALUES = 10**6  # log_likelihood kept in posterior.nc up to chains × draws × rows
 PREDICTIVE_VALUES = 10**6  # replicated rows kept in posterior.nc: at most these many values
 PREDICTIVE_MIN_DRAWS = 20  # ... but at least these many draws (thinned evenly in each chain)
-
-
-def draw_blocks(count: int, rows: int, columns: int) -> int:
-    """Draws per block when a computation holds ``columns`` values per row and draw
-    (:data:`CHUNK_VALUES` at most; every draw at once where they fit)."""
-    return int(max(1, min(count, CHUNK_VALUES // max(1, rows * columns))))
-
-
-def factor_columns(noise) -> int:
-    """Columns of the likelihood's low-rank factor W (samples, calibration groups, rotation
-    settings with two or more rows) of a :class:`~brdf_infer.error_model.NoiseLayout`."""
-    names = ("sample_members", "calibration_members", "rotation_members")
-    return sum(int(np.shape(getattr(noise, name))[-1]) for name in names if hasattr(noise, name))
 
 
 def loo_terms(model, sites: dict[str, np.ndarray]):
@@ -76,26 +63,21 @@ def loo_terms(model, sites: dict[str, np.ndarray]):
 
     The leave-one-out conditionals of the model's (possibly correlated) normal likelihood
     (:mod:`brdf_infer.posterior._loo`); for independent rows the ordinary pointwise terms.
-    Computed a block of draws at a time (the likelihood's low-rank factor is rows × columns
-    per draw; the last block padded to the others' shape, so one program serves them all);
-    held in float32 where the two arrays would exceed :data:`FLOAT64_TERMS_BYTES` each.
+    Computed a block of draws at a time (:mod:`brdf_infer.posterior._blocks`); held in float32
+    where the two arrays would exceed :data:`FLOAT64_TERMS_BYTES` each.
     """
     chains, n_draws = next(iter(sites.values())).shape[:2]
-    flat = flatten_draws(sites)
-    count = chains * n_draws
     y = model.data.rows.log_reflectance
     rows = int(np.shape(y)[-1])
-    size = draw_blocks(count, rows, 4 + factor_columns(model.data.noise))
-    dtype = np.float64 if count * rows * 8 <= FLOAT64_TERMS_BYTES else np.float32
-    log_lik, cdf = np.empty((count, rows), dtype), np.empty((count, rows), dtype)
     disjoint = disjoint_columns(model.data)
-    for start in range(0, count, size):
-        index = np.minimum(np.arange(start, start + size), count - 1)  # pad with the last draw
-        parts = model.draw_parts({k: v[index] for k, v in flat.items()})
-        terms = pointwise_loo_terms(y, parts.mean, parts.factor, parts.diagonal, disjoint=disjoint)
-        kept = min(size, count - start)
-        log_lik[start : start + kept] = np.asarray(terms[0])[:kept]
-        cdf[start : start + kept] = np.asarray(terms[1])[:kept]
+
+    def terms(block):
+        parts = model.draw_parts(block)
+        return pointwise_loo_terms(y, parts.mean, parts.factor, parts.diagonal, disjoint=disjoint)
+
+    dtype = np.float64 if chains * n_draws * rows * 8 <= FLOAT64_TERMS_BYTES else np.float32
+    columns = factor_columns(model.data.noise)
+    log_lik, cdf = over_draw_blocks(terms, flatten_draws(sites), rows, columns, dtype)
     shape = (chains, n_draws, rows)
     return log_lik.reshape(shape), cdf.reshape(shape)
 

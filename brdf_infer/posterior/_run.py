@@ -233,8 +233,7 @@ def run_posterior(
             :class:`~brdf_infer.settings.PosteriorSettings`'s, as ``brdf-infer posterior``'s.
         walkers, steps: emcee settings (walkers default: max(24, 2 × dimension)).
         seed: random seed of the sampler.
-        target_accept: NUTS target acceptance probability (raise it towards 0.95 when a
-            run reports divergent transitions).
+        target_accept: NUTS target acceptance probability (towards 0.95 when a run diverges).
         out: output directory (nothing written when None; emcee then keeps no checkpoint).
         resume: continue an interrupted emcee run from ``out``'s checkpoint.
         error_model: override the scene's ``errors.model`` (``generative`` or ``spread``).
@@ -263,10 +262,7 @@ def run_posterior(
         what = _describe(
             model, measurements, sampler, chains, draws, warmup, walkers, steps, seed, out, resume
         )
-        total = chains * draws if sampler == "nuts" else (walkers or 24) * steps
-        check_memory(
-            len(measurements), total, chains, factor_columns(model.data.noise), measurements.path
-        )
+        _check_memory(model, measurements, sampler, chains * draws, chains, walkers, steps)
         if announce is not None:
             announce(f"posterior of scene '{scene.name}' ({name}) with {sampler}: {what}")
         result = _sample(
@@ -287,6 +283,14 @@ def run_posterior(
         return complete_run(
             model, measurements, result, seed, out, started, forced=forced, refit=refit
         )
+
+
+def _check_memory(model, measurements, sampler, nuts_draws, chains, walkers, steps) -> None:
+    """:func:`~brdf_infer.posterior._memory.check_memory` of the run's rows and draws (emcee:
+    walkers × steps, an upper bound)."""
+    total = nuts_draws if sampler == "nuts" else (walkers or 24) * steps
+    columns = factor_columns(model.data.noise)
+    check_memory(len(measurements), total, chains, columns, measurements.path)
 
 
 def _checked_warmup(
