@@ -118,3 +118,25 @@ def test_a_run_the_machine_cannot_hold_is_refused_in_one_line_before_it_samples(
     assert check_memory(42, 4000, 4, 12) > 0
     with pytest.raises(BadInputError, match=r"10000000 rows × 4000 draws need about .* GiB"):
         check_memory(10_000_000, 4000, 4, 20)
+
+
+def test_the_report_summarises_a_long_table_per_incidence_angle(lya):
+    """A whole table's rows are not listed in the report (60 000 HTML rows), one line per θi."""
+    import dataclasses
+
+    from brdf_infer.report._run_tables import DATA_TABLE_ROWS, data_table
+
+    _, measurements = lya
+    assert "<td>I</td>" in data_table(measurements)  # the bundled rows are listed
+    copies = DATA_TABLE_ROWS // len(measurements) + 1
+    long = dataclasses.replace(
+        measurements,
+        **{
+            name: np.tile(getattr(measurements, name), copies)
+            for name in ("series", "sample", "theta_i_deg", "theta_s_deg", "reflectance")
+        },
+        reflectance_err=None,
+    )
+    html = data_table(long)
+    assert f"{len(long)} rows, too many to list" in html
+    assert html.count("<tr>") == 1 + np.unique(measurements.theta_i_deg).size

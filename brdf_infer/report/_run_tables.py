@@ -108,9 +108,42 @@ def run_table(scene, rows, idata, summary: PosteriorSummary, member) -> str:
     )
 
 
+DATA_TABLE_ROWS = 300  # more rows (a whole instrument table) are summarised per θi
+
+
+def data_summary_table(rows) -> str:
+    """A table too long to list (more than :data:`DATA_TABLE_ROWS` rows), one line per
+    incidence angle: its rows, those in the plane of incidence, and the values' range."""
+    name, unit = ("BRDF", "[sr⁻¹]") if rows.quantity == "brdf" else ("R", "[-]")
+    phi = rows.phi_s_deg
+    lines = []
+    for angle in np.unique(rows.theta_i_deg):
+        at = rows.theta_i_deg == angle
+        in_plane = int(at.sum()) if phi is None else int(np.sum(at & np.isnan(phi)))
+        values = rows.reflectance[at]
+        lines.append(
+            [
+                f"{angle:g}",
+                f"{int(at.sum())}",
+                f"{in_plane}",
+                f"{values.min():.3e} – {values.max():.3e}",
+            ]
+        )
+    return (
+        f"<p>{len(rows)} rows, too many to list here: one line per incidence angle (every row "
+        "is in the measurement file the run names above).</p>"
+        + _html.table(
+            ["θi [deg]", "rows", "in the plane of incidence", f"{name} range {unit}"], lines
+        )
+    )
+
+
 def data_table(rows) -> str:
     """The measured rows: series, sample, θi, θs and (with out-of-plane rows) φs [deg], the
-    value (raw reflectance R [-] or BRDF [sr⁻¹]) and its σ."""
+    value (raw reflectance R [-] or BRDF [sr⁻¹]) and its σ; a longer table summarised
+    (:func:`data_summary_table`)."""
+    if len(rows) > DATA_TABLE_ROWS:
+        return data_summary_table(rows)
     name, unit = ("BRDF", "[sr⁻¹]") if rows.quantity == "brdf" else ("R", "[-]")
     phi = rows.phi_s_deg
     errors = [None] * len(rows) if rows.reflectance_err is None else rows.reflectance_err
