@@ -85,6 +85,14 @@ def test_scenes_lists_the_default(capsys):
     assert "lya" in [entry["name"] for entry in json_of(capsys, "scenes")["scenes"]]
 
 
+def test_version_names_the_package_version(capsys):
+    import brdf_infer
+
+    code, out, _ = run_cli("--version", capsys=capsys)
+    assert code == 0
+    assert out.strip() == f"brdf-infer {brdf_infer.__version__}"
+
+
 def test_human_tables_show_error_beside_time(capsys):
     code, out, _ = run_cli("tis", "--params", "vis-paper", "--theta-i", "5", "70", capsys=capsys)
     assert code == 0 and "quadrature error" in out and "ms for 2 angles" in out

@@ -17,6 +17,7 @@ import sys
 from collections.abc import Sequence
 from typing import NoReturn
 
+import brdf_infer
 from brdf_infer._device import placement
 from brdf_infer.cli import (
     batch,
@@ -68,6 +69,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Bayesian BRDF/TIS inference for black coatings (Strumik et al. 2024).",
         formatter_class=HelpFormatter,
     )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {brdf_infer.__version__}")
     commands = parser.add_subparsers(
         dest="command", required=True, parser_class=Parser, metavar="COMMAND"
     )
