@@ -114,7 +114,8 @@ def test_a_run_the_machine_cannot_hold_is_refused_in_one_line_before_it_samples(
     from brdf_infer.errors import BadInputError
     from brdf_infer.posterior._memory import check_memory, estimated_bytes
 
-    assert estimated_bytes(42, 4000, 4, 12) < 2 * 2**30  # the bundled run: nothing to refuse
+    # the bundled run adds a few tens of MiB: not refused unless the machine is out of memory
+    assert 0 < estimated_bytes(42, 4000, 4, 12) < 192 * 2**20
     assert check_memory(42, 4000, 4, 12) > 0
     with pytest.raises(BadInputError, match=r"10000000 rows × 4000 draws need about .* GiB"):
         check_memory(10_000_000, 4000, 4, 20)

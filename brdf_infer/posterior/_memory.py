@@ -1,13 +1,16 @@
-"""What a posterior run will hold in memory, estimated before it samples, and a clear refusal
-when the machine does not have it (a whole instrument table with every draw, say).
+"""What a posterior run will add to the memory it holds, estimated before it samples, and a
+clear refusal when the machine does not have it free (a whole instrument table with every
+draw, say).
 
 The estimate adds the parts that grow with rows × draws or rows × chains (the run's other
 arrays are a few MiB): the leave-one-out terms of every draw and row (two arrays, float64 up
 to 256 MiB each, float32 above; :func:`brdf_infer.posterior._results.loo_terms`), one block
-of draws' likelihood parts (:data:`~brdf_infer.posterior._blocks.CHUNK_VALUES` values and
-their temporaries), the sampler's per-chain gradient intermediates (rows × (columns of the
-low-rank factor + 16) values, eight-fold for reverse mode) and the process itself (JAX,
-NumPyro, ArviZ and the compiled programs: :data:`PROCESS_BYTES`).
+of draws' likelihood parts (at most :data:`~brdf_infer.posterior._blocks.CHUNK_VALUES`
+values and their temporaries) and the sampler's per-chain gradient intermediates (rows ×
+(columns of the low-rank factor + 16) values, eight-fold for reverse mode). The process
+itself (the libraries, the compiled programs) is already running when the check is made, so
+the memory the machine reports free is what the run has left; the bundled run adds about
+0.1 GiB.
 """
 
 from __future__ import annotations
@@ -18,17 +21,17 @@ from brdf_infer.errors import BadInputError
 from brdf_infer.posterior._blocks import CHUNK_VALUES
 from brdf_infer.posterior._results import FLOAT64_TERMS_BYTES
 
-PROCESS_BYTES = 1.0 * 2**30  # the interpreter, the libraries and the compiled programs
 GIB = 2**30
 
 
 def estimated_bytes(rows: int, draws: int, chains: int, columns: int) -> float:
-    """Peak memory of a posterior run [bytes] (module docstring)."""
+    """What a posterior run adds to its process's memory at its peak [bytes] (module
+    docstring)."""
     width = 8 if draws * rows * 8 <= FLOAT64_TERMS_BYTES else 4
     loo = 2 * draws * rows * width
-    block = 4 * CHUNK_VALUES * 8
+    block = 4 * min(CHUNK_VALUES, draws * rows * (columns + 4)) * 8
     sampler = 8 * chains * rows * (columns + 16) * 8
-    return PROCESS_BYTES + loo + block + sampler
+    return loo + block + sampler
 
 
 def available_bytes() -> float | None:
@@ -48,7 +51,8 @@ def available_bytes() -> float | None:
 
 
 def check_memory(rows: int, draws: int, chains: int, columns: int, file=None) -> float:
-    """The run's estimated peak memory [bytes], after checking that the machine has it.
+    """What the run is estimated to add to its memory [bytes], after checking that the
+    machine has it free.
 
     Raises:
         BadInputError: the estimate exceeds the available memory (one line: rows, draws, the
