@@ -89,7 +89,11 @@ def assert_png_shows_the_comparison(path, models: int) -> None:
 
 def test_compare_command_json_contract_and_files(tmp_path, capsys):
     """At the settings of ``SMALL`` the two families' NUTS programs are the suite's (the lya
-    posterior's and the ABg run's): one chain of 100 draws costs no compilation of its own."""
+    posterior's and the ABg run's): one chain of 100 draws costs no compilation of its own.
+    ``--no-refit``: at 100 draws four rows have Pareto k > 0.7, and each exact refit is another
+    NUTS run, warmup included; the refits' arithmetic is checked by
+    test_refitted_terms_replace_psis_in_elpd_and_p_loo, a refitting comparison by the slow
+    test_a_row_with_pareto_k_above_0_7_is_refitted_on_a_single_series_scene."""
     code, out, err = run_cli(
         "compare",
         "lya",
@@ -104,6 +108,7 @@ def test_compare_command_json_contract_and_files(tmp_path, capsys):
         str(SMALL.target_accept),
         "--draws",
         "100",
+        "--no-refit",
         "--out",
         str(tmp_path / "cmp"),
         "--json",
