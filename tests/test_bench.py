@@ -31,6 +31,7 @@ def test_quick_benchmark_report(tmp_path, capsys):
     for case in ("well specified", "latent angles", "calibration left out"):
         assert f"| {case} |" in text, case
     assert "## Bad input" in text and "| parameter JSON | 500 |" in text
+    assert "## Cost against the number of rows" in text and "| 2 × 10³ |" in text
     assert (tmp_path / "benchmarks_tis.png").stat().st_size > 10_000
 
 

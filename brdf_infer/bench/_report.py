@@ -8,6 +8,7 @@ from pathlib import Path
 from brdf_infer._atomic import atomic_write_bytes
 from brdf_infer.bench._batch import batch_rows
 from brdf_infer.bench._cache import cache_rows
+from brdf_infer.bench._cost_curve import cost_rows, cost_section
 from brdf_infer.bench._design_section import command_section, design_section
 from brdf_infer.bench._export import abg_rows, grid_rows
 from brdf_infer.bench._families import comparison_row, quadrature_rows
@@ -107,6 +108,8 @@ def write_report(out: Path, quick: bool, progress=print) -> Path:
     progress("benchmark: experimental design (estimate against refit, pay-off) ...")
     design_lines = design_section(quick, out.with_name(out.stem + "_design.png"), progress)
     design_lines += command_section(quick, progress)
+    progress("benchmark: cost against the number of rows ...")
+    cost_lines = cost_section(*cost_rows(quick, progress))
     progress("benchmark 8/12: exports ...")
     grids, abgs = grid_rows(quick), abg_rows(quick)
     progress("benchmark 9/12: model families ...")
@@ -147,6 +150,7 @@ def write_report(out: Path, quick: bool, progress=print) -> Path:
         *cache_section(caches),
         *instrument_section(kernel_nodes, kernel_ess, biases),
         *design_lines,
+        *cost_lines,
     ]
     atomic_write_bytes(out, "\n".join(sections).encode())
     return out
