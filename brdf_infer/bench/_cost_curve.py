@@ -142,16 +142,8 @@ def cost_row(label: str, scene: str, scratch: Path, cache: Path) -> CostRow:
     """One size: the gradient here, then ``posterior`` and ``report`` in fresh processes."""
     import json
 
-    from brdf_infer.bench._speed import gradient_microseconds
-    from brdf_infer.posterior import FlatPotential, build_model
-    from brdf_infer.scene import load_scene
-
-    loaded = load_scene(scene)
-    rows = loaded.load_measurements()
-    model = build_model(loaded, rows)
-    evaluations = int(max(20, min(4000, 4e6 // len(rows))))
-    gradient = gradient_microseconds(FlatPotential(model), model.data, evaluations)
-    out = scratch / f"run-{len(rows)}"
+    rows, gradient = scene_gradient(scene)
+    out = scratch / f"run-{rows}"
     argv = ["posterior", scene, "--chains", str(CHAINS), "--warmup", str(WARMUP)]
     argv += ["--draws", str(DRAWS), "--out", str(out), "--json"]
     wall, peak, output = measured_process(argv, cache)
@@ -159,7 +151,7 @@ def cost_row(label: str, scene: str, scratch: Path, cache: Path) -> CostRow:
     report_wall, report_peak, _ = measured_process(["report", str(out)], cache)
     return CostRow(
         label=label,
-        rows=len(rows),
+        rows=rows,
         gradient_us=gradient,
         posterior_s=wall,
         compile_s=float(seconds.get("compile", 0.0)),
@@ -171,8 +163,9 @@ def cost_row(label: str, scene: str, scratch: Path, cache: Path) -> CostRow:
     )
 
 
-def full_grid_gradient(scene: str) -> tuple[int, float]:
-    """(rows, value-and-gradient [µs]) of the full-grid table's whitened potential."""
+def scene_gradient(scene: str, evaluations: int | None = None) -> tuple[int, float]:
+    """(rows, value-and-gradient [µs]) of a scene's whitened potential, averaged over
+    ``evaluations`` in a compiled loop (default: 4 × 10⁶ row-evaluations, 20 to 4000)."""
     from brdf_infer.bench._speed import gradient_microseconds
     from brdf_infer.posterior import FlatPotential, build_model
     from brdf_infer.scene import load_scene
@@ -180,7 +173,9 @@ def full_grid_gradient(scene: str) -> tuple[int, float]:
     loaded = load_scene(scene)
     rows = loaded.load_measurements()
     model = build_model(loaded, rows)
-    return len(rows), gradient_microseconds(FlatPotential(model), model.data, 20)
+    if evaluations is None:
+        evaluations = int(max(20, min(4000, 4e6 // len(rows))))
+    return len(rows), gradient_microseconds(FlatPotential(model), model.data, evaluations)
 
 
 def cost_rows(quick: bool, progress=print) -> tuple[list[CostRow], tuple[int, float] | None]:
@@ -197,7 +192,7 @@ def cost_rows(quick: bool, progress=print) -> tuple[list[CostRow], tuple[int, fl
         full = None
         if not quick:
             progress(f"cost curve: {FULL_GRID[0]}, value and gradient ...")
-            full = full_grid_gradient(str(scene_file(scratch, table, *FULL_GRID[1:])))
+            full = scene_gradient(str(scene_file(scratch, table, *FULL_GRID[1:])), 20)
     return rows, full
 
 
