@@ -34,7 +34,7 @@ import jax.numpy as jnp
 import numpy as np
 from scipy.special import logsumexp
 
-from brdf_infer._arviz import az
+from brdf_infer import _arviz as az
 from brdf_infer.errors import BadInputError
 from brdf_infer.measurements import Measurements
 from brdf_infer.model import check_family_name, family

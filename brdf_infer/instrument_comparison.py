@@ -14,9 +14,9 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-import arviz as az
 import numpy as np
 
+from brdf_infer import _arviz as az
 from brdf_infer.errors import BadInputError
 from brdf_infer.instrument import INSTRUMENT_MODELS
 from brdf_infer.measurements import Measurements

@@ -47,7 +47,7 @@ from brdf_infer.scene import Scene, parse_errors
 from brdf_infer.settings import SensitivitySettings
 
 if TYPE_CHECKING:  # ArviZ is imported where it is used: the command line's parser stays light
-    from arviz import InferenceData
+    from brdf_infer._arviz import InferenceData
 
 SENSITIVITY_FILE = "sensitivity.json"
 SENSITIVITY_FIGURE = "sensitivity.png"
@@ -283,7 +283,7 @@ def _summarise(
 ) -> VariantResult:
     """TIS, π·BRDF0, PSIS-LOO (``refit(pointwise, rows)``: exact terms where Pareto k > 0.7)
     and the sampler's health of one variant's draws."""
-    from brdf_infer._arviz import az
+    from brdf_infer import _arviz as az
     from brdf_infer.compare import PARETO_K_LIMIT
     from brdf_infer.posterior import (
         FAMILY_TIS_DRAWS,

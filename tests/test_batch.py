@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from brdf_infer._arviz import az
+from brdf_infer import _arviz as az
 from brdf_infer._outlock import LOCK_FILE
 from tests.helpers import (
     SUITE_WARMUP,

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from brdf_infer._arviz import az
+from brdf_infer import _arviz as az
 from brdf_infer._processes import Processes, resolve_processes
 from brdf_infer.errors import BadInputError
 from tests.helpers import fewer_rows, lya_scene_file, run_cli, scaled_rows

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from brdf_infer._arviz import az
+from brdf_infer import _arviz as az
 from brdf_infer._atomic import atomic_write_bytes
 from brdf_infer.posterior._results import write_inference_data
 from tests.helpers import run_cli

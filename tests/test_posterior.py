@@ -7,12 +7,12 @@ import subprocess
 import sys
 import time
 
-import arviz as az
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from brdf_infer import _arviz as az
 from brdf_infer.errors import BadInputError
 from brdf_infer.params import PARAM_NAMES, UV_PAPER
 from brdf_infer.posterior import (

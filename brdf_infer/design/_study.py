@@ -98,7 +98,7 @@ def load_design_run(run: str | Path, scene: Scene | str | None = None) -> Design
         BadInputError: no readable posterior.nc, a run of another scene or other rows, a run
             of a family other than ``strumik2024``.
     """
-    from brdf_infer._arviz import az
+    from brdf_infer import _arviz as az
     from brdf_infer._outlock import require_complete
 
     require_complete(run)  # not a folder a writer is writing or left unfinished

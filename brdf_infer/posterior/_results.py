@@ -14,7 +14,7 @@ import numpy as np
 from numpyro.infer import Predictive
 
 import brdf_infer
-from brdf_infer._arviz import az
+from brdf_infer import _arviz as az
 from brdf_infer._atomic import atomic_write_bytes, atomic_write_json
 from brdf_infer._outlock import require_complete
 from brdf_infer.errors import BadInputError
@@ -41,7 +41,7 @@ def _versions() -> dict[str, str]:
         "jax": jax.__version__,
         "numpyro": numpyro.__version__,
         "emcee": emcee.__version__,
-        "arviz": az.__version__,
+        "arviz": az.VERSION,
         "optimistix": optimistix.__version__,
     }
 

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from brdf_infer._arviz import az
+from brdf_infer import _arviz as az
 from brdf_infer._outlock import writing
 from brdf_infer.error_model import ERROR_MODELS
 from brdf_infer.errors import BadInputError

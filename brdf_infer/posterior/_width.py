@@ -46,7 +46,7 @@ import numpy as np
 from scipy.special import logsumexp
 from scipy.stats import norm
 
-from brdf_infer._arviz import az
+from brdf_infer import _arviz as az
 from brdf_infer.error_model import ErrorSettings
 from brdf_infer.measurements import Measurements
 from brdf_infer.model import ModelFamily

@@ -7,7 +7,7 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from brdf_infer._arviz import az
+from brdf_infer import _arviz as az
 from brdf_infer._atomic import atomic_write_bytes
 from brdf_infer._outlock import require_complete, writing
 from brdf_infer.errors import BadInputError

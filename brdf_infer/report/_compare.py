@@ -13,7 +13,7 @@ import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
 
-from brdf_infer._arviz import az
+from brdf_infer import _arviz as az
 from brdf_infer._atomic import atomic_write_bytes, atomic_write_json
 from brdf_infer.compare import COMPARE_FILE, ComparisonResult
 from brdf_infer.posterior import THRESHOLDS

@@ -6,7 +6,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from brdf_infer._arviz import az
+from brdf_infer import _arviz as az
 from brdf_infer.posterior import POSTERIOR_FILE, SUMMARY_FILE
 from brdf_infer.report import _html
 from brdf_infer.run_records import PosteriorSummary

@@ -9,7 +9,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.colors import BoundaryNorm, ListedColormap
 
-from brdf_infer._arviz import az
+from brdf_infer import _arviz as az
 from brdf_infer.model import ModelFamily, brdf_inplane, family, run_family_name
 from brdf_infer.params import PARAM_NAMES, PARAMETER_SETS
 from brdf_infer.report._table_views import in_plane, panel_grid, value_label
@@ -87,9 +87,7 @@ def coordinate_note(idata: az.InferenceData) -> str:
 
 
 def _labeller(idata: az.InferenceData, short: bool = False):
-    from arviz.labels import MapLabeller
-
-    return MapLabeller(var_name_map=coordinate_labels(idata, short))
+    return az.MapLabeller(var_name_map=coordinate_labels(idata, short))
 
 
 def trace(idata: az.InferenceData):
