@@ -72,7 +72,9 @@ def closure(requirements: list[Requirement]) -> dict[str, str]:
         try:
             distribution = metadata.distribution(requirement.name)
         except metadata.PackageNotFoundError:
-            raise SystemExit(f"{requirement.name} is not installed: pip install -e '.[test]'")
+            raise SystemExit(
+                f"{requirement.name} is not installed: pip install -e '.[test]'"
+            ) from None
         if (name, frozenset(extras)) in done:
             continue
         done.add((name, frozenset(extras)))
