@@ -3,6 +3,11 @@
 A write that fails (a full disk, a read-only folder, a file-size limit) leaves the target as
 it was and no temporary file, and raises :class:`OSError` naming the target, so that the
 command line says which file could not be written (one line, exit 2).
+
+The temporary file is created with mode ``0o666``, which the process's umask narrows as it
+does for any new file, so the published file has the permissions a plain ``open(path, "w")``
+would give it (``tempfile.mkstemp`` would create it ``0o600``; reading the umask means setting
+it, process-wide and unsafe between threads, so it is never touched).
 """
 
 from __future__ import annotations
@@ -10,7 +15,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
-import tempfile
+import secrets
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -27,9 +32,7 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
     path = Path(path)
     with _failed_write(path):
         path.parent.mkdir(parents=True, exist_ok=True)
-        handle, temporary = tempfile.mkstemp(
-            dir=path.parent, prefix=f".{path.name}.", suffix=".tmp"
-        )
+        handle, temporary = _create_temporary(path)
         try:
             with os.fdopen(handle, "wb") as stream:
                 stream.write(data)
@@ -55,11 +58,21 @@ def _failed_write(path: Path) -> Iterator[None]:
         raise OSError(error.errno, f"cannot write: {what}", str(path)) from error
 
 
+def _create_temporary(path: Path) -> tuple[int, str]:
+    """A new file ``.NAME.XXXXXXXX.tmp`` beside ``path``, open for writing, created with mode
+    ``0o666`` less the umask (8 random hexadecimal characters, as brdf_infer._outlock's
+    clean-up of a dead writer's temporary files expects)."""
+    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0)
+    while True:
+        temporary = str(path.parent / f".{path.name}.{secrets.token_hex(4)}.tmp")
+        try:
+            return os.open(temporary, flags, 0o666), temporary
+        except FileExistsError:
+            continue
+
+
 def publish(temporary: str | Path, path: str | Path) -> None:
-    """Give ``temporary`` the permissions of a normally created file, then rename it."""
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(temporary, 0o666 & ~umask)
+    """Rename the written ``temporary`` (created by :func:`_create_temporary`) to ``path``."""
     os.replace(temporary, path)
     note_written(path)
 

@@ -2,7 +2,8 @@
 
 A command writing a results folder holds the file ``.brdf-infer.lock`` in it from before its
 first write until its last: the file names the writer (process id, host, command, start) and
-carries an advisory lock (``flock``) for as long as the writer lives.
+carries an advisory lock (:mod:`brdf_infer._oslock`: ``flock``, Windows' ``msvcrt.locking``,
+or the record itself where neither exists) for as long as the writer lives.
 
 - A second writer of the same folder is refused at once, while the first one runs
   (:class:`~brdf_infer.errors.BadInputError`, exit code 2 on the command line).
@@ -20,15 +21,13 @@ carries an advisory lock (``flock``) for as long as the writer lives.
   the folders it created for it (bad input creates no folder).
 
 Claims are per process and re-entrant: ``run`` holds its folder and calls ``posterior`` and
-``report`` on it. The lock guards processes on one machine (``flock``; a file system without
-it, some network mounts, is written without the lock).
+``report`` on it. The lock guards processes on one machine (a file system without locks, some
+network mounts, is written without the lock).
 """
 
 from __future__ import annotations
 
 import contextlib
-import errno
-import fcntl
 import json
 import os
 import re
@@ -39,15 +38,16 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from brdf_infer import _oslock
 from brdf_infer.errors import BadInputError
 
 LOCK_FILE = ".brdf-infer.lock"
 ADDING_LOCK_FILE = ".brdf-infer.adding.lock"
-# the temporary files of brdf_infer._atomic (tempfile.mkstemp: 8 random characters)
+# the temporary files of brdf_infer._atomic (8 random characters)
 _TEMPORARY = re.compile(r"^\..+\.[A-Za-z0-9_]{8}\.tmp$")
 _ATTEMPTS = 10  # a reader probing the lock holds it for microseconds: retry before refusing
 _RETRY_SECONDS = 0.02
-_NO_LOCKING = {errno.ENOLCK, errno.EOPNOTSUPP, errno.ENOSYS, errno.EINVAL}
+_CLOEXEC = getattr(os, "O_CLOEXEC", 0)  # Python's descriptors are not inherited anyway
 
 
 @dataclass(frozen=True)
@@ -143,21 +143,9 @@ def _read_owner(path: Path) -> Owner | None:
 def _write_owner(fd: int, owner: Owner) -> None:
     data = (json.dumps(owner.as_json()) + "\n").encode()
     os.ftruncate(fd, 0)
-    os.pwrite(fd, data, 0)
+    os.lseek(fd, 0, os.SEEK_SET)
+    os.write(fd, data)
     os.fsync(fd)
-
-
-def _lock(fd: int, exclusive: bool) -> bool:
-    """Take the advisory lock of ``fd`` without waiting: False when another process holds it."""
-    try:
-        fcntl.flock(fd, (fcntl.LOCK_EX if exclusive else fcntl.LOCK_SH) | fcntl.LOCK_NB)
-    except BlockingIOError:
-        return False
-    except OSError as error:
-        if error.errno in _NO_LOCKING:
-            return True  # a file system without flock: written without the lock
-        raise
-    return True
 
 
 def _same_file(fd: int, path: Path) -> bool:
@@ -171,12 +159,12 @@ def _same_file(fd: int, path: Path) -> bool:
 def _is_locked(path: Path) -> bool:
     """Another process holds the lock file ``path`` (its writer is alive)."""
     try:
-        fd = os.open(path, os.O_RDONLY | os.O_CLOEXEC)
+        fd = os.open(path, os.O_RDONLY | _CLOEXEC)
     except OSError:
         return False
     try:
-        if _lock(fd, exclusive=False):
-            fcntl.flock(fd, fcntl.LOCK_UN)
+        if _oslock.try_lock(fd, exclusive=False):
+            _oslock.unlock(fd)
             return False
         return True
     except OSError:
@@ -221,13 +209,13 @@ def _open_locked(path: Path) -> tuple[int, bool] | None:
     created the file); None when another process holds it."""
     for _ in range(_ATTEMPTS):
         try:
-            fd, new = os.open(path, os.O_RDWR | os.O_CREAT | os.O_EXCL | os.O_CLOEXEC, 0o644), True
+            fd, new = os.open(path, os.O_RDWR | os.O_CREAT | os.O_EXCL | _CLOEXEC, 0o644), True
         except FileExistsError:
             try:
-                fd, new = os.open(path, os.O_RDWR | os.O_CLOEXEC), False
+                fd, new = os.open(path, os.O_RDWR | _CLOEXEC), False
             except FileNotFoundError:
                 continue  # its writer finished and removed it just now: again
-        if not _lock(fd, exclusive=True):
+        if not _oslock.try_lock(fd, exclusive=True, created=new):
             os.close(fd)
             time.sleep(_RETRY_SECONDS)
             continue

@@ -81,3 +81,21 @@ def test_a_read_only_folder_is_refused_before_any_work(tmp_path, capsys):
     finally:
         (folder / "run").chmod(0o700)
         folder.chmod(0o700)
+
+
+def test_a_written_file_has_the_mode_of_a_plain_open_and_the_umask_is_never_set(
+    tmp_path, monkeypatch
+):
+    """The umask is process-wide: setting it (the only way to read it) races with every other
+    thread creating a file. An atomic write creates its temporary file with mode 0o666, which
+    the umask narrows as for any new file."""
+    plain = tmp_path / "plain.json"
+    plain.write_text("{}")
+
+    def refuse(mask):
+        raise AssertionError("os.umask called")
+
+    monkeypatch.setattr(os, "umask", refuse)
+    written = atomic_write_bytes(tmp_path / "written.json", b"{}")
+    assert (written.stat().st_mode & 0o777) == (plain.stat().st_mode & 0o777)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["plain.json", "written.json"]

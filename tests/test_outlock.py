@@ -127,3 +127,63 @@ def test_claims_are_re_entrant_within_a_process(tmp_path):
             pass
         assert (folder / LOCK_FILE).exists()
     assert not (folder / LOCK_FILE).exists() and folder.is_dir()
+
+
+# The same writer and a second process where neither fcntl nor msvcrt can be imported (a
+# platform without flock): brdf_infer imports, and the lock file's record stands for the lock.
+_NO_FLOCK = "import sys\nsys.modules['fcntl'] = sys.modules['msvcrt'] = None\n"
+_SECOND = textwrap.dedent(
+    """
+    import sys
+    from pathlib import Path
+    import brdf_infer
+    from brdf_infer import _oslock
+    from brdf_infer._outlock import LOCK_FILE, require_complete, writing
+    from brdf_infer.errors import BadInputError
+
+    assert _oslock.BACKEND == "record", _oslock.BACKEND
+    folder = Path(sys.argv[1])
+    try:
+        require_complete(folder)
+        with writing(folder, "run") as claim:
+            print("took", claim.previous.pid if claim.previous else None)
+        print("released", (folder / LOCK_FILE).exists())
+    except BadInputError as error:
+        print("refused", error)
+    """
+)
+
+
+def _second_writer(folder) -> str:
+    result = subprocess.run(
+        [sys.executable, "-c", _NO_FLOCK + _SECOND, str(folder)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert result.returncode == 0, result.stderr
+    return result.stdout
+
+
+def test_without_fcntl_the_package_imports_and_the_record_is_the_lock(tmp_path):
+    """Where ``fcntl`` is missing (Windows has msvcrt instead; this hides both), a live
+    writer's folder is refused to a second writer and to readers, a dead writer's folder is
+    taken over, and a finished writer leaves no lock file."""
+    folder = tmp_path / "out"
+    assert _second_writer(folder) == "took None\nreleased False\n"
+    holder = subprocess.Popen(
+        [sys.executable, "-c", _NO_FLOCK + _HOLDER, str(folder)], stdout=subprocess.PIPE, text=True
+    )
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        out = _second_writer(folder)
+        assert out.startswith("refused ") and "is being written by 'brdf-infer run'" in out
+        assert f"process {holder.pid} on " in out
+    finally:
+        holder.send_signal(signal.SIGKILL)
+        holder.wait()
+    out = _second_writer(folder)
+    assert out.startswith("refused ") and "incomplete: 'brdf-infer run'" in out  # the reader
+    with writing(folder, "run") as claim:  # this process (flock) takes it over too
+        assert claim.previous.pid == holder.pid
+    assert _second_writer(folder) == "took None\nreleased False\n"
