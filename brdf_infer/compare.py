@@ -35,6 +35,7 @@ import numpy as np
 from scipy.special import logsumexp
 
 from brdf_infer import _arviz as az
+from brdf_infer._precision import ensure_float64
 from brdf_infer.errors import BadInputError
 from brdf_infer.measurements import Measurements
 from brdf_infer.model import check_family_name, family
@@ -279,6 +280,7 @@ def compare_families(
     Raises:
         BadInputError: unknown family names, fewer than two, or settings out of range.
     """
+    ensure_float64()
     names = check_family_names(names)
     started = time.perf_counter()
     fits = {

@@ -38,6 +38,7 @@ from brdf_infer._fit_space import FitSpace, FreeTransform, physical_of
 from brdf_infer._fit_space import fit_space as fit_space
 from brdf_infer._fit_space import internal_bounds as internal_bounds
 from brdf_infer._fit_space import start_points as start_points
+from brdf_infer._precision import ensure_float64
 from brdf_infer._reweighting import REWEIGHT_TOLERANCE as REWEIGHT_TOLERANCE
 from brdf_infer._reweighting import Reweighting
 from brdf_infer._reweighting import paule_mandel as paule_mandel
@@ -224,6 +225,7 @@ def fit_lsq(
         ValueError: a family outside the registry, or ``init`` for another family than
             Eq. (7)'s.
     """
+    ensure_float64()
     if member is None:
         member = family(scene.model.family, scene.model.fold, scene.model.constants)
     elif member.name not in FAMILY_NAMES:  # the solver rebuilds it from the registry

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from brdf_infer._precision import ensure_float64
 from brdf_infer.errors import BadInputError
 from brdf_infer.measurements import Measurements
 from brdf_infer.model import log_brdf_inplane
@@ -133,6 +134,7 @@ def paper_fit(
     Raises:
         BadInputError: fewer selected points than the four linear coefficients.
     """
+    ensure_float64()
     settings = scene.paper_fit
     alpha = settings.alpha if alpha is None else alpha
     theta_s0_deg = settings.theta_s0_deg if theta_s0_deg is None else theta_s0_deg

@@ -7,6 +7,7 @@ from typing import Any
 
 import numpy as np
 
+from brdf_infer._precision import ensure_float64
 from brdf_infer.measurements import Measurements
 from brdf_infer.observations import build_observation_model
 from brdf_infer.params import Params, params_to_dict
@@ -32,6 +33,7 @@ def predict_rows(
     Raises:
         BadInputError: an instrument model the scene's geometry cannot support.
     """
+    ensure_float64()
     instrument = instrument or scene.instrument.model
     scene = check_instrument(scene, instrument)
     predicted = np.exp(

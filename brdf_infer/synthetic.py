@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from brdf_infer._precision import ensure_float64
 from brdf_infer.measurements import Measurements
 from brdf_infer.observations import build_observation_model, predicted_log_reflectance
 from brdf_infer.params import Params
@@ -62,6 +63,7 @@ def simulate_measurements(
     Returns:
         A table like ``template`` (same σ column) with simulated ``reflectance``.
     """
+    ensure_float64()
     import jax
     from numpyro import handlers
     from numpyro.infer import Predictive

@@ -33,6 +33,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from brdf_infer._precision import ensure_float64
 from brdf_infer._run_studies import (
     Job,
     compare_study,
@@ -317,6 +318,7 @@ def run(
             ``settings.force``) a failed plausibility check, or another process writing
             ``out``; nothing is written then.
     """
+    ensure_float64()
     from brdf_infer._outlock import writing
 
     with writing(out, "run"):  # one writer; an interrupted run leaves ``out`` incomplete

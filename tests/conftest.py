@@ -5,10 +5,12 @@ import os
 import pytest
 from hypothesis import HealthCheck, settings
 
-import brdf_infer  # noqa: F401  (float64 for every test)
+import brdf_infer
 from brdf_infer.posterior import run_posterior
 from brdf_infer.scene import load_scene
 from tests.helpers import REDUCED_NUTS
+
+brdf_infer.use_float64()  # importing changes no JAX setting: float64 for every test
 
 # Property tests: random exploration locally; CI (the CI variable set, as .ci/run does)
 # replays the same examples every time so a run cannot fail by chance; "explore" searches

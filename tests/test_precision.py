@@ -1,19 +1,84 @@
-"""float64 is required; float32 is refused with a clear message."""
+"""float64: importing the package changes no JAX setting; the command line and the library's
+entry points switch float64 (and the compilation cache) on, or refuse float32 in one line."""
+
+import os
+import subprocess
+import sys
+import textwrap
 
 import jax
 import pytest
 
 from brdf_infer._precision import Float32Error, require_float64
-from tests.helpers import run_cli
+from tests.helpers import REPO, run_cli
 
 
-def test_float32_is_refused(capsys):
+def _python(code: str, **environment: str) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-c", textwrap.dedent(code)],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        env={**os.environ, **environment},
+        timeout=300,
+    )
+
+
+def test_importing_the_package_changes_no_jax_setting(tmp_path):
+    result = _python(
+        """
+        import jax
+        import brdf_infer, brdf_infer.cli, brdf_infer.posterior, brdf_infer.workflow
+        import brdf_infer.report, brdf_infer.batch, brdf_infer.design, brdf_infer.lsq
+        print(jax.config.jax_enable_x64, jax.config.jax_compilation_cache_dir)
+        brdf_infer.use_float64()
+        brdf_infer.use_float64()  # again: nothing more
+        import jax.numpy as jnp
+        print(jnp.asarray(1.0).dtype, jax.config.jax_compilation_cache_dir)
+        """,
+        BRDF_INFER_CACHE=str(tmp_path / "cache"),
+    )
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.splitlines() == ["False None", f"float64 {tmp_path / 'cache'}"]
+
+
+def test_an_entry_point_switches_float64_on_or_refuses_float32_in_one_line():
+    """Before any JAX array exists, ``load_scene`` switches float64 and the cache on; after
+    a float32 array was made, it refuses, naming ``brdf_infer.use_float64()``."""
+    result = _python(
+        """
+        import jax
+        from brdf_infer.scene import load_scene
+        load_scene("lya")
+        print(jax.config.jax_enable_x64, jax.config.jax_compilation_cache_dir is not None)
+        """
+    )
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.split() == ["True", "True"]
+    result = _python(
+        """
+        import jax.numpy as jnp
+        from brdf_infer import Float32Error
+        from brdf_infer.scene import load_scene
+        kept = jnp.ones(3)  # float32
+        try:
+            load_scene("lya")
+        except Float32Error as error:
+            print(error)
+        """
+    )
+    assert result.returncode == 0, result.stderr
+    lines = result.stdout.splitlines()
+    assert len(lines) == 1 and "float32" in lines[0] and "brdf_infer.use_float64()" in lines[0]
+
+
+def test_the_command_line_switches_float64_on(capsys):
     jax.config.update("jax_enable_x64", False)
     try:
-        with pytest.raises(Float32Error, match="float64"):
+        with pytest.raises(Float32Error, match=r"brdf_infer\.use_float64\(\)"):
             require_float64()
         code, _, err = run_cli("tis", capsys=capsys)
-        assert code == 2 and "float32" in err
+        assert code == 0, err
+        require_float64()
     finally:
         jax.config.update("jax_enable_x64", True)
-    require_float64()

@@ -18,6 +18,7 @@ import numpy as np
 
 from brdf_infer._atomic import atomic_write_json
 from brdf_infer._outlock import note_written, require_complete, writing
+from brdf_infer._precision import ensure_float64
 from brdf_infer._processes import Processes
 from brdf_infer.batch._entries import (
     BATCH_FILE,
@@ -427,6 +428,7 @@ def run_batch(
         BatchInterrupted: ``cancel`` was set; the complete run folders stay, no partial one,
             and ``batch.json`` lists every scene (the unfinished ones as interrupted).
     """
+    ensure_float64()
     batch = Batch(
         sources,
         out,

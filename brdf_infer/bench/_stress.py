@@ -51,13 +51,14 @@ POTENTIAL_SCRIPT = textwrap.dedent(
     import faulthandler, signal, sys, threading
     faulthandler.register(signal.SIGUSR1, all_threads=True)
     import jax, jax.numpy as jnp
-    import brdf_infer  # float64
+    import brdf_infer
     from brdf_infer._cache import enable_compilation_cache
     from brdf_infer.posterior import build_posterior_model
     from brdf_infer.posterior._potential import FlatPotential
     from brdf_infer.scene import load_scene
 
     points, calls, threads = (int(a) for a in sys.argv[1:4])
+    brdf_infer.use_float64(cache=False)
     enable_compilation_cache()
     scene = load_scene("lya")
     model = build_posterior_model(scene, scene.load_measurements())

@@ -87,6 +87,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     from brdf_infer._precision import Float32Error, require_float64
 
     args = build_parser().parse_args(argv)
+    brdf_infer.use_float64(cache=not args.no_cache)  # before anything is compiled
     signal.signal(signal.SIGTERM, _interrupt)
     if args.no_cache:  # before anything is compiled
         from brdf_infer._cache import disable_compilation_cache
@@ -122,6 +123,4 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def entry_point() -> None:
     """Console-script entry point."""
-    import brdf_infer  # noqa: F401  (switches JAX to float64 before any work)
-
     sys.exit(main())

@@ -31,6 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from brdf_infer._design_target import DesignTarget, parse_target
+from brdf_infer._precision import ensure_float64
 from brdf_infer.design._candidates import (
     REACH_LIMITS,
     Candidates,
@@ -359,6 +360,7 @@ def design(
         BadInputError: ``same_session`` not a measured series, a new series without an
             aperture.
     """
+    ensure_float64()
     start = time.perf_counter()
     options = DesignOptions() if options is None else options
     target = parse_target(target) if isinstance(target, str) else target

@@ -16,6 +16,7 @@ import numpy as np
 
 from brdf_infer import _arviz as az
 from brdf_infer._outlock import writing
+from brdf_infer._precision import ensure_float64
 from brdf_infer.error_model import ERROR_MODELS
 from brdf_infer.errors import BadInputError
 from brdf_infer.measurements import Measurements
@@ -296,8 +297,10 @@ def _check_memory(model, measurements, sampler, nuts_draws, chains, walkers, ste
 def _checked_warmup(
     sampler, chains, draws, warmup, walkers, steps, seed, target_accept, resume
 ) -> int | None:
-    """Every setting of :func:`run_posterior` checked; the warmup (None: the sampler's
-    default)."""
+    """Every setting of :func:`run_posterior` checked, and float64 on (the first thing
+    run_posterior does; ``_precision.ensure_float64``); the warmup (None: the
+    sampler's default)."""
+    ensure_float64()
     settings = PosteriorSettings(
         sampler=sampler,
         chains=chains,

@@ -5,6 +5,7 @@ from __future__ import annotations
 import tomllib
 from pathlib import Path
 
+from brdf_infer._precision import ensure_float64
 from brdf_infer._resources import data_path
 from brdf_infer.errors import BadInputError
 from brdf_infer.scene._parse import parse_scene
@@ -41,6 +42,7 @@ def load_scene(name_or_path: str | Path = DEFAULT_SCENE, *, check_files: bool = 
         BadInputError: unreadable file, TOML syntax error, unknown key, wrong type, a missing
             or malformed measurement or reference file.
     """
+    ensure_float64()
     path = scene_file(name_or_path)
     try:
         with path.open("rb") as handle:
