@@ -139,7 +139,8 @@ def _print_result(result, scene, measurements, out: Path) -> None:
         print(f"model comparison: {best['name']} first (PSIS-LOO, see the report){caveat}")
     print_verdict(result.verdict.as_json())
     print(f"report: {result.report}")
-    print(f"done in {result.seconds:.1f} s")
+    # the whole job (fits, posterior, studies, report), not the posterior's line above
+    print(f"done in {result.seconds:.1f} s (the whole job)")
 
 
 def requested_studies(args: argparse.Namespace, scene):
