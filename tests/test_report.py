@@ -135,6 +135,18 @@ def test_report_says_its_tis_is_of_the_physical_brdf(good_report):
     assert text.count(statement) >= 5 and "Eq. (10) folding: included" not in text
 
 
+def test_only_a_scene_compared_with_the_article_names_its_table_3():
+    """The line under the result says how to include Eq. (10); the article's Table 3 is named
+    only for a scene drawn beside the article's parameters (the bundled ones), not for yours."""
+    from brdf_infer.report._results import fold_note
+
+    bands = {"fold": False}
+    assert "article&#x27;s Table 3 includes it" in fold_note(bands, article=True)
+    mine = fold_note(bands, article=False)
+    assert "Table 3" not in mine and "article" not in mine
+    assert "to include it, set [model] fold = true" in mine
+
+
 def test_a_scene_without_a_reference_draws_no_reference(lya, tmp_path):
     """Captions and legends describe what is drawn: no reference curve, no reference words."""
     import dataclasses
