@@ -322,3 +322,24 @@ def test_report_draws_the_pareto_k_its_run_recorded_and_computes_none(nuts_run, 
     text = (run / "report.html").read_text()
     assert f"{loo['elpd_loo']:.2f} ± {loo['se']:.2f}" in text
     assert not (run / "figures" / "pareto_k.png").exists()
+
+
+@pytest.mark.parametrize("models", [1, 2])
+def test_the_loo_pit_figure_keeps_its_titles_inside(models):
+    """The title over one panel (the run alone) wraps instead of running off the figure."""
+    import numpy as np
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    from brdf_infer.report._noise import loo_pit_comparison
+
+    rng = np.random.default_rng(0)
+    pits = {name: (rng.uniform(size=42), 0.5) for name in ["generative", "spread"][:models]}
+    figure = loo_pit_comparison(pits)
+    canvas = FigureCanvasAgg(figure)
+    canvas.draw()
+    renderer = canvas.get_renderer()
+    titles = [*figure.texts, *(axis.title for axis in figure.axes)]
+    assert any("calibration" in text.get_text() for text in titles)
+    for text in titles:
+        box = text.get_window_extent(renderer)
+        assert box.x0 >= 0 and box.x1 <= figure.bbox.width, text.get_text()
