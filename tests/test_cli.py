@@ -2,6 +2,7 @@
 
 import html
 import json
+import re
 import subprocess
 import sys
 
@@ -91,6 +92,38 @@ def test_version_names_the_package_version(capsys):
     code, out, _ = run_cli("--version", capsys=capsys)
     assert code == 0
     assert out.strip() == f"brdf-infer {brdf_infer.__version__}"
+
+
+def help_of(capsys, monkeypatch, command: str) -> str:
+    """``brdf-infer COMMAND --help``, its lines unwrapped (a wide terminal)."""
+    monkeypatch.setenv("COLUMNS", "10000")
+    code, out, _ = run_cli(command, "--help", capsys=capsys)
+    assert code == 0
+    return out
+
+
+@pytest.mark.parametrize("command", ["run", "posterior", "fit", "sbc", "batch"])
+def test_help_lists_the_names_each_option_allows_from_its_registry(capsys, monkeypatch, command):
+    from brdf_infer.error_model import ERROR_MODELS
+    from brdf_infer.instrument import INSTRUMENT_MODELS
+    from brdf_infer.model import FAMILY_NAMES
+
+    # one block per option: its invocation and its help (on the next line for long ones)
+    blocks = re.split(r"\n(?=  -)", help_of(capsys, monkeypatch, command))
+    lines = {block.split()[0]: " ".join(block.split()) for block in blocks[1:]}
+    expected = {"--model": FAMILY_NAMES}
+    if command != "batch":
+        expected["--instrument"] = INSTRUMENT_MODELS
+    if command == "run":
+        expected |= {
+            "--error-models": ERROR_MODELS,
+            "--instruments": INSTRUMENT_MODELS,
+            "--compare": FAMILY_NAMES,
+        }
+    if command == "posterior":  # argparse's choices, spelled out in the program
+        assert lines["--error-model"].split()[1] == "{" + ",".join(ERROR_MODELS) + "}"
+    for option, names in expected.items():
+        assert ", ".join(names) in lines[option], lines[option]
 
 
 def test_human_tables_show_error_beside_time(capsys):

@@ -485,3 +485,28 @@ def test_a_larger_budget_extends_a_smaller_ones_picks(nuts_run):
         for budget in (2, 4)
     }
     assert picks[4][:2] == picks[2]
+
+
+def test_today_is_in_the_tables_unit_on_the_command_line_and_in_the_report():
+    """The header line of ``design`` and the report's "Today" say the target in the unit its
+    table does: TIS and π·BRDF0 in per cent, a parameter as design.json holds it."""
+    from brdf_infer.design import current_words, design_rows
+
+    current = {"median": 0.0663, "lo95": 0.0594, "hi95": 0.0744, "sd": 0.0038}
+    chosen = [
+        {
+            "step": 1,
+            "theta_i_deg": 70,
+            "theta_s_deg": -40,
+            "series": "II",
+            "expected_sd": 0.0031,
+            "sd_ratio": 0.8,
+            "eig_nats": 0.3,
+        }
+    ]
+    payload = {"target": "tis_70deg", "current": current, "chosen": chosen}
+    assert current_words(payload) == "6.63 % (5.94–7.44 %, 95 %), sd 0.38 %"
+    assert design_rows(payload)[0][5] == "0.31 %"
+    alpha = {"target": "alpha", "current": {"median": 3.2, "lo95": 2.5, "hi95": 3.9, "sd": 0.36}}
+    assert current_words(alpha) == "3.2 (2.5–3.9, 95 %), sd 0.36"
+    assert current_words({"target": "alpha", "current": {"median": None}}) is None

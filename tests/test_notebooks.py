@@ -31,3 +31,21 @@ def test_notebook_runs_and_every_plotting_cell_shows_a_figure(path):
         assert images, f"no figure shown by the cell:\n{cell.source[:200]}"
         errors = [output for output in cell.outputs if output.output_type == "error"]
         assert not errors, errors
+    # nothing on stderr: no warning (tqdm's "IProgress not found" under NumPyro's import was)
+    stderr = [
+        output["text"]
+        for cell in notebook.cells
+        for output in cell.get("outputs", [])
+        if output.get("name") == "stderr"
+    ]
+    assert not stderr, stderr
+    if path.name == "lyman_alpha_analysis.ipynb":
+        # the run's verdict, as test_cli's main job: the sampler's diagnostics pass; PSIS-LOO
+        # may call row 41 (Pareto k ≈ 0.7) unreliable, which the verdict then says
+        text = "".join(
+            output.get("text", "") for cell in notebook.cells for output in cell.get("outputs", [])
+        )
+        verdict = next(line for line in text.splitlines() if line.startswith("verdict: "))
+        assert verdict.startswith(
+            ("verdict: every diagnostic passes", "verdict: 1 measurement(s) with Pareto k > 0.7")
+        ), verdict

@@ -135,6 +135,18 @@ def test_report_says_its_tis_is_of_the_physical_brdf(good_report):
     assert text.count(statement) >= 5 and "Eq. (10) folding: included" not in text
 
 
+def test_only_a_scene_compared_with_the_article_names_its_table_3():
+    """The line under the result says how to include Eq. (10); the article's Table 3 is named
+    only for a scene drawn beside the article's parameters (the bundled ones), not for yours."""
+    from brdf_infer.report._results import fold_note
+
+    bands = {"fold": False}
+    assert "article&#x27;s Table 3 includes it" in fold_note(bands, article=True)
+    mine = fold_note(bands, article=False)
+    assert "Table 3" not in mine and "article" not in mine
+    assert "to include it, set [model] fold = true" in mine
+
+
 def test_a_scene_without_a_reference_draws_no_reference(lya, tmp_path):
     """Captions and legends describe what is drawn: no reference curve, no reference words."""
     import dataclasses
@@ -310,3 +322,24 @@ def test_report_draws_the_pareto_k_its_run_recorded_and_computes_none(nuts_run, 
     text = (run / "report.html").read_text()
     assert f"{loo['elpd_loo']:.2f} ± {loo['se']:.2f}" in text
     assert not (run / "figures" / "pareto_k.png").exists()
+
+
+@pytest.mark.parametrize("models", [1, 2])
+def test_the_loo_pit_figure_keeps_its_titles_inside(models):
+    """The title over one panel (the run alone) wraps instead of running off the figure."""
+    import numpy as np
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    from brdf_infer.report._noise import loo_pit_comparison
+
+    rng = np.random.default_rng(0)
+    pits = {name: (rng.uniform(size=42), 0.5) for name in ["generative", "spread"][:models]}
+    figure = loo_pit_comparison(pits)
+    canvas = FigureCanvasAgg(figure)
+    canvas.draw()
+    renderer = canvas.get_renderer()
+    titles = [*figure.texts, *(axis.title for axis in figure.axes)]
+    assert any("calibration" in text.get_text() for text in titles)
+    for text in titles:
+        box = text.get_window_extent(renderer)
+        assert box.x0 >= 0 and box.x1 <= figure.bbox.width, text.get_text()

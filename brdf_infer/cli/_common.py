@@ -188,5 +188,6 @@ def print_posterior_summary(summary: PosteriorSummary, out: Path) -> None:
             print(f"  share of its 95 % width carried by each assumption: {', '.join(shares)}")
     seconds = summary["seconds"]
     print(
-        f"sampling {seconds['sampling']:.1f} s, total {seconds['total']:.1f} s; results in {out}/"
+        f"posterior: {seconds['total']:.1f} s from building the model to its files, "
+        f"{seconds['sampling']:.1f} s of it sampling; results in {out}/"
     )

@@ -4,11 +4,36 @@ their checks before any work, and the scene they read."""
 from __future__ import annotations
 
 import argparse
+import importlib
 
 import numpy as np
 
 from brdf_infer.cli._common import progress
 from brdf_infer.errors import BadInputError
+
+# where each registry of names lives (module, attribute): read only when a help text is printed
+ERROR_MODEL_REGISTRY = ("brdf_infer.error_model", "ERROR_MODELS")
+INSTRUMENT_REGISTRY = ("brdf_infer.instrument", "INSTRUMENT_MODELS")
+FAMILY_REGISTRY = ("brdf_infer.model", "FAMILY_NAMES")
+
+
+class KnownNames:
+    """The names of a registry, looked up when ``--help`` is printed: the registries live in
+    modules that import JAX and NumPyro, which building the parser does not."""
+
+    def __init__(self, registry: tuple[str, str]) -> None:
+        self.registry = registry
+
+    def __str__(self) -> str:
+        module, attribute = self.registry
+        return ", ".join(getattr(importlib.import_module(module), attribute))
+
+
+def with_known_names(action: argparse.Action, registry: tuple[str, str]) -> argparse.Action:
+    """``action`` whose help text may say ``%(known)s``: the registry's names, comma-separated
+    (argparse fills a help text's ``%(NAME)s`` from the action's attributes)."""
+    action.known = KnownNames(registry)
+    return action
 
 
 def add_force_argument(parser: argparse.ArgumentParser) -> None:
@@ -22,19 +47,21 @@ def add_force_argument(parser: argparse.ArgumentParser) -> None:
 
 
 def add_model_argument(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
+    action = parser.add_argument(
         "--model",
-        help="model family: strumik2024, abg, harvey-shack, lambertian, lambertian+abg "
-        "(default: the scene's [model] family)",
+        help="model family: %(known)s (default: the scene's [model] family)",
     )
+    with_known_names(action, FAMILY_REGISTRY)
 
 
 def add_instrument_argument(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
+    action = parser.add_argument(
         "--instrument",
-        help="what a raw reflectance is: point (Eq. 6), aperture (dPs/Pi through the detector "
-        "aperture), image (Eq. 2 over the signal square) (default: the scene's [instrument])",
+        help="what a raw reflectance is, one of %(known)s: point is Eq. 6, aperture dPs/Pi "
+        "through the detector aperture, image Eq. 2 over the signal square (default: the "
+        "scene's [instrument])",
     )
+    with_known_names(action, INSTRUMENT_REGISTRY)
 
 
 def add_fold_arguments(parser: argparse.ArgumentParser, default: str) -> None:

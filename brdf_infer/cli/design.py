@@ -89,6 +89,7 @@ def main(args: argparse.Namespace) -> int:
         DESIGN_FIGURE,
         DESIGN_FILE,
         DESIGN_HEADERS,
+        current_words,
         design,
         design_rows,
         design_series,
@@ -132,12 +133,9 @@ def main(args: argparse.Namespace) -> int:
     if args.json:
         emit_json(payload)
         return 0
-    current = payload["current"]
-    if current["median"] is not None:
-        print(
-            f"{target.label} today: {current['median']:.4g} "
-            f"({current['lo95']:.4g}–{current['hi95']:.4g}), sd {current['sd']:.3g}"
-        )
+    current = current_words(payload)
+    if current is not None:  # in the table's unit: TIS and π·BRDF0 in per cent
+        print(f"{target.label} today: {current}")
     print(f"chosen together (budget {options.budget}):")
     print(table(DESIGN_HEADERS, design_rows(payload)))
     print(reach_line(payload))

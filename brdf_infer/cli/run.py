@@ -17,10 +17,14 @@ from brdf_infer.cli._common import (
     scene_command_parser,
 )
 from brdf_infer.cli._options import (
+    ERROR_MODEL_REGISTRY,
+    FAMILY_REGISTRY,
+    INSTRUMENT_REGISTRY,
     add_force_argument,
     add_instrument_argument,
     add_model_argument,
     scene_and_measurements,
+    with_known_names,
 )
 from brdf_infer.errors import BadInputError
 from brdf_infer.settings import RunSettings, check_family_name
@@ -52,16 +56,20 @@ def add_parser(commands) -> argparse.ArgumentParser:
         "traces, model comparison, sensitivity to the error-model assumptions, where to "
         "measure next)",
     )
-    studies.add_argument(
-        "--error-models", nargs="+", metavar="NAME", help="posteriors under these error models"
-    )
-    studies.add_argument(
-        "--instruments", nargs="+", metavar="NAME", help="posteriors under these instrument models"
-    )
+    for option, metavar, registry, what in (
+        ("--error-models", "NAME", ERROR_MODEL_REGISTRY, "posteriors under these error models"),
+        ("--instruments", "NAME", INSTRUMENT_REGISTRY, "posteriors under these instrument models"),
+    ):
+        action = studies.add_argument(option, nargs="+", metavar=metavar, help=f"{what}: %(known)s")
+        with_known_names(action, registry)
     studies.add_argument("--raytrace", action="store_true", help="ray-trace the posterior")
-    studies.add_argument(
-        "--compare", nargs="+", metavar="FAMILY", help="model families compared by PSIS-LOO"
+    action = studies.add_argument(
+        "--compare",
+        nargs="+",
+        metavar="FAMILY",
+        help="model families compared by PSIS-LOO, two or more of %(known)s",
     )
+    with_known_names(action, FAMILY_REGISTRY)
     studies.add_argument(
         "--sensitivity",
         action="store_true",
@@ -131,7 +139,8 @@ def _print_result(result, scene, measurements, out: Path) -> None:
         print(f"model comparison: {best['name']} first (PSIS-LOO, see the report){caveat}")
     print_verdict(result.verdict.as_json())
     print(f"report: {result.report}")
-    print(f"done in {result.seconds:.1f} s")
+    # the whole job (fits, posterior, studies, report), not the posterior's line above
+    print(f"done in {result.seconds:.1f} s (the whole job)")
 
 
 def requested_studies(args: argparse.Namespace, scene):

@@ -26,7 +26,13 @@ from brdf_infer.design._study import (
     target_values,
     write_design,
 )
-from brdf_infer.design._table import DESIGN_HEADERS, design_rows, reach_line, target_scale
+from brdf_infer.design._table import (
+    DESIGN_HEADERS,
+    current_words,
+    design_rows,
+    reach_line,
+    target_scale,
+)
 
 __all__ = [
     "DESIGN_FIGURE",
@@ -40,6 +46,7 @@ __all__ = [
     "DesignTarget",
     "candidate_measurements",
     "candidate_outcomes",
+    "current_words",
     "design",
     "design_rows",
     "design_series",

@@ -21,6 +21,20 @@ def target_scale(payload: dict) -> tuple[float, str]:
     return (100.0, " %") if target.startswith("tis") or target == "pi_brdf0" else (1.0, "")
 
 
+def current_words(payload: dict) -> str | None:
+    """The target today in its unit (:func:`target_scale`): median, 95 % interval and sd, as
+    the command line and the report print it (None: a design.json without the current
+    posterior's numbers)."""
+    current = payload["current"]
+    if current.get("median") is None:
+        return None
+    k, unit = target_scale(payload)
+    return (
+        f"{k * current['median']:.4g}{unit} ({k * current['lo95']:.4g}–"
+        f"{k * current['hi95']:.4g}{unit}, 95 %), sd {k * current['sd']:.3g}{unit}"
+    )
+
+
 def design_rows(payload: dict) -> list[list[str]]:
     """One row per chosen setting, in the order chosen (the expected sd in the target's
     unit, :func:`target_scale`)."""

@@ -1,6 +1,17 @@
 """Posterior over the six parameters of Eq. (7), or of another BRDF family's: NumPyro NUTS and
 emcee from one model, with ArviZ diagnostics and credible bands for the BRDF and the TIS."""
 
+import warnings
+
+from tqdm import TqdmWarning
+
+# NumPyro imports tqdm.auto, which in a Jupyter kernel without ipywidgets warns "IProgress not
+# found"; NumPyro's progress bars are never shown here (ours are tqdm's console bars, on
+# stderr), so the warning says nothing about this package: imported once without it
+with warnings.catch_warnings():
+    warnings.filterwarnings("ignore", "IProgress not found", TqdmWarning)
+    import numpyro.util  # noqa: F401
+
 from brdf_infer.posterior._bands import (
     FAMILY_TIS_DRAWS,
     QUANTILES,

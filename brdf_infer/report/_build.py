@@ -272,7 +272,7 @@ def _answer(run: Path, verdict, summary, bands, scene, rows, member, figures) ->
         )
         + "</p>",
         result_box(summary, bands, tis_angles(scene, rows), member),
-        fold_note(bands) if "tis" in bands else "",
+        fold_note(bands, scene.outputs.reference_params is not None) if "tis" in bands else "",
         *_shown(figures, "brdf_bands"),
         _studies_line(run),
     ]

@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from brdf_infer.design import DESIGN_HEADERS, design_rows, reach_line, target_scale
+from brdf_infer.design import DESIGN_HEADERS, current_words, design_rows, reach_line
 from brdf_infer.report import _html
 
 
@@ -18,14 +18,8 @@ def design_section(run: Path) -> list[str]:
     if not path.is_file():
         return []
     payload = json.loads(path.read_text())
-    current = payload["current"]
-    today = ""
-    if current.get("median") is not None:
-        k, unit = target_scale(payload)
-        today = (
-            f" Today: {k * current['median']:.4g}{unit} ({k * current['lo95']:.4g}–"
-            f"{k * current['hi95']:.4g}{unit}, 95 %), sd {k * current['sd']:.3g}{unit}."
-        )
+    current = current_words(payload)
+    today = "" if current is None else f" Today: {current}."
     session = payload.get("same_session")
     session = (
         f"each row continuing series {session}'s session (its reference measurement)"

@@ -30,7 +30,9 @@ def loo_pit_comparison(pits: dict[str, tuple[np.ndarray, float]]) -> Figure:
         axis.set_xlabel("LOO-PIT value [-]")
         axis.set_ylabel("ECDF − uniform CDF [-]")
         axis.legend(fontsize=7, loc="lower right")
-    figure.suptitle("Leave-one-out predictive calibration: inside the band when calibrated")
+    # one panel (5.2 in) is narrower than the title on one line: two lines then
+    joint = ": " if len(pits) > 1 else ":\n"
+    figure.suptitle(f"Leave-one-out predictive calibration{joint}inside the band when calibrated")
     return figure
 
 

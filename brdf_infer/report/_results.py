@@ -118,14 +118,18 @@ def tis_fold(bands: Bands) -> bool:
     return bands.get("fold", True)
 
 
-def fold_note(bands: Bands) -> str:
-    """One line under the result: whether its TIS includes Eq. (10), and how to change it."""
+def fold_note(bands: Bands, article: bool = False) -> str:
+    """One line under the result: whether its TIS includes Eq. (10), and how to change it;
+    ``article``: the scene is compared with the article's parameters (``[outputs]
+    reference_params``, the bundled scenes), whose Table 3 the line then names."""
     fold = tis_fold(bands)
+    include = "set [model] fold = true in the scene, or pass --fold to tis and export"
     change = (
         "leave out [model] fold (or set it false) in the scene for the physical BRDF"
         if fold
-        else "the article's Table 3 includes it: set [model] fold = true in the scene, or "
-        "pass --fold to tis and export"
+        else f"the article's Table 3 includes it: {include}"
+        if article
+        else f"to include it, {include}"
     )
     return f"<p class='fold'>{_html.escape(fold_statement(fold))}; {_html.escape(change)}.</p>"
 
