@@ -37,6 +37,11 @@ from brdf_infer.posterior._padding import pad_datasets
 from brdf_infer.posterior._potential import FlatPotential
 
 INIT_CANDIDATES = 16
+# XLA's CPU backend (jaxlib 0.10) hands large fused loops to YNNPACK; when two threads run one
+# such program at once its pooled executables keep memory: 18-40 MB/s while two chains of a
+# 19 637-row table sampled side by side, flat with this fusion off (tools/nuts_memory_growth.py;
+# the gradient at 42 / 2e3 / 2e4 rows is the same within the machine's noise either way)
+CPU_COMPILER_OPTIONS = {"xla_cpu_experimental_ynn_fusion_type": ""}
 CHUNK = 50  # iterations per compiled call: one program whatever the number of draws
 _STATISTICS = ("diverging", "potential_energy", "energy", "accept_prob", "num_steps")
 
@@ -141,7 +146,9 @@ class NutsProgram:
         key = (name, *(jax.tree_util.tree_structure(a) for a in arguments), _shapes(arguments))
         with self._lock:
             if key not in self._compiled:
-                self._compiled[key] = jax.jit(function).lower(*arguments).compile()
+                self._compiled[key] = (
+                    jax.jit(function).lower(*arguments).compile(_compiler_options())
+                )
             return self._compiled[key]
 
     def _chain(self, key, data: ModelData, total: int, on_chunk=None, cancel=None) -> list:
@@ -388,6 +395,11 @@ def _side_by_side(function, items: list, workers: int, cancel=None) -> list:
         except BaseException:
             stop.set()
             raise
+
+
+def _compiler_options() -> dict | None:
+    """:data:`CPU_COMPILER_OPTIONS` on a CPU, else none."""
+    return CPU_COMPILER_OPTIONS if jax.default_backend() == "cpu" else None
 
 
 def _shapes(arguments) -> tuple:

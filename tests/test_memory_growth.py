@@ -1,0 +1,50 @@
+"""Resident memory stays flat while two NUTS chains of a large table sample in threads.
+
+XLA's CPU backend (jaxlib 0.10) grows without bound when two threads run one program whose
+large loops it hands to YNNPACK; :class:`brdf_infer.posterior._nuts.NutsProgram` compiles with
+that fusion off. ``tools/nuts_memory_growth.py`` prints the resident memory every 10 s; the
+planted fault (``--ynn``, XLA's default) must grow. Slow: about 5 minutes on 2 cores.
+"""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+TOOL = Path(__file__).resolve().parents[1] / "tools" / "nuts_memory_growth.py"
+SECONDS = 120
+SETTLED_ITERATIONS = 200  # both chains two chunks in: every program compiled and run
+FLAT_MB = 40.0  # flat; the fault grows 18-40 MB/s on a quiet machine
+
+
+def growth_mb(*options: str) -> float:
+    """Resident memory gained [MB] from the first reading with :data:`SETTLED_ITERATIONS`
+    iterations done (both chains together) to the last, which must be 200 iterations later."""
+    result = subprocess.run(
+        [sys.executable, str(TOOL), "--seconds", str(SECONDS), *options],
+        capture_output=True,
+        text=True,
+        timeout=SECONDS + 240,
+        check=True,
+    )
+    readings = [
+        (int(its), float(mb))
+        for mb, its in re.findall(r"t =\s*\d+ s:\s*(\d+) MB, (\d+) its", result.stdout)
+    ]
+    settled = [(its, mb) for its, mb in readings if its >= SETTLED_ITERATIONS]
+    assert settled and settled[-1][0] - settled[0][0] >= 200, result.stdout
+    return settled[-1][1] - settled[0][1]
+
+
+@pytest.mark.slow
+def test_two_chain_threads_hold_their_memory():
+    assert growth_mb() < FLAT_MB
+
+
+@pytest.mark.slow
+def test_planted_fault_grows():
+    assert growth_mb("--ynn") > 4 * FLAT_MB
