@@ -12,7 +12,8 @@ Private names. A name is private when it starts with one underscore (dunder name
 ``__version__`` are not private): a module (``posterior._nuts``) or an attribute
 (``lsq._residuals``). Where a private name sits is a directory: a private module ``d/_m.py`` (or
 a private package ``d/_p/``) sits in ``d``; a private attribute defined in ``d/m.py`` or
-``d/__init__.py`` sits in ``d``. The rule (DESIGN.md: "no private names of other packages"):
+``d/__init__.py`` sits in ``d``. The rule (no private names of other packages; this docstring
+is where it is written down):
 
 * a private attribute may be imported only by a module in the same directory;
 * a private module may be imported by a module of its own package, which for Python includes

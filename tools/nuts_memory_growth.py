@@ -56,7 +56,7 @@ def main() -> None:
         table = write_table(Path(folder))
         scene = load_scene(scene_file(Path(folder), table, args.radial, 1))
         model = build_model(scene, scene.load_measurements())
-        program = NutsProgram(model, warmup=100)
+        program = NutsProgram(model, warmup=100, warmup_tree_depth=4)  # chunks of seconds
         keys = jax.random.split(jax.random.PRNGKey(0), 2)
         iterations = [0]
         started = time.perf_counter()

@@ -81,6 +81,33 @@ def add_json_argument(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="one JSON object on stdout")
 
 
+def add_nuts_arguments(
+    parser: argparse.ArgumentParser,
+    defaults: type,
+    *,
+    per: str = "chain",
+    helps: dict[str, str] | None = None,
+) -> None:
+    """The NUTS options of a command, one per field of its settings record ``defaults`` that
+    it has (``chains``, ``draws``, ``warmup``, ``seed``, ``target_accept``), with the record's
+    defaults; ``per``: what one warmup and one set of draws belong to (chain, replicate);
+    ``helps``: a field's own help text where the command says more."""
+    fields = {field.name for field in dataclasses.fields(defaults)}
+    options = {
+        "chains": (int, "NUTS chains"),
+        "draws": (int, f"NUTS draws per {per}"),
+        "warmup": (int, f"NUTS warmup per {per}"),
+        "seed": (int, "random seed"),
+        "target_accept": (float, "NUTS target acceptance probability"),
+    }
+    for name, (kind, help_text) in options.items():
+        if name in fields:
+            help_text = (helps or {}).get(name, help_text)
+            parser.add_argument(
+                flag(name), type=kind, default=getattr(defaults, name), help=help_text
+            )
+
+
 def flag(field: str) -> str:
     """The option of a settings record's field: ``target_accept`` → ``--target-accept``."""
     return "--" + field.replace("_", "-")

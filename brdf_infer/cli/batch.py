@@ -14,6 +14,7 @@ from brdf_infer._outdir import check_output_dir
 from brdf_infer._processes import PEER_TIMEOUT, resolve_processes
 from brdf_infer.cli._common import (
     add_json_argument,
+    add_nuts_arguments,
     claimed_output_dir,
     command_parser,
     emit_json,
@@ -38,17 +39,10 @@ def add_parser(commands) -> argparse.ArgumentParser:
     parser.add_argument(
         "--sampler", choices=["nuts"], default="nuts", help="sampler (NUTS: one compiled program)"
     )
-    parser.add_argument("--chains", type=int, default=defaults.chains, help="NUTS chains per scene")
-    parser.add_argument("--draws", type=int, default=defaults.draws, help="NUTS draws per chain")
-    parser.add_argument("--warmup", type=int, default=defaults.warmup, help="NUTS warmup per chain")
-    parser.add_argument(
-        "--seed", type=int, default=defaults.seed, help="random seed (as posterior --seed)"
-    )
-    parser.add_argument(
-        "--target-accept",
-        type=float,
-        default=defaults.target_accept,
-        help="NUTS target acceptance",
+    add_nuts_arguments(
+        parser,
+        defaults,
+        helps={"chains": "NUTS chains per scene", "seed": "random seed (as posterior --seed)"},
     )
     parser.add_argument(
         "--mode",

@@ -7,6 +7,7 @@ import argparse
 import sys
 
 from brdf_infer.cli._common import (
+    add_nuts_arguments,
     claimed_output_dir,
     emit_json,
     headless,
@@ -37,17 +38,14 @@ def add_parser(commands) -> argparse.ArgumentParser:
     parser.add_argument(
         "--models", nargs="+", default=list(DEFAULT_MODELS), help="model families to compare"
     )
-    parser.add_argument(
-        "--chains", type=int, default=defaults.chains, help="NUTS chains per family"
-    )
-    parser.add_argument("--warmup", type=int, default=defaults.warmup, help="NUTS warmup per chain")
-    parser.add_argument("--draws", type=int, default=defaults.draws, help="NUTS draws per chain")
-    parser.add_argument("--seed", type=int, default=defaults.seed, help="random seed")
-    parser.add_argument(
-        "--target-accept",
-        type=float,
-        default=defaults.target_accept,
-        help="NUTS target acceptance (0.9: one setting for families that diverge more easily)",
+    add_nuts_arguments(
+        parser,
+        defaults,
+        helps={
+            "chains": "NUTS chains per family",
+            "target_accept": "NUTS target acceptance (0.9: one setting for families that "
+            "diverge more easily)",
+        },
     )
     parser.add_argument(
         "--no-refit", action="store_true", help="no exact refits where Pareto k > 0.7"

@@ -92,7 +92,7 @@ def _source(args: argparse.Namespace, scene_name: str):
         member = folded_family(member, args.fold)
         with contextlib.suppress(OSError, ValueError, KeyError):
             scene_name = json.loads((run / "summary.json").read_text())["scene"]
-        if args.format == "abg" and not member.paper_parameters and member.name != "abg":
+        if args.format == "abg" and not (member.paper_parameters or member.abg_parameters):
             raise BadInputError(
                 f"ABg rows are fitted to Eq. (7) or read from an abg run, not a run of "
                 f"{member.name} (export it with --format zemax-bsdf)",

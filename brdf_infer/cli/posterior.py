@@ -7,6 +7,7 @@ import argparse
 from pathlib import Path
 
 from brdf_infer.cli._common import (
+    add_nuts_arguments,
     claimed_output_dir,
     emit_json,
     print_posterior_summary,
@@ -37,13 +38,15 @@ def add_parser(commands) -> argparse.ArgumentParser:
     parser.add_argument(
         "--sampler", choices=list(SAMPLERS), default=defaults.sampler, help="sampler"
     )
-    parser.add_argument("--chains", type=int, default=defaults.chains, help="NUTS chains")
-    parser.add_argument("--draws", type=int, default=defaults.draws, help="NUTS draws per chain")
-    parser.add_argument(
-        "--warmup",
-        type=int,
-        default=defaults.warmup,
-        help=f"NUTS warmup per chain ({NUTS_WARMUP}) or emcee burn-in steps ({EMCEE_BURN_IN})",
+    add_nuts_arguments(
+        parser,
+        defaults,
+        helps={
+            "warmup": f"NUTS warmup per chain ({NUTS_WARMUP}) or emcee burn-in steps "
+            f"({EMCEE_BURN_IN})",
+            "target_accept": "NUTS target acceptance probability (raise towards 0.95 if a run "
+            "diverges)",
+        },
     )
     parser.add_argument(
         "--walkers",
@@ -52,19 +55,12 @@ def add_parser(commands) -> argparse.ArgumentParser:
         help="emcee walkers (default: max(24, 2 x dimension))",
     )
     parser.add_argument("--steps", type=int, default=defaults.steps, help="emcee steps")
-    parser.add_argument("--seed", type=int, default=defaults.seed, help="random seed")
     parser.add_argument("--out", help="output directory (default: reports/<scene>/<sampler>)")
     parser.add_argument("--resume", action="store_true", help="continue an interrupted emcee run")
     parser.add_argument(
         "--error-model",
         choices=["generative", "spread"],
         help="override the scene's errors.model (spread: the earlier model, for comparison)",
-    )
-    parser.add_argument(
-        "--target-accept",
-        type=float,
-        default=defaults.target_accept,
-        help="NUTS target acceptance probability (raise towards 0.95 if a run diverges)",
     )
     add_model_argument(parser)
     add_instrument_argument(parser)

@@ -7,6 +7,7 @@ import argparse
 from pathlib import Path
 
 from brdf_infer.cli._common import (
+    add_nuts_arguments,
     claimed_output_dir,
     emit_json,
     headless,
@@ -40,12 +41,7 @@ def add_parser(commands) -> argparse.ArgumentParser:
     )
     parser.add_argument("--out", help="output directory (default: reports/<scene>)")
     parser.add_argument("--example", help="also write the small committed example report here")
-    parser.add_argument("--chains", type=int, default=RunSettings.chains, help="NUTS chains")
-    parser.add_argument("--draws", type=int, default=RunSettings.draws, help="NUTS draws per chain")
-    parser.add_argument(
-        "--warmup", type=int, default=RunSettings.warmup, help="NUTS warmup per chain"
-    )
-    parser.add_argument("--seed", type=int, default=RunSettings.seed, help="random seed")
+    add_nuts_arguments(parser, RunSettings)
     studies = parser.add_argument_group(
         "studies (default: the scene's [studies] table; any of these replaces it)"
     )

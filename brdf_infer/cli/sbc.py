@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 from brdf_infer.cli._common import (
+    add_nuts_arguments,
     claimed_output_dir,
     emit_json,
     headless,
@@ -34,15 +35,11 @@ def add_parser(commands) -> argparse.ArgumentParser:
         "--replicates", type=int, default=defaults.replicates, help="simulated data sets"
     )
     parser.add_argument(
-        "--draws", type=int, default=defaults.draws, help="posterior draws per replicate"
-    )
-    parser.add_argument(
         "--thin", type=int, default=defaults.thin, help="keep every THIN-th NUTS draw"
     )
-    parser.add_argument(
-        "--warmup", type=int, default=defaults.warmup, help="NUTS warmup per replicate"
+    add_nuts_arguments(
+        parser, defaults, per="replicate", helps={"draws": "posterior draws per replicate"}
     )
-    parser.add_argument("--seed", type=int, default=defaults.seed, help="random seed")
     parser.add_argument(
         "--sigma-scale",
         type=float,
@@ -54,12 +51,6 @@ def add_parser(commands) -> argparse.ArgumentParser:
         default=defaults.planted_fault,
         help="planted fault in the inference only, which SBC must flag: jacobian (the "
         "whitening's log-Jacobian dropped) or prior (every free prior moved by one sd)",
-    )
-    parser.add_argument(
-        "--target-accept",
-        type=float,
-        default=defaults.target_accept,
-        help="NUTS target acceptance",
     )
     parser.add_argument(
         "--warmup-tree-depth",

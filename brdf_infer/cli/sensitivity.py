@@ -8,6 +8,7 @@ import argparse
 import sys
 
 from brdf_infer.cli._common import (
+    add_nuts_arguments,
     claimed_output_dir,
     emit_json,
     headless,
@@ -37,10 +38,7 @@ def add_parser(commands) -> argparse.ArgumentParser:
         "calibration=none rotation_coupling=camera_fixed images_per_row=1 model=spread "
         "(default: each assumption changed in turn)",
     )
-    parser.add_argument("--chains", type=int, default=defaults.chains, help="NUTS chains")
-    parser.add_argument("--warmup", type=int, default=defaults.warmup, help="NUTS warmup")
-    parser.add_argument("--draws", type=int, default=defaults.draws, help="NUTS draws per chain")
-    parser.add_argument("--seed", type=int, default=defaults.seed, help="random seed (all)")
+    add_nuts_arguments(parser, defaults, helps={"seed": "random seed (all)"})
     parser.add_argument(
         "--no-refit", action="store_true", help="no exact refits where Pareto k > 0.7"
     )

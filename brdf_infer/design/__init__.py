@@ -22,7 +22,6 @@ from brdf_infer.design._study import (
     design,
     load_design_run,
     predictive,
-    read_design,
     target_values,
     write_design,
 )
@@ -58,7 +57,6 @@ __all__ = [
     "reach_line",
     "reachable",
     "read_candidates",
-    "read_design",
     "session_scene",
     "set_outcome",
     "target_scale",

@@ -19,7 +19,6 @@ rotation error with the measured rows. The run must be of the scene (its name an
 
 from __future__ import annotations
 
-import json
 import math
 import time
 from dataclasses import dataclass, replace
@@ -487,9 +486,3 @@ def write_design(out: str | Path, result: DesignResult) -> list[Path]:
         atomic_write_json(out / DESIGN_FILE, payload),
         atomic_write_bytes(out / DESIGN_FIGURE, design_figure(payload)),
     ]
-
-
-def read_design(out: str | Path) -> dict[str, Any] | None:
-    """design.json of a run folder, or None."""
-    path = Path(out) / DESIGN_FILE
-    return json.loads(path.read_text()) if path.is_file() else None

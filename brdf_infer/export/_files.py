@@ -73,7 +73,7 @@ def _abg_of_abg_run(source: Source, theta_i: np.ndarray) -> tuple[list[dict], di
         BadInputError: a run of a family that ABg cannot represent.
     """
     member = source.family
-    if member.name != "abg":
+    if not member.abg_parameters:
         raise BadInputError(
             f"ABg rows are fitted to Eq. (7) or read from an abg run, not a run of {member.name} "
             "(export it with --format zemax-bsdf)",

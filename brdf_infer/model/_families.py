@@ -103,6 +103,12 @@ class ModelFamily:
         to measure next) apply to it."""
         return self.as_params is not None
 
+    @property
+    def abg_parameters(self) -> bool:
+        """The family's parameters are ABg's A, B, g (Harvey 1976) and nothing else, so an
+        ABg export reads them from its posterior instead of fitting them."""
+        return set(self.parameters) == {"A", "B", "g"}
+
     def hemispheric(self, out_of_plane: bool) -> bool:
         """The family predicts the BRDF over the hemisphere (TIS bands, maps): Eq. (7)'s with
         Eq. (8) only, the scene's ``[model] out_of_plane``; every other family always."""
