@@ -1,5 +1,5 @@
 """What a design study shrinks: the ``--target`` of ``brdf-infer design`` (and of the scene's
-``[studies] design``), parsed without importing JAX so that a scene loads light.
+``[studies] design``), parsed in plain Python (this module itself uses no JAX).
 
 Targets (units are the paper's):
 
