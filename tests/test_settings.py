@@ -14,6 +14,7 @@ from brdf_infer.cli import build_parser
 from brdf_infer.errors import BadInputError
 from brdf_infer.posterior import run_posterior
 from brdf_infer.settings import (
+    EMCEE_BURN_IN,
     BatchSettings,
     CompareSettings,
     DesignOptions,
@@ -58,11 +59,11 @@ def test_every_cli_default_is_its_settings_records(record, argv):
 
 
 def test_the_library_functions_default_to_the_records():
-    """run_posterior's keywords are PosteriorSettings'; ``fit``'s lsq options are
-    lsq_summary's, whose starts are the main job's."""
+    """run_posterior holds no copy of PosteriorSettings' fields (it takes the record, or its
+    fields by name); ``fit``'s lsq options are lsq_summary's, whose starts are the main
+    job's."""
     keywords = inspect.signature(run_posterior).parameters
-    for field in dataclasses.fields(PosteriorSettings):
-        assert keywords[field.name].default == field.default, field.name
+    assert not {field.name for field in dataclasses.fields(PosteriorSettings)} & set(keywords)
     assert PosteriorSettings().warmup == 1000 and PosteriorSettings(sampler="emcee").warmup == 4000
     options = options_of(["fit"])
     for name, parameter in inspect.signature(lsq_summary).parameters.items():
@@ -96,6 +97,22 @@ def test_a_record_refuses_a_bad_field_by_its_own_name(make, field, message):
     with pytest.raises(BadInputError, match=re.escape(message)) as error:
         make()
     assert error.value.field == field
+
+
+def test_run_posterior_takes_the_record_or_its_fields_by_name():
+    """One settings path: the record, its fields by name in place of the record's, and a
+    name the record lacks refused by that name before anything is sampled."""
+    from brdf_infer.posterior import posterior_settings
+
+    base = PosteriorSettings(chains=2, seed=4)
+    assert posterior_settings(base, {"draws": 30}) == PosteriorSettings(chains=2, seed=4, draws=30)
+    assert posterior_settings(None, {"sampler": "emcee"}).warmup == EMCEE_BURN_IN
+    with pytest.raises(BadInputError) as error:
+        posterior_settings(None, {"thin": 2})
+    assert error.value.field == "thin"
+    with pytest.raises(BadInputError) as error:
+        run_posterior(None, None, chanis=2)  # refused before the scene is touched
+    assert error.value.field == "chanis"
 
 
 def test_the_command_line_names_the_flag_and_creates_nothing(tmp_path, capsys):

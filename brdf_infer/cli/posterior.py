@@ -13,6 +13,7 @@ from brdf_infer.cli._common import (
     print_posterior_summary,
     print_verdict,
     progress,
+    record_from_args,
     scene_command_parser,
 )
 from brdf_infer.cli._options import (
@@ -74,6 +75,7 @@ def main(args: argparse.Namespace) -> int:
     from brdf_infer.posterior import run_posterior
 
     check_family_name(args.model)
+    settings = record_from_args(PosteriorSettings, args)  # every setting checked first
     scene, measurements = scene_and_measurements(args.scene, args.instrument, args.force)
     passed = forced(scene, measurements)
     out = claimed_output_dir(
@@ -82,18 +84,11 @@ def main(args: argparse.Namespace) -> int:
     run = run_posterior(
         scene,
         measurements,
-        sampler=args.sampler,
-        chains=args.chains,
-        draws=args.draws,
-        warmup=args.warmup,
-        walkers=args.walkers,
-        steps=args.steps,
-        seed=args.seed,
+        settings,
         out=out,
         resume=args.resume,
         error_model=args.error_model,
         model=args.model,
-        target_accept=args.target_accept,
         announce=lambda what: progress(what + " ..."),
         forced=passed,
     )

@@ -11,6 +11,7 @@ import tomllib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -207,15 +208,8 @@ def high_k_rows(measurements: Measurements, pareto_k: np.ndarray) -> list[dict]:
 def run_posterior(
     scene: Scene,
     measurements: Measurements,
+    settings: PosteriorSettings | None = None,
     *,
-    sampler: str = PosteriorSettings.sampler,
-    chains: int = PosteriorSettings.chains,
-    draws: int = PosteriorSettings.draws,
-    warmup: int | None = PosteriorSettings.warmup,
-    walkers: int | None = PosteriorSettings.walkers,
-    steps: int = PosteriorSettings.steps,
-    seed: int = PosteriorSettings.seed,
-    target_accept: float = PosteriorSettings.target_accept,
     out: Path | None = None,
     resume: bool = False,
     error_model: str | None = None,
@@ -224,17 +218,14 @@ def run_posterior(
     announce: Callable[[str], None] | None = None,
     forced: Sequence[str] = (),
     refit: bool = True,
+    **sampler_settings: Any,
 ) -> PosteriorRun:
     """Sample the scene's posterior and write posterior.nc, summary.json, bands.json.
 
     Args:
-        sampler: ``nuts`` or ``emcee``.
-        chains, draws, warmup: NUTS settings (emcee: ``warmup`` is the burn-in in steps;
-            None: 1000 NUTS warmup or 4000 emcee burn-in steps). Every default here is
-            :class:`~brdf_infer.settings.PosteriorSettings`'s, as ``brdf-infer posterior``'s.
-        walkers, steps: emcee settings (walkers default: max(24, 2 × dimension)).
-        seed: random seed of the sampler.
-        target_accept: NUTS target acceptance probability (towards 0.95 when a run diverges).
+        settings: how to sample (:class:`~brdf_infer.settings.PosteriorSettings`: sampler,
+            chains, draws, warmup, walkers, steps, seed, target_accept; its defaults are
+            ``brdf-infer posterior``'s).
         out: output directory (nothing written when None; emcee then keeps no checkpoint).
         resume: continue an interrupted emcee run from ``out``'s checkpoint.
         error_model: override the scene's ``errors.model`` (``generative`` or ``spread``).
@@ -247,138 +238,102 @@ def run_posterior(
             with ``--force``, one line each: they open the run's verdict.
         refit: sample an error-model variant anew where reweighting to it is unreliable
             (:mod:`brdf_infer.posterior._width`); False: reported unreliable (studies, batch).
+        **sampler_settings: fields of :class:`~brdf_infer.settings.PosteriorSettings` in
+            place of ``settings``' (``run_posterior(scene, rows, draws=500)``).
 
     Raises:
-        BadInputError: a setting out of range, or a checkpoint that this run did not write.
+        BadInputError: a setting out of range or unknown, or a checkpoint that this run did
+            not write.
     """
-    warmup = _checked_warmup(
-        sampler, chains, draws, warmup, walkers, steps, seed, target_accept, resume
-    )
+    ensure_float64()
+    settings = posterior_settings(settings, sampler_settings)
+    if resume and settings.sampler != "emcee":
+        raise BadInputError(
+            "--resume continues an emcee run; NUTS runs are not checkpointed", field="resume"
+        )
     claim = contextlib.nullcontext() if out is None else writing(out, "posterior")
     with claim:  # one writer per folder; an interrupted run leaves it marked incomplete
         started = time.perf_counter()
         scene = with_error_model(scene, error_model)
         name = scene.model.family if model is None else model
         model = build_model(scene, measurements, name)
-        what = _describe(
-            model, measurements, sampler, chains, draws, warmup, walkers, steps, seed, out, resume
-        )
-        _check_memory(model, measurements, sampler, chains * draws, chains, walkers, steps)
+        what = _describe(model, measurements, settings, out, resume)
+        _check_memory(model, measurements, settings)
         if announce is not None:
-            announce(f"posterior of scene '{scene.name}' ({name}) with {sampler}: {what}")
-        result = _sample(
-            model,
-            measurements,
-            sampler,
-            chains=chains,
-            draws=draws,
-            warmup=warmup,
-            walkers=walkers,
-            steps=steps,
-            seed=seed,
-            target_accept=target_accept,
-            out=out,
-            resume=resume,
-            progress=progress,
-        )
+            announce(f"posterior of scene '{scene.name}' ({name}) with {settings.sampler}: {what}")
+        result = _sample(model, measurements, settings, out=out, resume=resume, progress=progress)
         return complete_run(
-            model, measurements, result, seed, out, started, forced=forced, refit=refit
+            model, measurements, result, settings.seed, out, started, forced=forced, refit=refit
         )
 
 
-def _check_memory(model, measurements, sampler, nuts_draws, chains, walkers, steps) -> None:
+def posterior_settings(
+    settings: PosteriorSettings | None, fields: dict[str, Any]
+) -> PosteriorSettings:
+    """``settings`` with ``fields`` in place of its own (every one checked; a field the
+    record lacks is refused by name), or the record of ``fields`` alone."""
+    known = {field.name for field in dataclasses.fields(PosteriorSettings)}
+    for name in fields:
+        if name not in known:
+            raise BadInputError(
+                f"not a posterior setting (known: {', '.join(sorted(known))})", field=name
+            )
+    if settings is None:
+        return PosteriorSettings(**fields)
+    return dataclasses.replace(settings, **fields) if fields else settings
+
+
+def _check_memory(model, measurements, settings: PosteriorSettings) -> None:
     """:func:`~brdf_infer.posterior._memory.check_memory` of the run's rows and draws (emcee:
     walkers × steps, an upper bound)."""
-    total = nuts_draws if sampler == "nuts" else (walkers or 24) * steps
+    if settings.sampler == "nuts":
+        total = settings.chains * settings.draws
+    else:
+        total = (settings.walkers or 24) * settings.steps
     columns = factor_columns(model.data.noise)
-    check_memory(len(measurements), total, chains, columns, measurements.path)
+    check_memory(len(measurements), total, settings.chains, columns, measurements.path)
 
 
-def _checked_warmup(
-    sampler, chains, draws, warmup, walkers, steps, seed, target_accept, resume
-) -> int | None:
-    """Every setting of :func:`run_posterior` checked, and float64 on (the first thing
-    run_posterior does; ``_precision.ensure_float64``); the warmup (None: the
-    sampler's default)."""
-    ensure_float64()
-    settings = PosteriorSettings(
-        sampler=sampler,
-        chains=chains,
-        draws=draws,
-        warmup=warmup,
-        walkers=walkers,
-        steps=steps,
-        seed=seed,
-        target_accept=target_accept,
-    )  # every setting checked
-    warmup = settings.warmup  # None: the sampler's default
-    if resume and sampler != "emcee":
-        raise BadInputError(
-            "--resume continues an emcee run; NUTS runs are not checkpointed", field="resume"
-        )
-    return warmup
-
-
-def _describe(
-    model, measurements, sampler, chains, draws, warmup, walkers, steps, seed, out, resume
-) -> str:
+def _describe(model, measurements, settings: PosteriorSettings, out, resume) -> str:
     """The run's sampler settings in words (:func:`run_posterior`'s ``announce``); an emcee
     checkpoint to resume is checked first."""
-    if sampler == "nuts":
-        what = f"{chains} chains x ({warmup} warmup + {draws} draws)"
-    else:
-        dimension = FlatPotential(model).dimension
-        settings = emcee_settings(dimension, walkers, steps, warmup, seed)
-        if resume:
-            identity = {**run_fingerprint(model, measurements), "dimension": str(dimension)}
-            load_checkpoint(None if out is None else out / CHECKPOINT_FILE, settings, identity)
-        what = f"{settings['walkers']} walkers x {steps} steps ({warmup} burn-in)"
-    return what
+    warmup = settings.warmup
+    if settings.sampler == "nuts":
+        return f"{settings.chains} chains x ({warmup} warmup + {settings.draws} draws)"
+    dimension = FlatPotential(model).dimension
+    emcee = emcee_settings(dimension, settings.walkers, settings.steps, warmup, settings.seed)
+    if resume:
+        identity = {**run_fingerprint(model, measurements), "dimension": str(dimension)}
+        load_checkpoint(None if out is None else out / CHECKPOINT_FILE, emcee, identity)
+    return f"{emcee['walkers']} walkers x {settings.steps} steps ({warmup} burn-in)"
 
 
-def _sample(
-    model,
-    measurements,
-    sampler,
-    *,
-    chains,
-    draws,
-    warmup,
-    walkers,
-    steps,
-    seed,
-    target_accept,
-    out,
-    resume,
-    progress,
-) -> Draws:
+def _sample(model, measurements, settings: PosteriorSettings, *, out, resume, progress) -> Draws:
     """The draws of :func:`run_posterior`'s sampler (emcee: checkpointed in ``out``)."""
-    if sampler == "nuts":
-        result = run_nuts(
+    if settings.sampler == "nuts":
+        return run_nuts(
             model,
-            chains=chains,
-            warmup=warmup,
-            draws=draws,
-            seed=seed,
-            target_accept=target_accept,
+            chains=settings.chains,
+            warmup=settings.warmup,
+            draws=settings.draws,
+            seed=settings.seed,
+            target_accept=settings.target_accept,
             progress=progress,
         )
-    else:
-        checkpoint = None if out is None else out / CHECKPOINT_FILE
-        if out is not None:
-            out.mkdir(parents=True, exist_ok=True)
-        result = run_emcee(
-            model,
-            walkers=walkers,
-            steps=steps,
-            burn=warmup,
-            seed=seed,
-            checkpoint=checkpoint,
-            resume=resume,
-            fingerprint=run_fingerprint(model, measurements),
-            progress=progress,
-        )
-    return result
+    checkpoint = None if out is None else out / CHECKPOINT_FILE
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
+    return run_emcee(
+        model,
+        walkers=settings.walkers,
+        steps=settings.steps,
+        burn=settings.warmup,
+        seed=settings.seed,
+        checkpoint=checkpoint,
+        resume=resume,
+        fingerprint=run_fingerprint(model, measurements),
+        progress=progress,
+    )
 
 
 class _StepClock:
