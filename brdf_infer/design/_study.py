@@ -19,7 +19,6 @@ rotation error with the measured rows. The run must be of the scene (its name an
 
 from __future__ import annotations
 
-import json
 import math
 import time
 from dataclasses import dataclass, replace
@@ -69,11 +68,10 @@ from brdf_infer.observations import (
     predicted_log_reflectance,
 )
 from brdf_infer.params import PARAM_NAMES, Params
-from brdf_infer.posterior import POSTERIOR_FILE, build_posterior_model, interval95, run_scene
+from brdf_infer.posterior import build_posterior_model, interval95, run_scene
+from brdf_infer.run_folder import DESIGN_FIGURE, DESIGN_FILE, RunFolder
 from brdf_infer.scene import Scene, load_scene
 from brdf_infer.settings import DesignOptions
-
-DESIGN_FILE, DESIGN_FIGURE = "design.json", "design.png"
 
 
 @dataclass(frozen=True)
@@ -103,7 +101,7 @@ def load_design_run(run: str | Path, scene: Scene | str | None = None) -> Design
     from brdf_infer._outlock import require_complete
 
     require_complete(run)  # not a folder a writer is writing or left unfinished
-    path = Path(run) / POSTERIOR_FILE
+    path = RunFolder(run).posterior_file
     if not path.is_file():
         raise BadInputError("no posterior.nc here (run 'brdf-infer run' first)", file=run)
     try:
@@ -478,18 +476,20 @@ def _current(target: DesignTarget, run: DesignRun, scene: Scene, scale) -> dict[
 
 def write_design(out: str | Path, result: DesignResult) -> list[Path]:
     """design.json and the map design.png into ``out``, atomically."""
-    from brdf_infer._atomic import atomic_write_bytes, atomic_write_json
     from brdf_infer.design._figure import design_figure
 
-    out = Path(out)
+    folder = RunFolder(out)
     payload = result.as_json()
     return [
-        atomic_write_json(out / DESIGN_FILE, payload),
-        atomic_write_bytes(out / DESIGN_FIGURE, design_figure(payload)),
+        folder.write_json(DESIGN_FILE, payload),
+        folder.write_bytes(DESIGN_FIGURE, design_figure(payload)),
     ]
 
 
 def read_design(out: str | Path) -> dict[str, Any] | None:
-    """design.json of a run folder, or None."""
-    path = Path(out) / DESIGN_FILE
-    return json.loads(path.read_text()) if path.is_file() else None
+    """design.json of a run folder, or None.
+
+    Raises:
+        BadInputError: the file is there but unreadable or no JSON.
+    """
+    return RunFolder(out).design()
