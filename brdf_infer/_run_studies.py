@@ -42,13 +42,14 @@ def error_model_posterior(
 ) -> None:
     """Study: the posterior under another error model, into ``variants/<error model>``."""
     from brdf_infer.posterior import run_posterior
+    from brdf_infer.run_folder import RunFolder
 
     job.step(f"NUTS posterior with the {error_model} error model")
     run_posterior(
         job.scene,
         job.measurements,
         error_model=error_model,
-        out=job.out / "variants" / error_model,
+        out=RunFolder(job.out).variant(error_model).path,
         forced=forced,
         refit=False,  # a study's posterior: its width is the main run's business
         **options,
@@ -57,13 +58,13 @@ def error_model_posterior(
 
 def instrument_study(job: Job, instruments: list[str], options: dict[str, Any], posterior):
     """Study: the posteriors under other instrument models, side by side."""
-    from brdf_infer._atomic import atomic_write_json
-    from brdf_infer.instrument_comparison import INSTRUMENT_FILE, compare_instruments
+    from brdf_infer.instrument_comparison import compare_instruments
+    from brdf_infer.run_folder import INSTRUMENT_FILE, RunFolder
 
     scene, out = job.scene, job.out
     job.step("instrument models: posteriors side by side")
-    atomic_write_json(
-        out / INSTRUMENT_FILE,
+    RunFolder(out).write_json(
+        INSTRUMENT_FILE,
         compare_instruments(
             scene,
             job.measurements,

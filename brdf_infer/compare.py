@@ -48,6 +48,7 @@ from brdf_infer.posterior import (
     interval95,
     loo_terms,
 )
+from brdf_infer.run_folder import COMPARE_FILE as COMPARE_FILE  # the old name, kept
 from brdf_infer.scene import Scene
 from brdf_infer.settings import CompareSettings
 
@@ -55,7 +56,6 @@ PARETO_K_LIMIT = 0.7
 LEFT_OUT_SIGMA = 1e6  # σ of ln R that removes a row's information (exact LOO by refit)
 TIS_DRAWS = 400  # posterior draws the TIS band is computed from
 TIS_ANGLE_DEG = 70.0
-COMPARE_FILE = "compare.json"
 
 
 @dataclass

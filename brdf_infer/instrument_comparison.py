@@ -21,10 +21,11 @@ from brdf_infer.errors import BadInputError
 from brdf_infer.instrument import INSTRUMENT_MODELS
 from brdf_infer.measurements import Measurements
 from brdf_infer.posterior import interval95
+from brdf_infer.run_folder import INSTRUMENT_FILE as INSTRUMENT_FILE  # the old name, kept
+from brdf_infer.run_folder import RunFolder
 from brdf_infer.run_records import PosteriorSummary
 from brdf_infer.scene import Scene, check_instrument
 
-INSTRUMENT_FILE = "instruments.json"
 TRACE_DRAWS = 16
 TRACE_RAYS = 16_384  # per draw and configuration (NEE)
 
@@ -110,7 +111,7 @@ def compare_instruments(
             folder, run = done[name]
         else:
             progress(f"  posterior with the '{name}' instrument model")
-            folder = out / "variants" / f"instrument-{name}"
+            folder = RunFolder(out).variant(f"instrument-{name}").path
             run = run_posterior(  # no refits of error-model variants for a study's posterior
                 check_instrument(scene, name), measurements, out=folder, refit=False, **options
             )

@@ -14,6 +14,7 @@ from typing import Any, NamedTuple
 
 from brdf_infer._resources import read_data_toml
 from brdf_infer.errors import BadInputError
+from brdf_infer.run_folder import read_json_file
 
 PARAM_NAMES: tuple[str, ...] = ("brdf0", "a1", "a2", "a3", "alpha", "theta_s0")
 
@@ -145,14 +146,7 @@ def resolve_params(name_or_file: str) -> Params:
         raise BadInputError(
             f"neither a parameter set ({known}) nor an existing JSON file", file=name_or_file
         )
-    try:
-        content = json.loads(path.read_text(encoding="utf-8-sig"))
-    except (OSError, UnicodeDecodeError) as error:
-        raise BadInputError(f"cannot read: {error}", file=path) from None
-    except json.JSONDecodeError as error:
-        raise BadInputError(f"not valid JSON: {error.msg}", file=path, line=error.lineno) from None
-    except RecursionError:
-        raise BadInputError("not valid JSON: nested too deeply", file=path) from None
+    content = read_json_file(path, encoding="utf-8-sig")  # BadInputError naming the file
     if isinstance(content, dict) and isinstance(content.get("params"), dict):
         content = content["params"]
     return params_from_mapping(content, source=str(path))

@@ -60,6 +60,7 @@ from brdf_infer.posterior import (
     prior_draws,
 )
 from brdf_infer.priors import Prior
+from brdf_infer.run_folder import SBC_FILE as SBC_FILE  # the old name, kept
 from brdf_infer.scene import Scene
 from brdf_infer.settings import SbcSettings, check_planted_fault_name
 
@@ -70,7 +71,6 @@ FAMILY_ALPHA = 0.01  # family-wise level of the verdict
 TESTS_PER_QUANTITY = 3  # χ², KS and the 90 % coverage
 HISTOGRAM_BINS = 20
 MIN_EXPECTED_PER_BIN = 10  # replicates per bin of the χ² test, at least
-SBC_FILE = "sbc.json"
 
 
 @dataclass(frozen=True)

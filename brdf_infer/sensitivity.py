@@ -43,15 +43,14 @@ from brdf_infer.error_model import CALIBRATIONS, ROTATION_COUPLINGS
 from brdf_infer.errors import BadInputError
 from brdf_infer.measurements import Measurements
 from brdf_infer.model import family
-from brdf_infer.scene import Scene, parse_errors
+from brdf_infer.run_folder import SENSITIVITY_FIGURE as SENSITIVITY_FIGURE  # the old name, kept
+from brdf_infer.run_folder import SENSITIVITY_FILE as SENSITIVITY_FILE  # the old name, kept
+from brdf_infer.scene import TIS_ANGLE_DEG, Scene, parse_errors, tis_angles
 from brdf_infer.settings import SensitivitySettings
 
 if TYPE_CHECKING:  # ArviZ is imported where it is used: the command line's parser stays light
     from brdf_infer._arviz import InferenceData
 
-SENSITIVITY_FILE = "sensitivity.json"
-SENSITIVITY_FIGURE = "sensitivity.png"
-TIS_ANGLE_DEG = 70.0  # the article's TIS angle (Sec. 7), always among the reported angles
 BASELINE = "default"
 
 
@@ -177,11 +176,6 @@ def check_scene(scene: Scene) -> None:
             file=scene.path,
             field="model.out_of_plane",
         )
-
-
-def tis_angles(scene: Scene, measurements: Measurements) -> list[float]:
-    """The scene's band angles and 70° (the article's TIS angle), ascending [deg]."""
-    return sorted({*scene.band_theta_i_deg(measurements), TIS_ANGLE_DEG})
 
 
 @dataclass

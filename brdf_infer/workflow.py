@@ -44,11 +44,11 @@ from brdf_infer._run_studies import (
 )
 from brdf_infer.measurements import Measurements
 from brdf_infer.plausibility import Implausible
+from brdf_infer.run_folder import FIT_LSQ_FILE, FIT_PAPER_FILE, RunFolder
+from brdf_infer.run_folder import STUDIES_FILE as STUDIES_FILE  # the old name, kept
 from brdf_infer.scene import Scene, Studies
 from brdf_infer.settings import LSQ_STARTS, RunSettings
 from brdf_infer.verdict import Verdict
-
-STUDIES_FILE = "studies.json"
 
 RUN_TRACE_RAYS = 2**18  # ~0.05 % MC error per configuration (NEE)
 RUN_TRACE_DRAWS = 64
@@ -434,7 +434,6 @@ def _write_fits(
 ) -> list[str]:
     """The plausibility checks passed (or forced: returned, one line each, each warned of),
     then the fits written."""
-    from brdf_infer._atomic import atomic_write_json
     from brdf_infer.plausibility import require_plausible
 
     out = job.out
@@ -443,9 +442,10 @@ def _write_fits(
     for line in forced:
         job.progress(f"warning: forced past a plausibility check: {line}")
     out.mkdir(parents=True, exist_ok=True)
+    folder = RunFolder(out)
     if paper is not None:
-        atomic_write_json(out / "fit_paper.json", paper)
-    atomic_write_json(out / "fit_lsq.json", lsq)
+        folder.write_json(FIT_PAPER_FILE, paper)
+    folder.write_json(FIT_LSQ_FILE, lsq)
     return forced
 
 
@@ -470,16 +470,11 @@ def _raytrace_study(job: Job, posterior) -> None:
 def _report(job: Job, example: Path | None) -> tuple[Path, Verdict]:
     """Last step: the studies run (``studies.json``), the report and (``example``) the
     example copy."""
-    from brdf_infer._atomic import atomic_write_json
     from brdf_infer.report import write_example, write_report
 
     scene, out, studies = job.scene, job.out, job.studies
-    atomic_write_json(
-        out / STUDIES_FILE,
-        {
-            "run": studies.requested(),
-            "not_run": not_run(scene, studies) if job.paper_parameters else [],
-        },
+    RunFolder(out).write_studies(
+        studies.requested(), not_run(scene, studies) if job.paper_parameters else []
     )
     job.step("report")
     report, verdict = write_report(out, progress=_silent)

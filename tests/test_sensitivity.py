@@ -9,7 +9,7 @@ import pytest
 
 from brdf_infer.errors import BadInputError
 from brdf_infer.report import write_report, write_sensitivity
-from brdf_infer.scene import load_scene
+from brdf_infer.scene import load_scene, tis_angles
 from brdf_infer.sensitivity import (
     SENSITIVITY_FIGURE,
     SENSITIVITY_FILE,
@@ -17,7 +17,6 @@ from brdf_infer.sensitivity import (
     default_variants,
     parse_variant,
     sensitivity,
-    tis_angles,
     variant,
 )
 from tests.helpers import run_cli

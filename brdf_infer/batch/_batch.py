@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-import json
 import os
 import threading
 import time
@@ -16,12 +15,10 @@ from typing import Any
 import jax
 import numpy as np
 
-from brdf_infer._atomic import atomic_write_json
 from brdf_infer._outlock import note_written, require_complete, writing
 from brdf_infer._precision import ensure_float64
 from brdf_infer._processes import Processes
 from brdf_infer.batch._entries import (
-    BATCH_FILE,
     BatchInterrupted,
     BatchResult,
     SceneEntry,
@@ -39,9 +36,6 @@ from brdf_infer.batch._team import Team
 from brdf_infer.errors import BadInputError
 from brdf_infer.plausibility import measurement_checks, require_plausible
 from brdf_infer.posterior import (
-    BANDS_FILE,
-    POSTERIOR_FILE,
-    SUMMARY_FILE,
     Cancelled,
     NutsProgram,
     build_model,
@@ -54,6 +48,13 @@ from brdf_infer.posterior import (
     row_count,
     run_fingerprint,
     stack_data,
+)
+from brdf_infer.run_folder import (
+    BANDS_FILE,
+    BATCH_FILE,
+    POSTERIOR_FILE,
+    SUMMARY_FILE,
+    RunFolder,
 )
 from brdf_infer.scene import load_scene
 from brdf_infer.settings import BatchSettings
@@ -127,7 +128,7 @@ class Batch:
         result = self.result(interrupted)
         if self.processes.index == 0:
             self.out.mkdir(parents=True, exist_ok=True)
-            atomic_write_json(self.out / BATCH_FILE, result.as_json())
+            RunFolder(self.out).write_json(BATCH_FILE, result.as_json())
         return result
 
     def owns(self, entry: SceneEntry) -> bool:
@@ -216,15 +217,16 @@ class Batch:
             BadInputError: the folder holds a complete run of another scene, data or settings.
         """
         folder = entry.out
-        files = [folder / name for name in (POSTERIOR_FILE, SUMMARY_FILE, BANDS_FILE)]
-        if not all(path.is_file() for path in files):
+        run = RunFolder(folder)
+        if not all(run.has(name) for name in (POSTERIOR_FILE, SUMMARY_FILE, BANDS_FILE)):
             return  # not there (a scene folder is renamed into place complete): run it
         require_complete(folder)
         try:
-            summary = json.loads(files[1].read_text())
-            bands = json.loads(files[2].read_text())
-        except (OSError, ValueError) as error:
-            raise BadInputError(f"cannot read the run to resume: {error}", file=folder) from None
+            summary, bands = run.summary(), run.bands()
+        except BadInputError as error:
+            raise BadInputError(
+                f"cannot read the run to resume: {error.problem}", file=error.file
+            ) from None
         settings = self.settings
         fingerprint = run_fingerprint(model, measurements)
         recorded = summary.get("fingerprint") or {}

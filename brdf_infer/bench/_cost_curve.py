@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from brdf_infer.bench._tables import markdown_table
+from brdf_infer.run_folder import RunFolder
 
 SCATTER = 0.05  # lognormal 1σ of the synthetic table's values
 CHAINS, WARMUP, DRAWS = 2, 200, 200  # the curve's reduced NUTS settings
@@ -159,7 +160,7 @@ def cost_row(label: str, scene: str, scratch: Path, cache: Path) -> CostRow:
         after_sampling_s=float(sum(seconds["after_sampling"].values())),
         report_s=report_wall,
         peak_gib=max(peak, report_peak),
-        netcdf_mb=(out / "posterior.nc").stat().st_size / 1e6,
+        netcdf_mb=RunFolder(out).posterior_file.stat().st_size / 1e6,
     )
 
 

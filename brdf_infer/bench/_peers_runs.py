@@ -22,6 +22,7 @@ from brdf_infer.bench._peers import (
     model_arrays,
 )
 from brdf_infer.bench._peers_check import log_density_check
+from brdf_infer.run_folder import RunFolder
 
 QUANTITIES = ("brdf0", "alpha", "theta_s0", "tis70")
 LABELS = {"brdf0": "BRDF0", "alpha": "α", "theta_s0": "θs0", "tis70": "TIS(70°)"}
@@ -77,7 +78,7 @@ def _run_ours(scene: str, out: Path, cache: Path, settings, env: dict):
     if done.returncode != 0:
         raise RuntimeError(f"brdf-infer posterior failed:\n{done.stderr[-3000:]}")
     summary = json.loads(done.stdout)
-    idata = az.from_netcdf(out / "posterior.nc")
+    idata = az.from_netcdf(RunFolder(out).posterior_file)
     sites = {name: np.asarray(idata.posterior[name]) for name in idata.posterior.data_vars}
     return seconds, summary, sites, float(idata.sample_stats["n_steps"].mean())
 

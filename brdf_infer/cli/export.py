@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import json
 from pathlib import Path
 
 import numpy as np
@@ -85,13 +84,14 @@ def _source(args: argparse.Namespace, scene_name: str):
     from brdf_infer.model import strumik_family
     from brdf_infer.params import params_to_dict, resolve_params
     from brdf_infer.posterior import load_run_family
+    from brdf_infer.run_folder import RunFolder
 
     if args.run is not None:
         run = Path(args.run)
         member, physical = load_run_family(run)
         member = folded_family(member, args.fold)
         with contextlib.suppress(OSError, ValueError, KeyError):
-            scene_name = json.loads((run / "summary.json").read_text())["scene"]
+            scene_name = RunFolder(run).summary()["scene"]
         if args.format == "abg" and not (member.paper_parameters or member.abg_parameters):
             raise BadInputError(
                 f"ABg rows are fitted to Eq. (7) or read from an abg run, not a run of "

@@ -86,12 +86,13 @@ def _payload(args: argparse.Namespace, scene, measurements) -> dict:
     shown = None if args.json else progress
     if args.run is not None:
         from brdf_infer.posterior import draws_params, load_run_family
+        from brdf_infer.run_folder import RunFolder
 
         member, physical = load_run_family(Path(args.run))
         if not member.paper_parameters:
             raise BadInputError(
                 f"a run of {member.name}, not of strumik2024: the ray tracer traces Eq. (7)",
-                file=Path(args.run) / "posterior.nc",
+                file=RunFolder(args.run).posterior_file,
             )
         all_draws = draws_params(physical)
         return raytrace_posterior_payload(

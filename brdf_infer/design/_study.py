@@ -68,11 +68,10 @@ from brdf_infer.observations import (
     predicted_log_reflectance,
 )
 from brdf_infer.params import PARAM_NAMES, Params
-from brdf_infer.posterior import POSTERIOR_FILE, build_posterior_model, interval95, run_scene
+from brdf_infer.posterior import build_posterior_model, interval95, run_scene
+from brdf_infer.run_folder import DESIGN_FIGURE, DESIGN_FILE, RunFolder
 from brdf_infer.scene import Scene, load_scene
 from brdf_infer.settings import DesignOptions
-
-DESIGN_FILE, DESIGN_FIGURE = "design.json", "design.png"
 
 
 @dataclass(frozen=True)
@@ -102,7 +101,7 @@ def load_design_run(run: str | Path, scene: Scene | str | None = None) -> Design
     from brdf_infer._outlock import require_complete
 
     require_complete(run)  # not a folder a writer is writing or left unfinished
-    path = Path(run) / POSTERIOR_FILE
+    path = RunFolder(run).posterior_file
     if not path.is_file():
         raise BadInputError("no posterior.nc here (run 'brdf-infer run' first)", file=run)
     try:
@@ -477,12 +476,11 @@ def _current(target: DesignTarget, run: DesignRun, scene: Scene, scale) -> dict[
 
 def write_design(out: str | Path, result: DesignResult) -> list[Path]:
     """design.json and the map design.png into ``out``, atomically."""
-    from brdf_infer._atomic import atomic_write_bytes, atomic_write_json
     from brdf_infer.design._figure import design_figure
 
-    out = Path(out)
+    folder = RunFolder(out)
     payload = result.as_json()
     return [
-        atomic_write_json(out / DESIGN_FILE, payload),
-        atomic_write_bytes(out / DESIGN_FIGURE, design_figure(payload)),
+        folder.write_json(DESIGN_FILE, payload),
+        folder.write_bytes(DESIGN_FIGURE, design_figure(payload)),
     ]

@@ -14,7 +14,6 @@ from brdf_infer.bsdf_file import (
 from brdf_infer.export._abg import AbgFit, fit_abg
 from brdf_infer.export._files import (
     ABG_COLUMNS,
-    EXPORTS_FILE,
     export_abg,
     record_export,
     run_export,
@@ -30,6 +29,7 @@ from brdf_infer.export._grid import (
 )
 from brdf_infer.export._source import Source, draw_indices, planned_files
 from brdf_infer.export._zemax import export_zemax
+from brdf_infer.run_folder import EXPORTS_FILE
 
 __all__ = [
     "ABG_COLUMNS",

@@ -40,7 +40,6 @@ from __future__ import annotations
 
 import csv
 import io
-import json
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -57,8 +56,8 @@ from brdf_infer.export._zemax import export_zemax
 from brdf_infer.model import fold_statement, tis
 from brdf_infer.params import Params, params_to_dict
 from brdf_infer.posterior import FAMILY_TIS_DRAWS, tis_band
+from brdf_infer.run_folder import RunFolder
 
-EXPORTS_FILE = "exports.json"  # in a run folder: the exports made from it, for the report
 ABG_COLUMNS = ("theta_i_deg", "A", "B", "g", "tis_model", "tis_abg", "rms_log_error")
 
 
@@ -241,11 +240,7 @@ def record_export(run: Path, result: dict) -> Path:
 
 
 def _record_export(run: Path, result: dict) -> Path:
-    path = run / EXPORTS_FILE
-    try:
-        entries = json.loads(path.read_text())["exports"] if path.is_file() else []
-    except (OSError, ValueError, KeyError):
-        entries = []
+    entries = RunFolder(run).exports()
     folder = str(Path(result["files"][0]["path"]).parent.resolve())
     entry = {
         "format": result["format"],
@@ -257,4 +252,4 @@ def _record_export(run: Path, result: dict) -> Path:
         **({"rows": result["rows"]} if "rows" in result else {}),
     }
     keep = [e for e in entries if (e["format"], e["folder"]) != (entry["format"], folder)]
-    return atomic_write_json(path, {"exports": [*keep, entry]})
+    return RunFolder(run).write_exports([*keep, entry])

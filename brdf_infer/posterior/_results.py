@@ -15,7 +15,7 @@ from numpyro.infer import Predictive
 
 import brdf_infer
 from brdf_infer import _arviz as az
-from brdf_infer._atomic import atomic_write_bytes, atomic_write_json
+from brdf_infer._atomic import atomic_write_bytes
 from brdf_infer._outlock import require_complete
 from brdf_infer.errors import BadInputError
 from brdf_infer.model import ModelFamily, family, run_family_name
@@ -25,9 +25,12 @@ from brdf_infer.posterior._likelihood import disjoint_columns
 from brdf_infer.posterior._loo import pointwise_loo_terms
 from brdf_infer.posterior._model import NOISE_SITES, PosteriorModel
 from brdf_infer.posterior._samplers import Draws
+from brdf_infer.run_folder import BANDS_FILE as BANDS_FILE  # the old name, kept
+from brdf_infer.run_folder import POSTERIOR_FILE as POSTERIOR_FILE  # the old name, kept
+from brdf_infer.run_folder import SUMMARY_FILE as SUMMARY_FILE  # the old name, kept
+from brdf_infer.run_folder import RunFolder
 from brdf_infer.run_records import Bands, PosteriorSummary
 
-POSTERIOR_FILE, SUMMARY_FILE, BANDS_FILE = "posterior.nc", "summary.json", "bands.json"
 THRESHOLDS = {"r_hat": 1.01, "ess": 400, "bfmi": 0.3, "tau_multiple": 50}
 
 
@@ -286,15 +289,16 @@ def write_results(
     out: Path, idata: az.InferenceData, summary: PosteriorSummary, bands: Bands
 ) -> None:
     """posterior.nc, summary.json and bands.json into ``out``, each atomically."""
-    out.mkdir(parents=True, exist_ok=True)
-    write_inference_data(idata, out / POSTERIOR_FILE)
-    atomic_write_json(out / BANDS_FILE, bands)
-    atomic_write_json(out / SUMMARY_FILE, summary)
+    folder = RunFolder(out)
+    folder.path.mkdir(parents=True, exist_ok=True)
+    write_inference_data(idata, folder.posterior_file)
+    folder.write_bands(bands)
+    folder.write_summary(summary)
 
 
 def _run_posterior_group(run: Path):
     require_complete(run)
-    path = run / POSTERIOR_FILE
+    path = RunFolder(run).posterior_file
     if not path.is_file():
         raise BadInputError("no posterior.nc here (run 'brdf-infer posterior' first)", file=run)
     try:

@@ -46,12 +46,11 @@ from brdf_infer.posterior._samplers import (
     run_emcee,
     run_nuts,
 )
+from brdf_infer.run_folder import CHECKPOINT_FILE
 from brdf_infer.run_records import Bands, PosteriorSummary
 from brdf_infer.scene import Scene, check_instrument, load_scene, parse_scene
 from brdf_infer.settings import PosteriorSettings
 from brdf_infer.verdict import PARETO_K_LIMIT, posterior_verdict
-
-CHECKPOINT_FILE = "emcee_checkpoint.npz"
 
 
 @dataclass(frozen=True)

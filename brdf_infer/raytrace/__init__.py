@@ -1,12 +1,6 @@
 """Ray-tracing validation of the series II measurement setup (Sec. 6, Figs. 12–14)."""
 
-from brdf_infer.raytrace._files import (
-    DETECTOR_IMAGES_FILE,
-    RAYTRACE_FILE,
-    load_detector_images,
-    load_traces,
-    write_traces,
-)
+from brdf_infer.raytrace._files import load_detector_images, load_traces, write_traces
 from brdf_infer.raytrace._images import simulate_images
 from brdf_infer.raytrace._payload import raytrace_payload, raytrace_posterior_payload
 from brdf_infer.raytrace._series import (
@@ -24,6 +18,7 @@ from brdf_infer.raytrace._setup import (
 )
 from brdf_infer.raytrace._tally import CHUNK_RAYS, Estimate, compile_tallies, trace_configuration
 from brdf_infer.raytrace._trace import ESTIMATORS, TALLIES, Setup
+from brdf_infer.run_folder import DETECTOR_IMAGES_FILE, RAYTRACE_FILE
 
 __all__ = [
     "CHUNK_RAYS",

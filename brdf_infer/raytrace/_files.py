@@ -6,20 +6,17 @@ by the report, which computes nothing."""
 from __future__ import annotations
 
 import io
-import json
 from pathlib import Path
 
 import numpy as np
 
-from brdf_infer._atomic import atomic_write_bytes, atomic_write_json
 from brdf_infer.errors import BadInputError
 from brdf_infer.measurements import Measurements
 from brdf_infer.params import Params
 from brdf_infer.raytrace._images import simulate_images
+from brdf_infer.run_folder import DETECTOR_IMAGES_FILE, RunFolder
 from brdf_infer.scene import Scene
 
-RAYTRACE_FILE = "raytrace.json"
-DETECTOR_IMAGES_FILE = "detector_images.npz"
 _ARRAYS = ("scattered", "reference", "x_edges_mm", "y_edges_mm", "signal_half_size_mm")
 
 
@@ -36,26 +33,25 @@ def write_traces(out: Path, scene: Scene, measurements: Measurements, traces: li
         theta_s_deg=np.asarray(images["theta_s_deg"], float),
         **{name: np.asarray(images[name]) for name in _ARRAYS},
     )
-    atomic_write_bytes(out / DETECTOR_IMAGES_FILE, buffer.getvalue())
-    atomic_write_json(out / RAYTRACE_FILE, {"traces": traces})
+    folder = RunFolder(out)
+    folder.write_bytes(DETECTOR_IMAGES_FILE, buffer.getvalue())
+    folder.write_traces(traces)
     return images
 
 
 def load_traces(run: Path) -> list[dict]:
-    """The ray traces a run wrote (``raytrace.json``), possibly none."""
-    path = run / RAYTRACE_FILE
-    if not path.is_file():
-        return []
-    try:
-        return json.loads(path.read_text())["traces"]
-    except (OSError, ValueError, KeyError) as error:
-        raise BadInputError(f"cannot read the ray traces: {error}", file=path) from None
+    """The ray traces a run wrote (``raytrace.json``), possibly none.
+
+    Raises:
+        BadInputError: the file is there but unreadable, no JSON or without ``traces``.
+    """
+    return RunFolder(run).traces()
 
 
 def load_detector_images(run: Path) -> dict | None:
     """The detector images a run wrote (``detector_images.npz``; None: none, as in runs made
     before they were written)."""
-    path = run / DETECTOR_IMAGES_FILE
+    path = RunFolder(run).file(DETECTOR_IMAGES_FILE)
     if not path.is_file():
         return None
     try:

@@ -2,26 +2,16 @@
 
 from __future__ import annotations
 
-import json
 import time
 from collections.abc import Callable
 from pathlib import Path
 
 from brdf_infer import _arviz as az
-from brdf_infer._atomic import atomic_write_bytes
 from brdf_infer._outlock import require_complete, writing
 from brdf_infer.errors import BadInputError
 from brdf_infer.model import fold_statement
-from brdf_infer.posterior import (
-    BANDS_FILE,
-    POSTERIOR_FILE,
-    SUMMARY_FILE,
-    THRESHOLDS,
-    draws_params,
-    family_draws,
-    run_scene,
-)
-from brdf_infer.raytrace import load_detector_images, load_traces
+from brdf_infer.posterior import THRESHOLDS, draws_params, family_draws, run_scene
+from brdf_infer.raytrace import load_detector_images
 from brdf_infer.report import _figures, _html, _noise
 from brdf_infer.report._compare import compare_section
 from brdf_infer.report._design import design_section
@@ -39,29 +29,39 @@ from brdf_infer.report._run_tables import run_section, summary_table
 from brdf_infer.report._sensitivity import sensitivity_section
 from brdf_infer.report._table_views import residual_hemisphere, value_words
 from brdf_infer.report._traces import raytrace_table
-from brdf_infer.sensitivity import tis_angles
+from brdf_infer.run_folder import (
+    FIGURE_DIR,
+    POSTERIOR_FILE,
+    REPORT_FILE,
+    SUMMARY_FILE,
+    RunFolder,
+)
+from brdf_infer.scene import tis_angles
 from brdf_infer.verdict import PARETO_K_LIMIT, Verdict
 
-REPORT_FILE = "report.html"
-FIGURE_DIR = "figures"
+__all__ = ["FIGURE_DIR", "REPORT_FILE", "write_report"]
 
 
-def _load(run: Path):
-    for name in (POSTERIOR_FILE, SUMMARY_FILE, BANDS_FILE):
-        if not (run / name).is_file():
-            raise BadInputError(
-                f"no {name} here (run 'brdf-infer posterior --out DIR' first)", file=run
-            )
+def _load(run: RunFolder):
+    """The run's posterior, summary and bands.
+
+    Raises:
+        BadInputError: one of them absent or unreadable, or a summary without a verdict.
+    """
+    if not run.posterior_file.is_file():
+        raise BadInputError(
+            f"no {POSTERIOR_FILE} here (run 'brdf-infer posterior --out DIR' first)",
+            file=run.path,
+        )
+    summary, bands = run.summary(), run.bands()
     try:
-        idata = az.from_netcdf(run / POSTERIOR_FILE)
-        summary = json.loads((run / SUMMARY_FILE).read_text())
-        bands = json.loads((run / BANDS_FILE).read_text())
+        idata = az.from_netcdf(run.posterior_file)
     except (OSError, ValueError) as error:
-        raise BadInputError(f"cannot read the run: {error}", file=run) from None
+        raise BadInputError(f"cannot read the run: {error}", file=run.posterior_file) from None
     if "verdict" not in summary:
         raise BadInputError(
             "no verdict in this run's summary (written by an earlier brdf_infer): run it again",
-            file=run / SUMMARY_FILE,
+            file=run.file(SUMMARY_FILE),
         )
     return idata, summary, bands
 
@@ -77,16 +77,17 @@ def write_report(run: Path, progress=print) -> tuple[Path, Verdict]:
     """
     started = time.perf_counter()
     require_complete(run)
-    loaded = _load(run)
+    folder = RunFolder(run)
+    loaded = _load(folder)
     with writing(run, "report", option="RUN_DIR", adds=True):
-        return _write_report(run, loaded, started, progress)
+        return _write_report(folder, loaded, started, progress)
 
 
 Figure = tuple[str, str, bytes]  # name, caption, PNG
 AddFigure = Callable[[str, str, Callable[[], object]], None]  # name, caption, make the figure
 
 
-def _write_report(run: Path, loaded, started: float, progress) -> tuple[Path, Verdict]:
+def _write_report(run: RunFolder, loaded, started: float, progress) -> tuple[Path, Verdict]:
     idata, summary, bands = loaded
     attrs = idata.posterior.attrs
     scene = run_scene(attrs)  # what the run sampled, not the scene file as it is now
@@ -104,10 +105,10 @@ def _write_report(run: Path, loaded, started: float, progress) -> tuple[Path, Ve
     _product_figures(add, idata, bands, scene, member, physical)
     exports = load_exports(run)
     _export_figure(add, exports, idata, scene, member.paper_parameters)
-    traces = load_traces(run)
-    _raytrace_figures(add, traces, load_detector_images(run))
+    traces = run.traces()
+    _raytrace_figures(add, traces, load_detector_images(run.path))
     for name, _, png in figures:
-        atomic_write_bytes(run / FIGURE_DIR / f"{name}.png", png)
+        run.write_bytes(f"{FIGURE_DIR}/{name}.png", png)
 
     sections = [
         *_answer(run, verdict, summary, bands, scene, rows, member, figures),
@@ -119,12 +120,12 @@ def _write_report(run: Path, loaded, started: float, progress) -> tuple[Path, Ve
     ]
     title = f"brdf_infer report: {scene.name}, {member.name} ({attrs['sampler']})"
     document = _html.page(title, sections)
-    path = atomic_write_bytes(run / REPORT_FILE, document.encode())
+    path = run.write_bytes(REPORT_FILE, document.encode())
     progress(f"report written in {time.perf_counter() - started:.1f} s")
     return path, verdict
 
 
-def _fit_figures(add: AddFigure, run: Path, idata, summary, bands, scene, rows, loo) -> None:
+def _fit_figures(add: AddFigure, run: RunFolder, idata, summary, bands, scene, rows, loo) -> None:
     """The BRDF bands against the data, the sampler's diagnostics and the fit to the data."""
     reference = scene.outputs.reference_params
     out_of_plane = int(rows.out_of_plane.sum())
@@ -260,7 +261,7 @@ def _shown(figures: list[Figure], *names: str) -> list[str]:
     return [_html.figure(png, caption) for name, caption, png in figures if name in names]
 
 
-def _answer(run: Path, verdict, summary, bands, scene, rows, member, figures) -> list[str]:
+def _answer(run: RunFolder, verdict, summary, bands, scene, rows, member, figures) -> list[str]:
     """The verdict and the answer first, with the BRDF bands and the studies left out."""
     return [
         _html.verdict_box(verdict),
@@ -278,7 +279,7 @@ def _answer(run: Path, verdict, summary, bands, scene, rows, member, figures) ->
     ]
 
 
-def _diagnostics(run: Path, idata, summary, loo, figures) -> list[str]:
+def _diagnostics(run: RunFolder, idata, summary, loo, figures) -> list[str]:
     """The sampler's diagnostics, the fit against the data and the error model."""
     return [
         "<h2>Diagnostics</h2>",
@@ -293,7 +294,7 @@ def _diagnostics(run: Path, idata, summary, loo, figures) -> list[str]:
     ]
 
 
-def _products(run: Path, bands, exports, traces, figures) -> list[str]:
+def _products(run: RunFolder, bands, exports, traces, figures) -> list[str]:
     """The products (TIS, maps, exports) and the studies written beside the run."""
     return [
         "<h2>Products</h2>",
@@ -316,13 +317,10 @@ def _products(run: Path, bands, exports, traces, figures) -> list[str]:
     ]
 
 
-def _studies_line(run: Path) -> str:
+def _studies_line(run: RunFolder) -> str:
     """One line naming the studies this run left out and how to add them (``studies.json``
     of ``run``; empty for a ``posterior`` folder)."""
-    path = run / "studies.json"
-    if not path.exists():
-        return ""
-    left_out = json.loads(path.read_text()).get("not_run", [])
+    left_out = (run.studies() or {}).get("not_run", [])
     if not left_out:
         return ""
     return (

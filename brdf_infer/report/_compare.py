@@ -4,7 +4,6 @@ written to with the result, and the report's Model comparison section."""
 from __future__ import annotations
 
 import io
-import json
 import warnings
 from pathlib import Path
 from typing import Any
@@ -14,11 +13,11 @@ import pandas as pd
 from matplotlib.figure import Figure
 
 from brdf_infer import _arviz as az
-from brdf_infer._atomic import atomic_write_bytes, atomic_write_json
-from brdf_infer.compare import COMPARE_FILE, ComparisonResult
+from brdf_infer.compare import ComparisonResult
 from brdf_infer.posterior import THRESHOLDS
 from brdf_infer.report._html import escape
 from brdf_infer.report._html import figure as html_figure
+from brdf_infer.run_folder import COMPARE_FIGURE, COMPARE_FILE, RunFolder
 
 UNTRUSTED = "sampler diagnostics fail"
 
@@ -105,19 +104,19 @@ def compare_table_html(payload: dict[str, Any]) -> str:
 
 def write_comparison(out: Path, result: ComparisonResult) -> list[Path]:
     """compare.json and ArviZ's compare plot (compare.png) into ``out``, atomically."""
-    out.mkdir(parents=True, exist_ok=True)
+    folder = RunFolder(out)
+    folder.path.mkdir(parents=True, exist_ok=True)
     return [
-        atomic_write_json(out / COMPARE_FILE, result.as_json()),
-        atomic_write_bytes(out / "compare.png", compare_figure(result.as_json())),
+        folder.write_json(COMPARE_FILE, result.as_json()),
+        folder.write_bytes(COMPARE_FIGURE, compare_figure(result.as_json())),
     ]
 
 
-def compare_section(run: Path) -> list[str]:
+def compare_section(run: RunFolder) -> list[str]:
     """The model comparison (``compare.json`` of ``brdf-infer compare --out RUN`` or ``run``)."""
-    path = run / COMPARE_FILE
-    if not path.is_file():
+    payload = run.compare()
+    if payload is None:
         return []
-    payload = json.loads(path.read_text())
     best = payload["models"][0]["name"]
     return [
         "<h2>Model comparison (PSIS-LOO)</h2>",

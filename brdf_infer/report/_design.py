@@ -2,22 +2,17 @@
 
 from __future__ import annotations
 
-import json
-from pathlib import Path
-
 from brdf_infer.design import DESIGN_HEADERS, current_words, design_rows, reach_line
 from brdf_infer.report import _html
+from brdf_infer.run_folder import DESIGN_FIGURE, RunFolder
 
 
-def design_section(run: Path) -> list[str]:
+def design_section(run: RunFolder) -> list[str]:
     """The report's section from ``run/design.json`` (none when the run has none); the map is
     the study's own ``design.png`` (the report computes nothing)."""
-    from brdf_infer.design import DESIGN_FIGURE, DESIGN_FILE
-
-    path = run / DESIGN_FILE
-    if not path.is_file():
+    payload = run.design()
+    if payload is None:
         return []
-    payload = json.loads(path.read_text())
     current = current_words(payload)
     today = "" if current is None else f" Today: {current}."
     session = payload.get("same_session")
@@ -37,7 +32,7 @@ def design_section(run: Path) -> list[str]:
         f"<code>design.json</code> lists every candidate).{today}{_html.escape(reach)}</p>",
         _html.table(DESIGN_HEADERS, design_rows(payload)),
     ]
-    figure = run / DESIGN_FIGURE
+    figure = run.file(DESIGN_FIGURE)
     if figure.is_file():
         parts.append(
             _html.figure(

@@ -3,19 +3,16 @@ this run and of its spread variant, PSIS-LOO and the comparison with the run's m
 
 from __future__ import annotations
 
-import json
-from pathlib import Path
-
 from brdf_infer import _arviz as az
-from brdf_infer.posterior import POSTERIOR_FILE, SUMMARY_FILE
 from brdf_infer.report import _html
+from brdf_infer.run_folder import SUMMARY_FILE, VARIANTS_DIR, RunFolder
 from brdf_infer.run_records import PosteriorSummary
 from brdf_infer.verdict import PARETO_K_LIMIT
 
 SPREAD_VARIANT = "spread"
 
 
-def loo_pits(run: Path, summary: PosteriorSummary) -> dict[str, tuple[list, float]]:
+def loo_pits(run: RunFolder, summary: PosteriorSummary) -> dict[str, tuple[list, float]]:
     """Error model name → (LOO-PIT values, KS p) of this run and of its spread variant."""
     pits = {}
     if "predictive" in summary:
@@ -24,9 +21,8 @@ def loo_pits(run: Path, summary: PosteriorSummary) -> dict[str, tuple[list, floa
             summary["predictive"]["loo_pit"],
             summary["predictive"]["loo_pit_ks_p"],
         )
-    variant = run / "variants" / SPREAD_VARIANT / SUMMARY_FILE
-    if variant.is_file():
-        other = json.loads(variant.read_text())
+    other = run.variant(SPREAD_VARIANT).read_json(SUMMARY_FILE, optional=True)
+    if other is not None:
         pits["spread (earlier model)"] = (
             other["predictive"]["loo_pit"],
             other["predictive"]["loo_pit_ks_p"],
@@ -108,12 +104,13 @@ def error_model_table(summary: PosteriorSummary) -> str:
     )
 
 
-def variants_comparison(run: Path, idata) -> str:
+def variants_comparison(run: RunFolder, idata) -> str:
     """LOO comparison with model variants stored under ``run/variants/NAME``."""
     variants = {"this run": idata}
-    for folder in sorted((run / "variants").glob("*/")) if (run / "variants").is_dir() else []:
-        if (folder / POSTERIOR_FILE).is_file():
-            variants[folder.name] = az.from_netcdf(folder / POSTERIOR_FILE)
+    stored = run.path / VARIANTS_DIR
+    for name in sorted(p.name for p in stored.glob("*/")) if stored.is_dir() else []:
+        if (posterior := run.variant(name).posterior_file).is_file():
+            variants[name] = az.from_netcdf(posterior)
     if len(variants) < 2:
         return "<p>No model variants in this run to compare (variants/NAME/posterior.nc).</p>"
     compared = az.compare(variants)

@@ -3,14 +3,12 @@ verdict and the TIS table."""
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 from brdf_infer._atomic import atomic_write_bytes
 from brdf_infer.model import fold_statement
-from brdf_infer.posterior import BANDS_FILE, SUMMARY_FILE
-from brdf_infer.report._build import FIGURE_DIR
 from brdf_infer.report._results import indices_of, tis_fold
+from brdf_infer.run_folder import RunFolder
 from brdf_infer.verdict import Verdict
 
 EXAMPLE_FIGURES = ("brdf_bands", "tis_band", "hemisphere", "predictive", "raytrace", "instrument")
@@ -25,19 +23,19 @@ STUDY_FIGURES = (
 
 def write_example(run: Path, example: Path) -> Path:
     """A small committed example: the key PNGs of ``run`` and a README with its verdict."""
-    summary = json.loads((run / SUMMARY_FILE).read_text())
+    folder = RunFolder(run)
+    summary = folder.summary()
     verdict = Verdict.from_json(summary["verdict"])
-    bands = json.loads((run / BANDS_FILE).read_text())
-    sources = [run / FIGURE_DIR / f"{name}.png" for name in EXAMPLE_FIGURES]
-    sources += [run / f"{name}.png" for name in STUDY_FIGURES]
+    bands = folder.bands()
+    sources = [folder.figure_dir / f"{name}.png" for name in EXAMPLE_FIGURES]
+    sources += [folder.file(f"{name}.png") for name in STUDY_FIGURES]
     names = [source.stem for source in sources if source.is_file()]
     for source in sources:
         if source.is_file():
             atomic_write_bytes(example / source.name, source.read_bytes())
     diagnostics = summary["diagnostics"]
     band = bands.get("tis")
-    studies_file = run / "studies.json"
-    studies = json.loads(studies_file.read_text()).get("run", []) if studies_file.exists() else []
+    studies = (folder.studies() or {}).get("run", [])
     lines = [
         f"# Example report: scene `{summary['scene']}` ({summary['sampler']})",
         "",

@@ -3,16 +3,16 @@ the model evaluated directly, and the ABg table."""
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import matplotlib.pyplot as plt
 import numpy as np
 
-from brdf_infer.export import EXPORTS_FILE, read_bsdf
+from brdf_infer.export import read_bsdf
 from brdf_infer.model import brdf_hemisphere, fold_statement
 from brdf_infer.params import HemisphereConstants, Params
 from brdf_infer.report import _html
+from brdf_infer.run_folder import RunFolder
 
 SHOWN_THETA_I_DEG = (0.0, 30.0, 60.0, 80.0)
 _KIND_STYLE = {"lower95": ":", "median": "-", "upper95": ":", "params": "-"}
@@ -25,15 +25,9 @@ _MEANINGS = (
 )
 
 
-def load_exports(run: Path) -> list[dict]:
+def load_exports(run: RunFolder) -> list[dict]:
     """The exports recorded in ``run/exports.json`` whose files still exist."""
-    path = run / EXPORTS_FILE
-    if not path.is_file():
-        return []
-    try:
-        entries = json.loads(path.read_text())["exports"]
-    except (OSError, ValueError, KeyError):
-        return []
+    entries = run.exports()
     return [e for e in entries if all(Path(f["path"]).is_file() for f in e["files"])]
 
 

@@ -2,16 +2,14 @@
 
 from __future__ import annotations
 
-import json
-from pathlib import Path
 from typing import Any
 
 import matplotlib.pyplot as plt
 import numpy as np
 
-from brdf_infer.instrument_comparison import INSTRUMENT_FILE
 from brdf_infer.report import _html
 from brdf_infer.report._raytrace import figure_png
+from brdf_infer.run_folder import RunFolder
 
 MEANINGS = {
     "point": "Eq. (6) at the nominal angles (the article's conversion)",
@@ -97,12 +95,11 @@ def plot_instrument_traces(payload: dict[str, Any]) -> plt.Figure:
     return figure
 
 
-def instruments_section(run: Path) -> list[str]:
+def instruments_section(run: RunFolder) -> list[str]:
     """HTML of the section, empty when the run has no ``instruments.json``."""
-    path = run / INSTRUMENT_FILE
-    if not path.is_file():
+    payload = run.instruments()
+    if payload is None:
         return []
-    payload = json.loads(path.read_text())
     meaning = "; ".join(
         f"<b>{name}</b>: {_html.escape(text)}"
         for name, text in MEANINGS.items()

@@ -9,10 +9,10 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
-from brdf_infer._atomic import atomic_write_bytes, atomic_write_json
 from brdf_infer.model import FAMILIES
 from brdf_infer.report import _html
-from brdf_infer.sbc import COVERAGE_LEVELS, HISTOGRAM_BINS, SBC_FILE, SbcResult
+from brdf_infer.run_folder import SBC_FILE, RunFolder
+from brdf_infer.sbc import COVERAGE_LEVELS, HISTOGRAM_BINS, SbcResult
 from brdf_infer.settings import PLANTED_FAULTS
 from brdf_infer.uniformity import ecdf_band, uniform_rank_band
 from brdf_infer.verdict import ALL_PASS, Verdict
@@ -174,10 +174,11 @@ def sbc_page(result: SbcResult, figures: dict[str, bytes]) -> str:
 
 def write_sbc(out: Path, result: SbcResult) -> list[Path]:
     """sbc.json, the figures (PNG) and sbc.html into ``out``, atomically."""
-    out.mkdir(parents=True, exist_ok=True)
-    paths = [atomic_write_json(out / SBC_FILE, result.as_json())]
+    folder = RunFolder(out)
+    folder.path.mkdir(parents=True, exist_ok=True)
+    paths = [folder.write_json(SBC_FILE, result.as_json())]
     figures = sbc_figures(result)
     for name, png in figures.items():
-        paths.append(atomic_write_bytes(out / f"{name}.png", png))
-    paths.append(atomic_write_bytes(out / "sbc.html", sbc_page(result, figures).encode()))
+        paths.append(folder.write_bytes(f"{name}.png", png))
+    paths.append(folder.write_bytes("sbc.html", sbc_page(result, figures).encode()))
     return paths

@@ -4,21 +4,16 @@ the folder the figure is written to with the result."""
 from __future__ import annotations
 
 import io
-import json
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from matplotlib.figure import Figure
 
-from brdf_infer._atomic import atomic_write_bytes, atomic_write_json
 from brdf_infer.report import _html
-from brdf_infer.sensitivity import (
-    SENSITIVITY_FIGURE,
-    SENSITIVITY_FILE,
-    TIS_ANGLE_DEG,
-    SensitivityResult,
-)
+from brdf_infer.run_folder import SENSITIVITY_FIGURE, SENSITIVITY_FILE, RunFolder
+from brdf_infer.scene import TIS_ANGLE_DEG
+from brdf_infer.sensitivity import SensitivityResult
 
 PRIOR_SENSITIVITY_LIMIT = 0.05  # power-scaling sensitivity above which a component matters
 
@@ -119,12 +114,11 @@ def power_scaling_rows(payload: dict[str, Any]) -> list[list[str]]:
     ]
 
 
-def sensitivity_section(run: Path) -> list[str]:
+def sensitivity_section(run: RunFolder) -> list[str]:
     """The report's section from ``run/sensitivity.json`` (none when the run has none)."""
-    path = run / SENSITIVITY_FILE
-    if not path.is_file():
+    payload = run.sensitivity()
+    if payload is None:
         return []
-    payload = json.loads(path.read_text())
     parts = [
         "<h2>Sensitivity to the error-model assumptions</h2>",
         "<p>The posterior under the scene's error model (default) and with one assumption "
@@ -157,8 +151,8 @@ def sensitivity_section(run: Path) -> list[str]:
 def write_sensitivity(out: Path, result: SensitivityResult) -> list[Path]:
     """sensitivity.json and its figure (TIS(70°) and Δelpd per variant) into ``out``,
     atomically."""
-    payload = result.as_json()
+    folder, payload = RunFolder(out), result.as_json()
     return [
-        atomic_write_json(out / SENSITIVITY_FILE, payload),
-        atomic_write_bytes(out / SENSITIVITY_FIGURE, sensitivity_figure(payload)),
+        folder.write_json(SENSITIVITY_FILE, payload),
+        folder.write_bytes(SENSITIVITY_FIGURE, sensitivity_figure(payload)),
     ]

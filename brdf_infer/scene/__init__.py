@@ -107,6 +107,7 @@ from brdf_infer.scene._errors import parse_errors
 from brdf_infer.scene._load import BUILTIN_SCENES, DEFAULT_SCENE, load_scene, scene_file
 from brdf_infer.scene._parse import parse_scene
 from brdf_infer.scene._records import (
+    TIS_ANGLE_DEG,
     DesignSettings,
     InstrumentSettings,
     ModelSettings,
@@ -117,12 +118,14 @@ from brdf_infer.scene._records import (
     Scene,
     SeriesGeometry,
     Studies,
+    tis_angles,
 )
 from brdf_infer.scene._setups import check_instrument
 
 __all__ = [
     "BUILTIN_SCENES",
     "DEFAULT_SCENE",
+    "TIS_ANGLE_DEG",
     "DesignSettings",
     "InstrumentSettings",
     "ModelSettings",
@@ -138,4 +141,5 @@ __all__ = [
     "parse_errors",
     "parse_scene",
     "scene_file",
+    "tis_angles",
 ]

@@ -364,3 +364,12 @@ class Scene:
     def measured_log_brdf(self, measurements: Measurements) -> np.ndarray:
         """ln BRDF of each row: the measured value converted through Eq. (6) where needed."""
         return np.log(measurements.reflectance) - self.log_conversion(measurements)
+
+
+TIS_ANGLE_DEG = 70.0  # the article's TIS angle (Sec. 7), always among the reported angles [deg]
+
+
+def tis_angles(scene: Scene, measurements: Measurements) -> list[float]:
+    """The angles a run reports the TIS at: the scene's band angles
+    (:meth:`Scene.band_theta_i_deg`) and 70° (:data:`TIS_ANGLE_DEG`), ascending [deg]."""
+    return sorted({*scene.band_theta_i_deg(measurements), TIS_ANGLE_DEG})
