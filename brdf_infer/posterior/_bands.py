@@ -87,6 +87,14 @@ def _signed_program(family: ModelFamily):
     return _program("signed", family, lambda member: member.log_brdf_signed)
 
 
+def _inplane_program(family: ModelFamily):
+    """The family's closed-form in-plane BRDF [sr⁻¹] (one program: op by op, each operation
+    is a program of its own)."""
+    return _program(
+        "inplane", family, lambda member: lambda i, s, p: jnp.exp(member.log_brdf_inplane(i, s, p))
+    )
+
+
 def tis_band(
     family: ModelFamily, physical: dict[str, np.ndarray], theta_i_deg, draws: int
 ) -> dict[str, list]:
@@ -106,7 +114,7 @@ def _brdf_inplane_draws(family: ModelFamily, physical: dict[str, np.ndarray], gr
     where it has one (Eq. 7), else its compiled hemisphere BRDF at φ = 180° or 0°."""
     if family.log_brdf_inplane is not None:
         batch = {k: np.asarray(v)[:, None, None] for k, v in physical.items()}
-        return np.asarray(jnp.exp(family.log_brdf_inplane(grid_i[None], grid_s[None], batch)))
+        return np.asarray(_inplane_program(family)(grid_i[None], grid_s[None], batch))
     batch = {k: jnp.asarray(v, float)[:, None, None] for k, v in physical.items()}
     return np.exp(np.asarray(_signed_program(family)(grid_i[None], grid_s[None], batch)))
 

@@ -43,6 +43,7 @@ INIT_CANDIDATES = 16
 # the gradient at 42 / 2e3 / 2e4 rows is the same within the machine's noise either way)
 CPU_COMPILER_OPTIONS = {"xla_cpu_experimental_ynn_fusion_type": ""}
 CHUNK = 50  # iterations per compiled call: one program whatever the number of draws
+CONSTRAIN_BLOCK = 250  # draws per call of the constraining program (NutsProgram._constrained)
 _STATISTICS = ("diverging", "potential_energy", "energy", "accept_prob", "num_steps")
 
 
@@ -186,14 +187,31 @@ class NutsProgram:
         flat_z, *statistics = (
             np.stack([r[k] for r in records])[:, self.warmup :] for k in range(len(records[0]))
         )
-        flat_z = jnp.asarray(flat_z)
-        constrain = jax.vmap(jax.vmap(self.flat.constrain, (0, None)), (0, None))
-        sites = self._compile("constrain", constrain, flat_z, data)(flat_z, data)
         return NutsOutput(
-            sites={k: np.asarray(v) for k, v in jax.device_get(sites).items()},
+            sites=self._constrained(flat_z, data),
             stats=dict(zip(_STATISTICS, statistics, strict=True)),
             seconds={},
         )
+
+    def _constrained(self, flat_z: np.ndarray, data: ModelData) -> dict[str, np.ndarray]:
+        """Every site of the draws ``flat_z`` (chains, draws, dimension), through one program
+        of :data:`CONSTRAIN_BLOCK` draws whatever their number (a refit's fewer draws reuse
+        the run's program instead of tracing their own)."""
+        shape = flat_z.shape[:-1]
+        rows = flat_z.reshape(-1, flat_z.shape[-1])
+        count = len(rows)
+        padded = np.concatenate([rows, np.repeat(rows[-1:], -count % CONSTRAIN_BLOCK, axis=0)])
+        constrain = jax.vmap(self.flat.constrain, (0, None))
+        block = jnp.asarray(padded[:CONSTRAIN_BLOCK])
+        program = self._compile("constrain", constrain, block, data)
+        parts = [
+            jax.device_get(program(jnp.asarray(padded[k : k + CONSTRAIN_BLOCK]), data))
+            for k in range(0, len(padded), CONSTRAIN_BLOCK)
+        ]
+        return {
+            k: np.concatenate([p[k] for p in parts])[:count].reshape(*shape, *np.shape(v)[1:])
+            for k, v in parts[0].items()
+        }
 
     def run(
         self,

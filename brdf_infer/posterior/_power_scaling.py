@@ -58,23 +58,31 @@ _PRIOR_SITES = {
 
 def log_prior_draws(model: PosteriorModel, sites: dict[str, np.ndarray]) -> np.ndarray:
     """ln p(θ) of every draw (shape of the draws' leading axes), from the scene's priors on
-    the sampled coordinates (module docstring)."""
-    shape = np.shape(sites["alpha"])
-    total = np.zeros(shape)
-    for name, prior in model.scene.priors.items():
-        if prior.fixed:
-            continue
+    the sampled coordinates (module docstring). One compiled program: run op by op, its ~60
+    small operations each cost a program of their own (traced, loaded from the cache)."""
+    names = [name for name, prior in model.scene.priors.items() if not prior.fixed]
+    needed = {_PRIOR_SITES[name][0] for name in names} | {"sample_sd", "repeatability"}
+    if model.family.paper_parameters:
+        needed |= set(PARAM_NAMES)
+    used = {k: jnp.asarray(v) for k, v in sites.items() if k in needed}
+    return np.asarray(jax.jit(lambda s: _log_prior(model, names, s))(used))
+
+
+def _log_prior(model: PosteriorModel, names: list[str], sites: dict) -> jnp.ndarray:
+    """:func:`log_prior_draws` of arrays (traced)."""
+    total = jnp.zeros(jnp.shape(sites["alpha"]))
+    for name in names:
         site, scale = _PRIOR_SITES[name]
-        distribution = prior_distribution(prior, scale)
-        total += np.asarray(distribution.log_prob(jnp.asarray(sites[site])))
+        distribution = prior_distribution(model.scene.priors[name], scale)
+        total += distribution.log_prob(sites[site])
     if model.family.paper_parameters:  # the physical prior's truncation (0 on the posterior)
-        params = Params(*(jnp.asarray(sites[name]) for name in PARAM_NAMES))
-        total += np.asarray(energy_log_factor(params, model.family.constants))
+        params = Params(*(sites[name] for name in PARAM_NAMES))
+        total += energy_log_factor(params, model.family.constants)
     errors = model.errors
     for site in ("sample_sd", "repeatability"):
         if site in sites:
             prior_scale = errors.noise_prior_scale(site)
-            total += np.asarray(dist.HalfNormal(prior_scale).log_prob(jnp.asarray(sites[site])))
+            total += dist.HalfNormal(prior_scale).log_prob(sites[site])
     return total
 
 

@@ -17,6 +17,7 @@ they are (the scene's ``[priors]`` are Eq. (7)'s).
 from __future__ import annotations
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 from numpyro.infer import Predictive
 
@@ -48,8 +49,11 @@ def accepted(model: PosteriorModel, draws: dict[str, np.ndarray]) -> np.ndarray:
     count = len(next(iter(draws.values())))
     if not model.family.paper_parameters:
         return np.ones(count, bool)
-    params = model.family.as_params({name: draws[name] for name in model.family.parameters})
-    return np.asarray(conserves_energy(params, model.family.constants))
+    family = model.family
+    physical = {name: jnp.asarray(draws[name]) for name in family.parameters}
+    # one compiled program (op by op, each operation is a program of its own)
+    check = jax.jit(lambda p: conserves_energy(family.as_params(p), family.constants))
+    return np.asarray(check(physical))
 
 
 def prior_draws(
