@@ -5,6 +5,7 @@ value-and-gradient inside a compiled loop, and the steps after sampling."""
 from __future__ import annotations
 
 import tempfile
+import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -139,6 +140,7 @@ def write_speed_report(out: Path, quick: bool, progress=print) -> Path:
     from brdf_infer.scene import load_scene
 
     started = time.perf_counter()
+    load_before = os.getloadavg()[0]  # other jobs on the cores lengthen every wall time
     scene = load_scene("lya")
     measurements = scene.load_measurements()
     progress("speed 1/3: value and gradient ...")
@@ -152,7 +154,8 @@ def write_speed_report(out: Path, quick: bool, progress=print) -> Path:
         "",
         f"Machine: {machine_description()}.  ",
         f"Mode: {'quick' if quick else 'full'}; total wall time "
-        f"{time.perf_counter() - started:.0f} s.  ",
+        f"{time.perf_counter() - started:.0f} s; 1-minute load average "
+        f"{load_before:.1f} at the start, {os.getloadavg()[0]:.1f} at the end.  ",
         "Regenerate: `brdf-infer bench --speed`. Every row was measured in this one run.",
         "",
         "## The main job, end to end",
