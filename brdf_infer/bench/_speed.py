@@ -4,8 +4,8 @@ value-and-gradient inside a compiled loop, and the steps after sampling."""
 
 from __future__ import annotations
 
-import tempfile
 import os
+import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
