@@ -133,7 +133,8 @@ def test_the_sample_scale_is_integrated_out_over_its_prior(nuts_run, lya):
         log_values = log_likelihood_draws(model, {**one, "sample_sd": tau}) + log_prior
         fine, coarse = trapezoid(log_values, 1), trapezoid(log_values, 2)
         assert abs(fine - coarse) < 1e-6, (index, fine, coarse)
-        np.testing.assert_allclose(ours[index], fine, atol=2e-3)
+        # 2e-4 measured; 8e-3 when the nodes spanned the extreme τ draws (down to 4e-6)
+        np.testing.assert_allclose(ours[index], fine, atol=5e-4)
 
 
 # ------------------------------------------------------------------ a run's records
