@@ -47,13 +47,13 @@ from brdf_infer.posterior import (
     flatten_draws,
     interval95,
     loo_terms,
+    without_row,
 )
 from brdf_infer.run_folder import COMPARE_FILE as COMPARE_FILE  # the old name, kept
 from brdf_infer.scene import Scene
 from brdf_infer.settings import CompareSettings
 
 PARETO_K_LIMIT = 0.7
-LEFT_OUT_SIGMA = 1e6  # σ of ln R that removes a row's information (exact LOO by refit)
 TIS_DRAWS = 400  # posterior draws the TIS band is computed from
 TIS_ANGLE_DEG = 70.0
 
@@ -139,14 +139,6 @@ def check_family_names(names: list[str]) -> list[str]:
     if len(names) < 2:
         raise BadInputError("name at least two families to compare", field="models")
     return names
-
-
-def without_row(model, row: int):
-    """``model``'s data with ``row`` left out: its σ set to :data:`LEFT_OUT_SIGMA`, which
-    removes its information from the likelihood and keeps the data's shape (no compilation)."""
-    noise = model.data.noise
-    sigma = noise.sigma_row.at[row].set(LEFT_OUT_SIGMA)
-    return model.data._replace(noise=noise._replace(sigma_row=sigma))
 
 
 def _idata(sites: dict, log_lik: np.ndarray, names: tuple[str, ...]) -> az.InferenceData:

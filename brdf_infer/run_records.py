@@ -53,10 +53,13 @@ class Predictive(TypedDict):
     se: float
     p_loo: float
     pareto_k_max: float
-    pareto_k_high: int  # rows above 0.7
+    pareto_k_high: int  # rows above 0.7, those refitted aside
     pareto_k: NotRequired[list[float]]  # every row's (runs written before it lack it)
     # the rows above 0.7: row, series, sample, theta_i_deg, theta_s_deg, [phi_s_deg], k
     pareto_k_rows: NotRequired[list[dict[str, Any]]]
+    # rows above 0.7 whose terms a refit without them computed exactly (the fields of
+    # pareto_k_rows and elpd_exact); pareto_k_high and pareto_k_rows leave them out
+    loo_refit_rows: NotRequired[list[dict[str, Any]]]
     loo_pit: list[float]
     loo_pit_ks_p: float
 

@@ -12,7 +12,8 @@ disagree. It lists, most serious first:
    autocorrelation times; :data:`brdf_infer.posterior.THRESHOLDS`);
 4. the rows whose PSIS-LOO Pareto k exceeds :data:`PARETO_K_LIMIT` (the leave-one-out
    estimate, and so the report's model comparisons, are unreliable there), each named by its
-   series, sample, angles and k.
+   series, sample, angles and k, unless the run computed their terms exactly by refitting
+   without them (:mod:`brdf_infer.posterior._loo_refit`), which makes them a fact.
 
 Empty, the verdict is "every diagnostic passes". Beside these failures it states *facts* a
 reader of the answer must know, which are not failures: an assumption of the error model that
@@ -202,6 +203,13 @@ def answer_facts(summary: PosteriorSummary) -> list[str]:
             "reference values outside the 95 % interval: "
             + ", ".join(outside)
             + ' (docs/instruments.md, "The answer and the article")'
+        )
+    refitted = summary.get("predictive", {}).get("loo_refit_rows") or []
+    if refitted:
+        facts.append(
+            f"{len(refitted)} influential measurement(s), Pareto k > {PARETO_K_LIMIT}, their "
+            "leave-one-out terms from a refit without them: "
+            + "; ".join(row_words(row) for row in refitted)
         )
     return facts
 

@@ -197,7 +197,7 @@ def test_a_row_with_the_left_out_sigma_carries_no_information(lya):
     posterior is the posterior without row i."""
     import numpyro.distributions as dist
 
-    from brdf_infer.compare import LEFT_OUT_SIGMA
+    from brdf_infer.posterior import LEFT_OUT_SIGMA
 
     scene, measurements = lya
     model = build_posterior_model(scene, measurements, family("abg"))

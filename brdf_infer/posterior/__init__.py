@@ -23,6 +23,7 @@ from brdf_infer.posterior._bands import (
 )
 from brdf_infer.posterior._likelihood import ModelData, build_model_data
 from brdf_infer.posterior._loo import pointwise_loo_terms
+from brdf_infer.posterior._loo_refit import LEFT_OUT_SIGMA, exact_loo_rows, without_row
 from brdf_infer.posterior._lowrank import cholesky, solve_lower, solve_upper_transposed
 from brdf_infer.posterior._model import LINEAR, NOISE_SITES, PosteriorModel, build_posterior_model
 from brdf_infer.posterior._nuts import (
@@ -75,6 +76,7 @@ __all__ = [
     "BANDS_FILE",
     "CHECKPOINT_FILE",
     "FAMILY_TIS_DRAWS",
+    "LEFT_OUT_SIGMA",
     "LINEAR",
     "NOISE_SITES",
     "POSTERIOR_FILE",
@@ -104,6 +106,7 @@ __all__ = [
     "diagnostics",
     "draws_params",
     "draws_physical",
+    "exact_loo_rows",
     "family_draws",
     "flatten_draws",
     "inference_data",
@@ -132,4 +135,5 @@ __all__ = [
     "solve_upper_transposed",
     "stack_data",
     "tis_band",
+    "without_row",
 ]

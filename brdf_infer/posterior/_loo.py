@@ -77,6 +77,8 @@ class LeaveOneOut:
         p_loo: the effective number of parameters, lppd − elpd_loo.
         pareto_k: the Pareto shape k̂ of every row's importance weights, (rows,).
         pit: the LOO-PIT of every row, (rows,) (:func:`loo_pit`).
+        elpd_i: every row's term of ``elpd_loo``, (rows,).
+        lppd_i: every row's ln mean_s p(yᵢ | y₋ᵢ, θ_s) over the draws, (rows,).
     """
 
     elpd_loo: float
@@ -84,6 +86,25 @@ class LeaveOneOut:
     p_loo: float
     pareto_k: np.ndarray
     pit: np.ndarray
+    elpd_i: np.ndarray
+    lppd_i: np.ndarray
+
+    def with_exact(self, exact: dict[int, tuple[float, float]]) -> LeaveOneOut:
+        """These estimates with the rows of ``exact`` (row → exact ln p(yᵢ | y₋ᵢ) and LOO-PIT,
+        :mod:`brdf_infer.posterior._loo_refit`) put in; ``p_loo`` follows the new elpd
+        (lppd − elpd_loo, the lppd unchanged), the k̂ stay the importance sampling's."""
+        elpd_i, pit = self.elpd_i.copy(), self.pit.copy()
+        for row, (elpd, row_pit) in exact.items():
+            elpd_i[row], pit[row] = elpd, row_pit
+        return LeaveOneOut(
+            elpd_loo=float(elpd_i.sum()),
+            se=float(np.sqrt(elpd_i.size * np.var(elpd_i))),
+            p_loo=float(self.lppd_i.sum() - elpd_i.sum()),
+            pareto_k=self.pareto_k,
+            pit=pit,
+            elpd_i=elpd_i,
+            lppd_i=self.lppd_i,
+        )
 
 
 def relative_efficiency(posterior) -> float:
@@ -132,4 +153,6 @@ def psis_loo(
         p_loo=float(lppd.sum() - elpd.sum()),
         pareto_k=pareto_k,
         pit=pit,
+        elpd_i=elpd,
+        lppd_i=lppd,
     )

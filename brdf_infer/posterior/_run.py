@@ -28,7 +28,13 @@ from brdf_infer.posterior._bands import (
     interval95,
     posterior_bands,
 )
-from brdf_infer.posterior._loo import psis_loo, relative_efficiency, uniformity_p_value
+from brdf_infer.posterior._loo import (
+    LeaveOneOut,
+    psis_loo,
+    relative_efficiency,
+    uniformity_p_value,
+)
+from brdf_infer.posterior._loo_refit import exact_loo_rows
 from brdf_infer.posterior._memory import check_memory
 from brdf_infer.posterior._model import NOISE_SITES, PosteriorModel, build_posterior_model
 from brdf_infer.posterior._potential import FlatPotential
@@ -157,27 +163,33 @@ def run_fingerprint(model: PosteriorModel, measurements: Measurements) -> dict[s
 
 
 def predictive_checks(
-    idata: az.InferenceData,
-    log_lik: np.ndarray,
-    cdf: np.ndarray,
+    loo: LeaveOneOut,
     measurements: Measurements | None = None,
+    exact: dict[int, tuple[float, float]] | None = None,
 ) -> dict:
     """PSIS-LOO (elpd with its standard error, p_loo, every row's Pareto k, the largest, the
-    number of rows above :data:`~brdf_infer.verdict.PARETO_K_LIMIT` and, given
-    ``measurements``, those rows by name) and the LOO-PIT of every row with a
-    Kolmogorov–Smirnov test of its uniformity, from the leave-one-out terms of
-    :func:`loo_terms` (``idata``: the run's draws, for their relative efficiency), a block of
-    rows at a time (:func:`~brdf_infer.posterior._loo.psis_loo`)."""
-    loo = psis_loo(log_lik, cdf, relative_efficiency(idata.posterior))
+    number of rows above :data:`~brdf_infer.verdict.PARETO_K_LIMIT` that were not refitted and,
+    given ``measurements``, those rows by name) and the LOO-PIT of every row with a
+    Kolmogorov–Smirnov test of its uniformity, from :func:`~brdf_infer.posterior._loo.psis_loo`;
+    the rows of ``exact`` (:func:`~brdf_infer.posterior._loo_refit.exact_loo_rows`) by refit,
+    listed under ``loo_refit_rows``."""
+    exact = exact or {}
+    loo = loo.with_exact(exact)
     pareto_k = loo.pareto_k
-    named = {} if measurements is None else {"pareto_k_rows": high_k_rows(measurements, pareto_k)}
+    high = high_k_rows(measurements, pareto_k) if measurements is not None else None
+    named = {}
+    if high is not None:
+        named["pareto_k_rows"] = [row for row in high if row["row"] not in exact]
+        named["loo_refit_rows"] = [
+            {**row, "elpd_exact": exact[row["row"]][0]} for row in high if row["row"] in exact
+        ]
     return {
         **named,
         "elpd_loo": loo.elpd_loo,
         "se": loo.se,
         "p_loo": loo.p_loo,
         "pareto_k_max": float(np.max(pareto_k)),
-        "pareto_k_high": int(np.sum(pareto_k > PARETO_K_LIMIT)),
+        "pareto_k_high": int(np.sum(pareto_k > PARETO_K_LIMIT)) - len(exact),
         "pareto_k": pareto_k.tolist(),  # per row, for the report
         "loo_pit": loo.pit.tolist(),
         "loo_pit_ks_p": uniformity_p_value(loo.pit),
@@ -348,6 +360,14 @@ class _StepClock:
         self._last = now
 
 
+def _tis_70(bands: Bands) -> dict | None:
+    """TIS(70°)'s median, 68 % and 95 % intervals from the bands (None: no TIS band)."""
+    if "tis" not in bands:
+        return None
+    at = bands["tis"]["theta_i_deg"].index(70.0)
+    return {key: bands["tis"][key][at] for key in ("median", "lo68", "hi68", "lo95", "hi95")}
+
+
 def complete_run(
     model: PosteriorModel,
     measurements: Measurements,
@@ -385,12 +405,11 @@ def complete_run(
     clock.lap("bands")
     checks = diagnostics(idata, result, parameters, fixed)
     clock.lap("diagnostics")
+    loo = psis_loo(log_lik, cdf, relative_efficiency(idata.posterior))
+    exact = exact_loo_rows(model, result, loo.pareto_k, PARETO_K_LIMIT) if refit else {}
+    clock.lap("loo")
     answer = answer_records(model, measurements, result, theta_i_band, with_tis, seed, refit)
     clock.lap("answer")
-    tis_70 = None
-    if "tis" in bands:
-        at = bands["tis"]["theta_i_deg"].index(70.0)
-        tis_70 = {key: bands["tis"][key][at] for key in ("median", "lo68", "hi68", "lo95", "hi95")}
     summary = {
         "scene": scene.name,
         "model": name,
@@ -407,8 +426,8 @@ def complete_run(
             site: interval95(result.sites[site]) for site in NOISE_SITES if site in result.sites
         },
         "diagnostics": checks,
-        "predictive": predictive_checks(idata, log_lik, cdf, measurements),
-        "tis_70deg": tis_70,
+        "predictive": predictive_checks(loo, measurements, exact),
+        "tis_70deg": _tis_70(bands),
         "pi_brdf0": pi_brdf0,
         **answer,  # width, learned, reference
         "seconds": dict(result.seconds),

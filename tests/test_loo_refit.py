@@ -1,0 +1,59 @@
+"""Exact leave-one-out by refit (:mod:`brdf_infer.posterior._loo_refit`) where PSIS-LOO's k̂
+exceeds 0.7, and the verdict that follows from it."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from brdf_infer.posterior import (
+    build_posterior_model,
+    exact_loo_rows,
+    loo_terms,
+    run_nuts,
+)
+from brdf_infer.posterior._loo import psis_loo
+from brdf_infer.verdict import answer_facts
+from tests.helpers import REDUCED_NUTS
+
+
+@pytest.fixture(scope="module")
+def lya_draws(lya):
+    scene, measurements = lya
+    model = build_posterior_model(scene, measurements)
+    draws = run_nuts(model, seed=0, progress=False, **REDUCED_NUTS)
+    log_lik, cdf = loo_terms(model, draws.sites)
+    return model, draws, psis_loo(log_lik, cdf, 1.0)  # reff 1: the smoothing's tail length
+
+
+def test_a_refit_without_a_row_gives_its_psis_term_where_psis_is_reliable(lya_draws):
+    """Where k̂ < 0.5 PSIS-LOO is reliable, so the refit's exact term must agree with it; the
+    planted fault (the row not left out: the full posterior's ln mean p(yᵢ | y₋ᵢ, θ)) lies
+    p_loo,ᵢ above it and must not. The row: the one with the largest p_loo,ᵢ among k̂ < 0.5."""
+    model, draws, loo = lya_draws
+    reliable = np.flatnonzero(loo.pareto_k < 0.5)
+    row = int(reliable[np.argmax((loo.lppd_i - loo.elpd_i)[reliable])])
+    pareto_k = np.zeros_like(loo.pareto_k)
+    pareto_k[row] = 1.0  # ask for this row alone
+    (elpd, pit), *_ = exact_loo_rows(model, draws, pareto_k, 0.7).values()
+    planted = loo.lppd_i[row] - loo.elpd_i[row]
+    # measured: 0.006 apart (row 41, 4 x 1000 draws each); the planted fault lies 1.17 away
+    assert abs(elpd - loo.elpd_i[row]) < 0.05, (elpd, loo.elpd_i[row])
+    assert planted > 0.5
+    assert abs(pit - loo.pit[row]) < 0.05
+
+
+def test_more_rows_than_the_cap_are_not_refitted(lya_draws):
+    model, draws, loo = lya_draws
+    assert exact_loo_rows(model, draws, np.ones_like(loo.pareto_k), 0.7) == {}
+    assert exact_loo_rows(model, draws, np.zeros_like(loo.pareto_k), 0.7) == {}
+
+
+def test_a_refitted_row_is_a_fact_of_the_verdict_not_a_failure():
+    row = {"row": 30, "series": "II", "sample": "40x40", "theta_i_deg": 45.0}
+    row |= {"theta_s_deg": 60.0, "k": 0.96, "elpd_exact": -0.13}
+    facts = answer_facts({"predictive": {"loo_refit_rows": [row]}})
+    assert facts == [
+        "1 influential measurement(s), Pareto k > 0.7, their leave-one-out terms from a refit "
+        "without them: series II, sample 40x40, θi 45°, θs 60° (k 0.96)"
+    ]
