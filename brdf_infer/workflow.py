@@ -46,6 +46,7 @@ from brdf_infer.measurements import Measurements
 from brdf_infer.plausibility import Implausible
 from brdf_infer.run_folder import FIT_LSQ_FILE, FIT_PAPER_FILE, RunFolder
 from brdf_infer.run_folder import STUDIES_FILE as STUDIES_FILE  # the old name, kept
+from brdf_infer.run_records import PosteriorSummary
 from brdf_infer.scene import Scene, Studies
 from brdf_infer.settings import LSQ_STARTS, RunSettings
 from brdf_infer.verdict import Verdict
@@ -107,7 +108,7 @@ class RunResult:
     verdict: Verdict
     paper_fit: dict[str, Any] | None
     lsq: dict[str, Any]
-    posterior: dict[str, Any]
+    posterior: PosteriorSummary
     comparison: dict[str, Any] | None
     seconds: float
 
