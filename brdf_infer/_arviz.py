@@ -30,6 +30,7 @@ with warnings.catch_warnings():
         plot_trace,
         psens,
         psislw,
+        rhat,
         summary,
     )
     from arviz.labels import MapLabeller
@@ -54,5 +55,6 @@ __all__ = [
     "plot_trace",
     "psens",
     "psislw",
+    "rhat",
     "summary",
 ]

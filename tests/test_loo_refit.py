@@ -12,8 +12,10 @@ from brdf_infer.posterior import (
     loo_terms,
     run_nuts,
 )
-from brdf_infer.posterior._loo import psis_loo
-from brdf_infer.verdict import answer_facts
+from brdf_infer.posterior._loo import LeaveOneOut, psis_loo
+from brdf_infer.posterior._loo_refit import MAX_REFIT_ROWS
+from brdf_infer.posterior._run import predictive_checks
+from brdf_infer.verdict import answer_facts, posterior_verdict
 from tests.helpers import REDUCED_NUTS
 
 
@@ -45,8 +47,42 @@ def test_a_refit_without_a_row_gives_its_psis_term_where_psis_is_reliable(lya_dr
 
 def test_more_rows_than_the_cap_are_not_refitted(lya_draws):
     model, draws, loo = lya_draws
-    assert exact_loo_rows(model, draws, np.ones_like(loo.pareto_k), 0.7) == {}
+    pareto_k = np.zeros_like(loo.pareto_k)
+    pareto_k[: MAX_REFIT_ROWS + 1] = 1.0
+    assert exact_loo_rows(model, draws, pareto_k, 0.7) == {}
     assert exact_loo_rows(model, draws, np.zeros_like(loo.pareto_k), 0.7) == {}
+
+
+def test_a_refitted_row_leaves_the_failures_and_its_exact_term_enters_the_elpd(lya):
+    """predictive_checks with a refitted row: counted out of pareto_k_high and pareto_k_rows,
+    named in loo_refit_rows, its exact term in elpd_loo, p_loo = lppd − elpd, se over the
+    new terms; the verdict passes and states it."""
+    _, measurements = lya
+    rows = len(measurements)
+    loo = LeaveOneOut(
+        elpd_loo=-float(rows),
+        se=0.0,
+        p_loo=0.5 * rows,
+        pareto_k=np.r_[0.95, 0.8, np.zeros(rows - 2)],
+        pit=np.full(rows, 0.5),
+        elpd_i=np.full(rows, -1.0),
+        lppd_i=np.full(rows, -0.5),
+    )
+    checks = predictive_checks(loo, measurements, {0: (-3.0, 0.9)})
+    assert checks["pareto_k_high"] == 1  # row 1, not refitted
+    assert [r["row"] for r in checks["pareto_k_rows"]] == [1]
+    assert [(r["row"], r["elpd_exact"]) for r in checks["loo_refit_rows"]] == [(0, -3.0)]
+    assert checks["elpd_loo"] == pytest.approx(-3.0 - (rows - 1))
+    assert checks["p_loo"] == pytest.approx(-0.5 * rows - checks["elpd_loo"])
+    terms = np.r_[-3.0, np.full(rows - 1, -1.0)]
+    assert checks["se"] == pytest.approx(np.sqrt(rows * np.var(terms)))
+    assert checks["loo_pit"][0] == 0.9
+    summary = {"diagnostics": {"failures": []}, "predictive": checks, "pi_brdf0": None}
+    verdict = posterior_verdict(summary, {}, [])
+    assert not verdict.ok and "Pareto k > 0.7" in verdict.lines[0]  # row 1 still fails
+    checks = predictive_checks(loo, measurements, {0: (-3.0, 0.9), 1: (-1.2, 0.4)})
+    verdict = posterior_verdict({**summary, "predictive": checks}, {}, [])
+    assert verdict.ok and "2 influential measurement(s)" in " ".join(verdict.facts)
 
 
 def test_a_refitted_row_is_a_fact_of_the_verdict_not_a_failure():

@@ -13,7 +13,10 @@ import subprocess
 import sys
 from pathlib import Path
 
+import jax
 import pytest
+
+from brdf_infer.posterior._nuts import _compiler_options
 
 TOOL = Path(__file__).resolve().parents[1] / "tools" / "nuts_memory_growth.py"
 SECONDS = 220
@@ -47,5 +50,9 @@ def test_two_chain_threads_hold_their_memory():
 
 
 @pytest.mark.slow
+@pytest.mark.skipif(
+    jax.default_backend() != "cpu" or _compiler_options() is None,
+    reason="the fault is XLA's CPU YNNPACK fusion, in the jaxlib that knows the option",
+)
 def test_planted_fault_grows():
     assert growth_mb("--ynn") > 4 * FLAT_MB

@@ -107,6 +107,9 @@ def test_run_posterior_takes_the_record_or_its_fields_by_name():
     base = PosteriorSettings(chains=2, seed=4)
     assert posterior_settings(base, {"draws": 30}) == PosteriorSettings(chains=2, seed=4, draws=30)
     assert posterior_settings(None, {"sampler": "emcee"}).warmup == EMCEE_BURN_IN
+    # a record's warmup that is its sampler's default follows a new sampler; one set stays
+    assert posterior_settings(PosteriorSettings(), {"sampler": "emcee"}).warmup == EMCEE_BURN_IN
+    assert posterior_settings(PosteriorSettings(warmup=300), {"sampler": "emcee"}).warmup == 300
     with pytest.raises(BadInputError) as error:
         posterior_settings(None, {"thin": 2})
     assert error.value.field == "thin"

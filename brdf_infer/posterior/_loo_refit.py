@@ -22,6 +22,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.special import logsumexp
 
+from brdf_infer import _arviz as az
 from brdf_infer.posterior._likelihood import ModelData
 from brdf_infer.posterior._model import PosteriorModel
 from brdf_infer.posterior._nuts import chain_keys
@@ -31,6 +32,7 @@ from brdf_infer.posterior._samplers import Draws
 LEFT_OUT_SIGMA = 1e6  # σ of ln R that removes a row's information
 MAX_REFIT_ROWS = 5
 REFIT_DRAWS = 1000  # draws per chain of a refit, at most the run's
+REFIT_R_HAT = 1.01  # as the run's own threshold
 
 
 def without_row(model: PosteriorModel, row: int) -> ModelData:
@@ -40,13 +42,24 @@ def without_row(model: PosteriorModel, row: int) -> ModelData:
     return model.data._replace(noise=noise._replace(sigma_row=sigma))
 
 
+def _converged(sites: dict[str, np.ndarray], stats: dict[str, np.ndarray]) -> bool:
+    """The refit's chains passed: no divergence and R-hat ≤ :data:`REFIT_R_HAT` on every
+    scalar site (a poorly mixed refit would turn a failure into a fact)."""
+    if np.any(np.asarray(stats["diverging"])):
+        return False
+    scalars = {name: v for name, v in sites.items() if np.ndim(v) == 2 and np.ptp(v) > 0}
+    r_hat = az.rhat(az.from_dict(posterior=scalars))
+    return all(float(r_hat[name]) <= REFIT_R_HAT for name in scalars)
+
+
 def exact_loo_rows(
     model: PosteriorModel, draws: Draws, pareto_k: np.ndarray, limit: float
 ) -> dict[int, tuple[float, float]]:
     """Row → (exact ln p(yᵢ | y₋ᵢ), exact LOO-PIT) for every row whose k̂ exceeds ``limit``,
     by a NUTS refit without it (module docstring) with the run's chains, warmup, seed and
-    target acceptance and at most :data:`REFIT_DRAWS` draws per chain. Empty when no row
-    exceeds ``limit``, when more than :data:`MAX_REFIT_ROWS` do, or when the run was not NUTS."""
+    target acceptance and at most :data:`REFIT_DRAWS` draws per chain; a refit whose chains
+    diverge or disagree (R-hat) leaves its row out. Empty when no row exceeds ``limit``, when
+    more than :data:`MAX_REFIT_ROWS` do, or when the run was not NUTS."""
     rows = np.flatnonzero(np.asarray(pareto_k) > limit)
     if draws.program is None or not 0 < rows.size <= MAX_REFIT_ROWS:
         return {}
@@ -56,6 +69,8 @@ def exact_loo_rows(
     exact = {}
     for row in map(int, rows):
         refit = draws.program.run(without_row(model, row), keys, count)
+        if not _converged(refit.sites, refit.stats):
+            continue  # the row stays a failure of the verdict
         log_lik, cdf = loo_terms(model, refit.sites)
         terms = np.asarray(log_lik[..., row], float).reshape(-1)
         pit = float(np.mean(np.asarray(cdf[..., row], float)))

@@ -15,6 +15,7 @@ away from numerically hopeless corners.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import os
 import sys
@@ -415,9 +416,17 @@ def _side_by_side(function, items: list, workers: int, cancel=None) -> list:
             raise
 
 
+@functools.cache
 def _compiler_options() -> dict | None:
-    """:data:`CPU_COMPILER_OPTIONS` on a CPU, else none."""
-    return CPU_COMPILER_OPTIONS if jax.default_backend() == "cpu" else None
+    """:data:`CPU_COMPILER_OPTIONS` on a CPU whose XLA knows them (a jaxlib before the YNNPACK
+    fusion, or one that dropped the experimental flag, refuses an unknown option: then none)."""
+    if jax.default_backend() != "cpu" or not CPU_COMPILER_OPTIONS:
+        return None
+    try:
+        jax.jit(lambda x: x + 1).lower(1.0).compile(CPU_COMPILER_OPTIONS)
+    except Exception:  # XLA's "No such compile option" (JaxRuntimeError)
+        return None
+    return CPU_COMPILER_OPTIONS
 
 
 def _shapes(arguments) -> tuple:

@@ -189,7 +189,9 @@ def predictive_checks(
         "se": loo.se,
         "p_loo": loo.p_loo,
         "pareto_k_max": float(np.max(pareto_k)),
-        "pareto_k_high": int(np.sum(pareto_k > PARETO_K_LIMIT)) - len(exact),
+        "pareto_k_high": sum(
+            1 for row in np.flatnonzero(pareto_k > PARETO_K_LIMIT) if int(row) not in exact
+        ),
         "pareto_k": pareto_k.tolist(),  # per row, for the report
         "loo_pit": loo.pit.tolist(),
         "loo_pit_ks_p": uniformity_p_value(loo.pit),
@@ -248,7 +250,10 @@ def run_posterior(
         forced: the plausibility checks (:mod:`brdf_infer.plausibility`) the caller went past
             with ``--force``, one line each: they open the run's verdict.
         refit: sample an error-model variant anew where reweighting to it is unreliable
-            (:mod:`brdf_infer.posterior._width`); False: reported unreliable (studies, batch).
+            (:mod:`brdf_infer.posterior._width`), and a row of Pareto k > 0.7 without it for
+            its exact leave-one-out term (:mod:`brdf_infer.posterior._loo_refit`); False:
+            neither (studies, batch): such a variant is reported unreliable, such a row stays
+            a failure of the verdict.
         **sampler_settings: fields of :class:`~brdf_infer.settings.PosteriorSettings` in
             place of ``settings``' (``run_posterior(scene, rows, draws=500)``).
 
@@ -291,7 +296,10 @@ def posterior_settings(
             )
     if settings is None:
         return PosteriorSettings(**fields)
-    return dataclasses.replace(settings, **fields) if fields else settings
+    values = {field.name: getattr(settings, field.name) for field in dataclasses.fields(settings)}
+    if "warmup" not in fields and settings.warmup == PosteriorSettings(settings.sampler).warmup:
+        values["warmup"] = None  # the sampler's default, that of a new sampler if one is given
+    return PosteriorSettings(**{**values, **fields})
 
 
 def _check_memory(model, measurements, settings: PosteriorSettings) -> None:

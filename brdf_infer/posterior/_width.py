@@ -171,7 +171,7 @@ def _scale_marginal(model: PosteriorModel, flat: dict[str, np.ndarray], site: st
     # the draws' central 99 %, widened fourfold each side: the extreme draws of a half-normal
     # reach 1e-6, and nodes spread to there left too few where the mass is (0.008 in ln)
     low = np.log(max(np.quantile(draws, 0.005), 1e-12) / 4.0)
-    high = np.log(np.quantile(draws, 0.995) * 4.0)
+    high = max(np.log(max(np.quantile(draws, 0.995), 1e-12) * 4.0), low + np.log(16.0))
     x, w = np.polynomial.legendre.leggauss(TAU_NODES)
     log_tau = low + 0.5 * (high - low) * (x + 1.0)
     tau = np.exp(log_tau)
