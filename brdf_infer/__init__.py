@@ -12,6 +12,7 @@ holds no array yet, or refuse float32 in one line (:class:`Float32Error`). Call 
 before using the model functions directly.
 """
 
+from brdf_infer import _moved
 from brdf_infer._precision import Float32Error, use_float64
 from brdf_infer._resources import data_path
 from brdf_infer.params import UV_PAPER, VIS_PAPER, Params
@@ -26,3 +27,10 @@ __all__ = [
     "data_path",
     "use_float64",
 ]
+
+_moved.install()
+
+
+def __getattr__(name: str):
+    """``from brdf_infer import lsq`` and the other old module paths (see ``_moved``)."""
+    return _moved.attribute(__name__, name)

@@ -126,7 +126,7 @@ class ErrorSettings:
         expected_repeatability: the per-row scatter beyond each row's own σ and the angle
             terms that the instrument is known to reach, sample and calibration scatter
             included: what judges a least-squares fit's learned σ_rep
-            (:mod:`brdf_infer.fit_quality`) [ln R]; a scene without the key gets its
+            (:mod:`brdf_infer.fit.quality`) [ln R]; a scene without the key gets its
             ``reflectance_rel`` (0.065 by default).
     """
 

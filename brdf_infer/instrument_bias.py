@@ -102,7 +102,7 @@ def bias_experiment(
         "instrument", QUANTITY: {"median", "lo95", "hi95"}, "covers": {QUANTITY: bool}}],
         "coverage": {instrument: {QUANTITY: fraction of seeds}}}``.
     """
-    from brdf_infer.lsq import fit_lsq
+    from brdf_infer.fit.lsq import fit_lsq
     from brdf_infer.posterior import build_posterior_model, interval95, run_nuts
 
     truth_values = traced_values(scene, measurements, params, generated_by, rays, seed=7)

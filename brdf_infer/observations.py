@@ -33,7 +33,7 @@ class Observations(NamedTuple):
         log_aperture: ln(measured value / BRDF): ln(Ω cos θs) of the row's series for raw
             reflectance, 0 for BRDF rows [ln sr].
         log_reflectance: measured ln R (ln BRDF for BRDF rows).
-        sigma: 1σ of ln R that weights the row in least squares (``brdf_infer.lsq``).
+        sigma: 1σ of ln R that weights the row in least squares (``brdf_infer.fit.lsq``).
         cos_weight: 1 where the measured value carries cos θs (raw reflectance), 0 for BRDF.
         phi_s_deg: azimuth of out-of-plane rows [deg], NaN in the plane; None when every row
             is in the plane (nothing out of plane is computed then).
@@ -176,7 +176,7 @@ def build_observation_model(scene: Scene, measurements: Measurements) -> Observa
     """The observation model of ``scene`` on ``measurements`` (every row, each sample).
 
     ``sigma`` is each row's fixed noise under the scene's error model (for ``generative``, the
-    value's own σ_i; ``brdf_infer.lsq`` adds the per-row scatter and the angle terms).
+    value's own σ_i; ``brdf_infer.fit.lsq`` adds the per-row scatter and the angle terms).
     """
     data = Observations(
         theta_i_deg=jnp.asarray(measurements.theta_i_deg),

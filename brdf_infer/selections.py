@@ -1,7 +1,7 @@
 """The paper fit's data selections (Sec. 4.2): which measurement rows enter the regression.
 
 A scene names one (``[paper_fit] selection``, checked when it loads);
-:func:`brdf_infer.paper_fit.select_points` applies it. ``paper`` is the one that reproduces
+:func:`brdf_infer.fit.paper.select_points` applies it. ``paper`` is the one that reproduces
 Sec. 5.3.
 """
 

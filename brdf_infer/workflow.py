@@ -149,7 +149,7 @@ def paper_fit_summary(
     scene: Scene, measurements: Measurements, selection: str | None = None
 ) -> dict[str, Any]:
     """The paper's regression (Sec. 4.2) as the JSON of ``fit --method paper``."""
-    from brdf_infer.paper_fit import paper_fit
+    from brdf_infer.fit.paper import paper_fit
     from brdf_infer.params import params_to_dict
 
     start = time.perf_counter()
@@ -182,11 +182,11 @@ def lsq_summary(
     """The least-squares fit of ``member`` (default: the scene's family) as the JSON of
     ``fit --method lsq`` (warnings also to ``progress``): ``sigma`` is the 1σ as asked (scaled
     by √(χ²/dof) with ``scale_covariance``), ``sigma_scaled`` always the scaled one, next to
-    ``chi2_dof`` and the ``fit_quality`` statement (:mod:`brdf_infer.fit_quality`); for Eq. (7)'s
+    ``chi2_dof`` and the ``fit_quality`` statement (:mod:`brdf_infer.fit.quality`); for Eq. (7)'s
     family ``paper_fit_cost``: the χ² of the paper fit's parameters ``paper`` under the same
     weights (None: fitted here)."""
-    from brdf_infer.fit_quality import FitQuality
-    from brdf_infer.lsq import fit_lsq
+    from brdf_infer.fit.lsq import fit_lsq
+    from brdf_infer.fit.quality import FitQuality
     from brdf_infer.model import family
 
     if member is None:
@@ -230,7 +230,7 @@ def lsq_summary(
 def _lsq_details(result, quality, names) -> dict[str, Any]:
     """The keys of the least-squares JSON after its parameters and quality (1σ, correlations,
     starts, row weights, warnings)."""
-    from brdf_infer.fit_quality import scaled_sigma
+    from brdf_infer.fit.quality import scaled_sigma
 
     return {
         "sigma": result.sigma,
@@ -265,8 +265,8 @@ def _lsq_details(result, quality, names) -> dict[str, Any]:
 def _paper_fit_cost(scene: Scene, measurements: Measurements, result, paper) -> float:
     """χ² of the paper fit's parameters (``paper``; None: fitted here) under the row weights
     least squares settled on."""
+    from brdf_infer.fit.paper import paper_fit
     from brdf_infer.observations import build_observation_model
-    from brdf_infer.paper_fit import paper_fit
     from brdf_infer.params import Params
 
     model = build_observation_model(scene, measurements).with_sigma(result.row_sigma)

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from brdf_infer.fit_quality import (
+from brdf_infer.fit.lsq import paule_mandel
+from brdf_infer.fit.quality import (
     POOR_MULTIPLE,
     POOR_P_VALUE,
     TREND_P_VALUE,
@@ -21,7 +22,6 @@ from brdf_infer.fit_quality import (
     scaled_sigma,
     trend_regressors,
 )
-from brdf_infer.lsq import paule_mandel
 
 
 def chi2_survival_even_dof(x: float, dof: int) -> float:
@@ -209,7 +209,7 @@ def _simulated(scene, rows, truth, rng, misfit: float = 0.0):
 
 
 def _quality(scene, data, init=None) -> FitQuality:
-    from brdf_infer.lsq import fit_lsq
+    from brdf_infer.fit.lsq import fit_lsq
 
     fit = fit_lsq(scene, data, starts=4, init=init)
     return FitQuality(
@@ -276,7 +276,7 @@ def test_false_alarms_are_rare_and_a_planted_alpha_fault_is_found_at_its_measure
 
 
 def test_paule_mandel_of_many_sets_is_each_sets_own():
-    from brdf_infer._reweighting import paule_mandel_many
+    from brdf_infer.fit._reweighting import paule_mandel_many
 
     rng = np.random.default_rng(5)
     variances = rng.uniform(0.001, 0.01, 30)
@@ -292,7 +292,7 @@ def test_low_rank_noise_gives_the_dense_covariances_p_values_and_scales_to_a_ful
     full-grid table) where the dense matrix would need 115 GB."""
     import tracemalloc
 
-    from brdf_infer.fit_quality import LowRankNoise
+    from brdf_infer.fit.quality import LowRankNoise
 
     rng = np.random.default_rng(7)
     rows = 60

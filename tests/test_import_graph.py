@@ -227,7 +227,7 @@ def test_a_planted_back_import_is_found(tmp_path, module, source):
         # a private module of another package, by its dotted name
         ("brdf_infer.batch", "\nfrom brdf_infer.posterior._nuts import x\n", "posterior._nuts"),
         # a private name of a module in another directory
-        ("brdf_infer.bench._fits", "\nfrom brdf_infer.lsq import _x\n", "lsq import _x"),
+        ("brdf_infer.bench._fits", "\nfrom brdf_infer.fit.lsq import _x\n", "lsq import _x"),
         # a private module named through `from package import`, relative, in a function
         ("brdf_infer.report._build", "\ndef f():\n    from ..posterior import _bands\n", "_bands"),
         # a private name of a shared helper of the top package, from a subpackage
@@ -248,7 +248,7 @@ def test_a_planted_private_import_is_found(tmp_path, module, source, found):
         ("brdf_infer.posterior._run", "\nfrom ._nuts import stack_data\n"),  # same package
         ("brdf_infer.posterior._run", "\nfrom brdf_infer._atomic import atomic_write_json\n"),
         ("brdf_infer.report._sbc", "\nfrom brdf_infer import _outlock\n"),  # a top helper module
-        ("brdf_infer.sbc", "\nfrom brdf_infer.lsq import _x\n"),  # the same directory
+        ("brdf_infer.fit.paper", "\nfrom brdf_infer.fit.lsq import _x\n"),  # the same directory
         ("brdf_infer.report", "\nfrom brdf_infer.report._html import page\n"),  # its __init__
     ],
 )

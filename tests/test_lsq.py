@@ -9,10 +9,10 @@ from scipy import stats
 
 from brdf_infer.coordinates import INTERNAL_NAMES, from_internal, to_internal
 from brdf_infer.errors import BadInputError
-from brdf_infer.lsq import fit_lsq
+from brdf_infer.fit.lsq import fit_lsq
+from brdf_infer.fit.paper import paper_fit
 from brdf_infer.model import family
 from brdf_infer.observations import build_observation_model
-from brdf_infer.paper_fit import paper_fit
 from brdf_infer.params import PARAM_NAMES, UV_PAPER, VIS_PAPER
 from brdf_infer.scene import load_scene
 from brdf_infer.synthetic import synthetic_measurements

@@ -11,7 +11,7 @@ import pytest
 
 from brdf_infer.compare import CompareSettings, fit_family
 from brdf_infer.errors import BadInputError
-from brdf_infer.lsq import fit_lsq
+from brdf_infer.fit.lsq import fit_lsq
 from brdf_infer.model import brdf_hemisphere, family
 from brdf_infer.params import UV_PAPER
 from brdf_infer.posterior import run_posterior

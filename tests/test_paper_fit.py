@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from brdf_infer.errors import BadInputError
+from brdf_infer.fit.paper import paper_fit, paper_grid_search, select_points
 from brdf_infer.model import reflectance_to_brdf, tis
-from brdf_infer.paper_fit import paper_fit, paper_grid_search, select_points
 from brdf_infer.params import UV_PAPER, Params
 from brdf_infer.selections import SELECTIONS
 

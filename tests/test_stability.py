@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 from jax.test_util import check_grads
 
 from brdf_infer.coordinates import from_internal
-from brdf_infer.lsq import fit_lsq
+from brdf_infer.fit.lsq import fit_lsq
 from brdf_infer.model import log_brdf_hemisphere, log_brdf_inplane, log_tis, tis
 from brdf_infer.observations import build_observation_model
 from brdf_infer.params import PAPER_CONSTANTS, UV_PAPER, Params

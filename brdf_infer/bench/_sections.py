@@ -86,7 +86,7 @@ def fit_section(fits: list) -> list[str]:
         "",
         "Final cost χ² = Σ((ln R_pred − ln R_obs)/σ)² over every measurement row, σ the row "
         "weights of least squares (the value's own noise, the angle errors through ln R and "
-        "the Paule–Mandel repeatability at the Levenberg–Marquardt optimum; brdf_infer.lsq), "
+        "the Paule–Mandel repeatability at the Levenberg–Marquardt optimum; brdf_infer.fit.lsq), "
         "against run time. The optimistix rows reweight as they go and report their own final "
         "χ²; the paper's "
         "regression minimises a different objective (unweighted, fixed α and θs0, its own "

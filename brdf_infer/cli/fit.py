@@ -1,5 +1,5 @@
 """``brdf-infer fit``: the paper's regression (Sec. 4.2), its grid search over (α, θs0), or
-least squares of any model family over its free parameters (:mod:`brdf_infer.lsq`)."""
+least squares of any model family over its free parameters (:mod:`brdf_infer.fit.lsq`)."""
 
 from __future__ import annotations
 
@@ -190,7 +190,7 @@ def _print_paper_fit(scene_name: str, payload: dict[str, Any]) -> None:
 
 
 def _grid_payload(scene, measurements, selection: str | None) -> dict[str, Any]:
-    from brdf_infer.paper_fit import paper_grid_search
+    from brdf_infer.fit.paper import paper_grid_search
     from brdf_infer.params import params_to_dict
 
     alphas = np.arange(1.5, 8.01, 0.25)

@@ -13,7 +13,7 @@ both
   5 dof it has p = 0.075 and is not called poor).
 
 Where the error model learns the repeatability, least squares sets σ_rep so that χ²/dof = 1
-(Paule–Mandel, :mod:`brdf_infer.lsq`), and the χ² test says nothing; the misfit shows in σ_rep
+(Paule–Mandel, :mod:`brdf_infer.fit.lsq`), and the χ² test says nothing; the misfit shows in σ_rep
 instead. Least squares treats the rows as independent, so its σ_rep holds every scatter beyond
 the rows' own σ and the angle terms: the repeatability, and the sample and calibration scatter
 it does not model. The scene states what the instrument is known to reach in the same terms,
@@ -89,7 +89,7 @@ class RepeatabilityCheck(NamedTuple):
 
 def _q_root(residuals: np.ndarray, variances: np.ndarray, target: float) -> float:
     """The s ≥ 0 with Σ rᵢ²/(vᵢ + s²) = ``target`` (0 where Q(0) ≤ target)."""
-    from brdf_infer._reweighting import paule_mandel
+    from brdf_infer.fit._reweighting import paule_mandel
 
     return paule_mandel(residuals, variances, target)
 
@@ -279,7 +279,7 @@ class FitQuality:
         chi2: the weighted sum of squared residuals at the optimum.
         dof: degrees of freedom, rows − free parameters.
         learned_repeatability: σ_rep [ln R] when it was set so that χ²/dof = 1 (Paule–Mandel;
-            :mod:`brdf_infer.lsq`), else None.
+            :mod:`brdf_infer.fit.lsq`), else None.
         repeatability: its check against ``expected_repeatability``
             (:func:`repeatability_check`; None: not judged).
         expected_repeatability: the scene's ``[errors] expected_repeatability`` [ln R].

@@ -15,7 +15,7 @@ terms and σ_rep are updated after each solve until they settle (iteratively rew
 squares). The ``spread`` error model keeps its fixed σ_i. Every family is weighted alike, so
 that their χ² and learned repeatabilities compare.
 
-The solver works on the free internal coordinates of the family (:mod:`brdf_infer._fit_space`:
+The solver works on the free internal coordinates of the family (:mod:`brdf_infer.fit._space`:
 Eq. (7)'s scaled internal coordinates with the scene's fixed parameters and bounds, or another
 family's own), bounded ones mapped through smooth maps of the real line. The covariance is
 the Gauss–Newton (JᵀJ)⁻¹ in the internal coordinates, not scaled by the reduced χ² unless
@@ -34,17 +34,17 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from brdf_infer._fit_space import FitSpace, FreeTransform, physical_of
-from brdf_infer._fit_space import fit_space as fit_space
-from brdf_infer._fit_space import internal_bounds as internal_bounds
-from brdf_infer._fit_space import start_points as start_points
 from brdf_infer._precision import ensure_float64
-from brdf_infer._reweighting import REWEIGHT_TOLERANCE as REWEIGHT_TOLERANCE
-from brdf_infer._reweighting import Reweighting
-from brdf_infer._reweighting import paule_mandel as paule_mandel
 from brdf_infer.error_model import noise_layout
 from brdf_infer.errors import BadInputError
-from brdf_infer.fit_quality import (
+from brdf_infer.fit._reweighting import REWEIGHT_TOLERANCE as REWEIGHT_TOLERANCE
+from brdf_infer.fit._reweighting import Reweighting
+from brdf_infer.fit._reweighting import paule_mandel as paule_mandel
+from brdf_infer.fit._space import FitSpace, FreeTransform, physical_of
+from brdf_infer.fit._space import fit_space as fit_space
+from brdf_infer.fit._space import internal_bounds as internal_bounds
+from brdf_infer.fit._space import start_points as start_points
+from brdf_infer.fit.quality import (
     LowRankNoise,
     RepeatabilityCheck,
     repeatability_check,
@@ -91,7 +91,7 @@ class LsqResult:
         sigma: 1σ per parameter (0 for fixed ones), linearised: for Eq. (7)'s a2 and a3 it is
             only meaningful when α is well determined, since a2 = b2·90^−(1+α) (see
             ``sigma_internal``).
-        internal: the optimum in internal coordinates (:mod:`brdf_infer._fit_space`).
+        internal: the optimum in internal coordinates (:mod:`brdf_infer.fit._space`).
         sigma_internal: 1σ in internal coordinates, where the linearisation holds better.
         correlation: correlation matrix of the physical parameters (identity rows for fixed
             parameters).
@@ -110,9 +110,9 @@ class LsqResult:
         repeatability: σ_rep used (estimated by Paule–Mandel when learned) [ln R].
         repeatability_check: where it is learned, its Q-profile interval and its p-value
             against twice the scene's expected repeatability
-            (:func:`brdf_infer.fit_quality.repeatability_check`); else None.
+            (:func:`brdf_infer.fit.quality.repeatability_check`); else None.
         residual_trend_p_values: F-test p-values of the residuals' trends in θs, θi and series
-            (:func:`brdf_infer.fit_quality.residual_trends`; empty without degrees of freedom).
+            (:func:`brdf_infer.fit.quality.residual_trends`; empty without degrees of freedom).
         reweightings: solves of the reweighting loop.
         warnings: identifiability and convergence warnings, in words.
     """
@@ -408,7 +408,7 @@ def _repeatability_check(scene, reweight: Reweighting, residuals) -> Repeatabili
 
 
 def _residual_trends(scene, measurements, residuals, sigma, absorbed, reweight: Reweighting):
-    """The residual-trend p-values of the fit (:func:`brdf_infer.fit_quality.residual_trends`):
+    """The residual-trend p-values of the fit (:func:`brdf_infer.fit.quality.residual_trends`):
     the rows whitened by the error model's covariance as least squares knows it: each row's
     σ² of the last solve, with its rotation term shared by the rows of one rotation setting,
     and the scene's calibration factors (the sample effect, whose scale the scene does not

@@ -1,4 +1,4 @@
-"""The per-row σ of least squares (:mod:`brdf_infer.lsq`) of any family, reweighted after each
+"""The per-row σ of least squares (:mod:`brdf_infer.fit.lsq`) of any family, reweighted after each
 solve: the angle terms at the current parameters and, where the repeatability is learned, σ_rep
 by the Paule–Mandel condition."""
 
@@ -15,7 +15,7 @@ REWEIGHT_TOLERANCE = 1e-6  # relative change of every σ_i that ends the reweigh
 
 
 class Reweighting:
-    """The per-row σ of least squares, updated after each solve (:mod:`brdf_infer.lsq`'s
+    """The per-row σ of least squares, updated after each solve (:mod:`brdf_infer.fit.lsq`'s
     docstring)."""
 
     def __init__(self, scene: Scene, model, member: ModelFamily, n_free: int):
@@ -73,7 +73,7 @@ def paule_mandel(residuals: np.ndarray, variances: np.ndarray, dof: float) -> fl
 
     0 when the rows already scatter no more than their variances say (χ²/dof ≤ 1). Any other
     target value of the sum gives the ends of σ_rep's Q-profile interval
-    (:func:`brdf_infer.fit_quality.repeatability_check`).
+    (:func:`brdf_infer.fit.quality.repeatability_check`).
     """
     return float(paule_mandel_many(np.asarray(residuals, float)[None], variances, dof, 200)[0])
 

@@ -1,4 +1,4 @@
-"""The coordinates least squares (:mod:`brdf_infer.lsq`) solves in, for every model family.
+"""The coordinates least squares (:mod:`brdf_infer.fit.lsq`) solves in, for every model family.
 
 A family's internal coordinates z are well conditioned (:class:`brdf_infer.model.ModelFamily`);
 the solver works on an unconstrained vector u of the free ones:

@@ -1,0 +1,88 @@
+"""The old import paths of the modules that moved into the grouped packages (``fit/``, ...).
+
+For one release each old path still imports (``import brdf_infer.lsq``,
+``from brdf_infer.lsq import fit_lsq``, ``from brdf_infer import lsq``) and gives the same
+module object as the new path, so monkeypatching and ``isinstance`` keep working; the first
+import of an old path in a process warns with :class:`FutureWarning` naming the new one.
+:data:`MOVED` is the table; :func:`install` puts the finder on ``sys.meta_path`` (the package's
+``__init__`` calls it) and ``brdf_infer.__getattr__`` serves ``from brdf_infer import lsq``.
+"""
+
+import importlib
+import importlib.abc
+import importlib.machinery
+import sys
+import types
+import warnings
+
+# old dotted name → new dotted name; the old names go in the next release
+MOVED: dict[str, str] = {
+    "brdf_infer.lsq": "brdf_infer.fit.lsq",
+    "brdf_infer.fit_quality": "brdf_infer.fit.quality",
+    "brdf_infer.paper_fit": "brdf_infer.fit.paper",
+}
+
+# the frames a warning skips to reach the importing line: the import system, this module, and
+# the package's __init__ (its __getattr__)
+_INTERNAL = (
+    "<frozen importlib",
+    importlib.__file__,
+    __file__,
+    __file__.replace("_moved", "__init__"),
+)
+
+
+def _warn(old: str, new: str) -> None:
+    """FutureWarning at the first frame outside the import machinery (the caller's line)."""
+    frame, level = sys._getframe(0), 1
+    while frame is not None and frame.f_code.co_filename.startswith(_INTERNAL):
+        frame = frame.f_back
+        name = frame.f_code.co_filename if frame is not None else ""
+        level += not ("importlib" in name and "_bootstrap" in name)  # warn() skips those itself
+    message = f"{old} moved to {new}; the old path goes in the next release"
+    warnings.warn(message, FutureWarning, stacklevel=level)
+
+
+class _Loader(importlib.abc.Loader):
+    """Gives the new module for the old name (no second copy of it)."""
+
+    def __init__(self, new: str) -> None:
+        self.new = new
+
+    def create_module(self, spec: importlib.machinery.ModuleSpec) -> types.ModuleType:
+        try:
+            module = importlib.import_module(self.new)
+        except ImportError as err:
+            raise ModuleNotFoundError(
+                f"{spec.name} moved to {self.new}, which does not import: {err}", name=spec.name
+            ) from err
+        _warn(spec.name, self.new)
+        self.spec = module.__spec__  # the import system sets the old spec; exec_module puts it back
+        return module
+
+    def exec_module(self, module: types.ModuleType) -> None:
+        module.__spec__ = self.spec
+
+
+class _Finder(importlib.abc.MetaPathFinder):
+    """Finds the old names of :data:`MOVED`, and nothing else."""
+
+    def find_spec(self, fullname, path=None, target=None):
+        new = MOVED.get(fullname)
+        if new is None:
+            return None
+        return importlib.machinery.ModuleSpec(fullname, _Loader(new))
+
+
+def install() -> None:
+    """Put the finder first on ``sys.meta_path`` (once)."""
+    if not any(isinstance(finder, _Finder) for finder in sys.meta_path):
+        sys.meta_path.insert(0, _Finder())
+
+
+def attribute(package: str, name: str) -> types.ModuleType:
+    """``from <package> import <name>`` for an old module name, or AttributeError."""
+    old = f"{package}.{name}"
+    if old not in MOVED:
+        raise AttributeError(f"module {package!r} has no attribute {name!r}")
+    return importlib.import_module(old)
