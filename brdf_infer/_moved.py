@@ -20,6 +20,13 @@ MOVED: dict[str, str] = {
     "brdf_infer.lsq": "brdf_infer.fit.lsq",
     "brdf_infer.fit_quality": "brdf_infer.fit.quality",
     "brdf_infer.paper_fit": "brdf_infer.fit.paper",
+    "brdf_infer.sensitivity": "brdf_infer.studies.sensitivity",
+    "brdf_infer.compare": "brdf_infer.studies.compare",
+    "brdf_infer.sbc": "brdf_infer.studies.sbc",
+    "brdf_infer.instrument_bias": "brdf_infer.studies.instrument_bias",
+    "brdf_infer.instrument_comparison": "brdf_infer.studies.instrument_comparison",
+    "brdf_infer.synthetic": "brdf_infer.studies.synthetic",
+    "brdf_infer.uniformity": "brdf_infer.studies.uniformity",
 }
 
 # the frames a warning skips to reach the importing line: the import system, this module, and

@@ -58,8 +58,8 @@ def error_model_posterior(
 
 def instrument_study(job: Job, instruments: list[str], options: dict[str, Any], posterior):
     """Study: the posteriors under other instrument models, side by side."""
-    from brdf_infer.instrument_comparison import compare_instruments
     from brdf_infer.run_folder import INSTRUMENT_FILE, RunFolder
+    from brdf_infer.studies.instrument_comparison import compare_instruments
 
     scene, out = job.scene, job.out
     job.step("instrument models: posteriors side by side")
@@ -79,8 +79,8 @@ def instrument_study(job: Job, instruments: list[str], options: dict[str, Any], 
 
 def compare_study(job: Job) -> dict[str, Any]:
     """Study: the model families ranked by PSIS-LOO."""
-    from brdf_infer.compare import compare_families
     from brdf_infer.report import write_comparison
+    from brdf_infer.studies.compare import compare_families
 
     studies = job.studies
     job.step(f"model comparison by PSIS-LOO: {', '.join(studies.compare)}")
@@ -92,7 +92,7 @@ def compare_study(job: Job) -> dict[str, Any]:
 def sensitivity_study(job: Job) -> None:
     """Study: the sensitivity to the error model's assumptions."""
     from brdf_infer.report import write_sensitivity
-    from brdf_infer.sensitivity import SensitivitySettings, sensitivity
+    from brdf_infer.studies.sensitivity import SensitivitySettings, sensitivity
 
     job.step("sensitivity to the error-model assumptions")
     write_sensitivity(

@@ -204,12 +204,13 @@ class RunFolder:
         return self.read_json(STUDIES_FILE, optional=True)
 
     def compare(self) -> dict[str, Any] | None:
-        """``compare.json`` (:meth:`brdf_infer.compare.ComparisonResult.as_json`), or None."""
+        """``compare.json`` (:meth:`brdf_infer.studies.compare.ComparisonResult.as_json`), or
+        None."""
         return self.read_json(COMPARE_FILE, optional=True)
 
     def sensitivity(self) -> dict[str, Any] | None:
-        """``sensitivity.json`` (:meth:`brdf_infer.sensitivity.SensitivityResult.as_json`), or
-        None."""
+        """``sensitivity.json``
+        (:meth:`brdf_infer.studies.sensitivity.SensitivityResult.as_json`), or None."""
         return self.read_json(SENSITIVITY_FILE, optional=True)
 
     def design(self) -> dict[str, Any] | None:
@@ -217,8 +218,8 @@ class RunFolder:
         return self.read_json(DESIGN_FILE, optional=True)
 
     def instruments(self) -> dict[str, Any] | None:
-        """``instruments.json`` (:func:`brdf_infer.instrument_comparison.compare_instruments`),
-        or None."""
+        """``instruments.json``
+        (:func:`brdf_infer.studies.instrument_comparison.compare_instruments`), or None."""
         return self.read_json(INSTRUMENT_FILE, optional=True)
 
     def traces(self) -> list[dict[str, Any]]:

@@ -6,7 +6,7 @@ Every record checks its own fields when it is made and raises
 :class:`~brdf_infer.errors.BadInputError` naming the field (``warmup``, ``target_accept``);
 the command line names the option (``--warmup``, ``--target-accept``) when it prints it. The
 home modules re-export their records (``brdf_infer.workflow.RunSettings``,
-``brdf_infer.sbc.SbcSettings``, ...).
+``brdf_infer.studies.sbc.SbcSettings``, ...).
 """
 
 from __future__ import annotations

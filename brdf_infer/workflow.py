@@ -68,7 +68,7 @@ def full_studies(scene: Scene) -> Studies:
     scene's ``[studies] design`` target, else TIS(70°) where the scene has a TIS, else
     π·BRDF0)."""
     from brdf_infer.error_model import ERROR_MODELS
-    from brdf_infer.instrument_comparison import supported_instruments
+    from brdf_infer.studies.instrument_comparison import supported_instruments
 
     return Studies(
         error_models=tuple(m for m in ERROR_MODELS if m != scene.errors.model),
@@ -488,7 +488,7 @@ def _check_studies(scene: Scene, instruments: list[str], sensitive: bool) -> Non
     """Refuse, before any work, an instrument study the scene's geometry cannot support, or
     a sensitivity study without a TIS."""
     from brdf_infer.scene import check_instrument
-    from brdf_infer.sensitivity import check_scene
+    from brdf_infer.studies.sensitivity import check_scene
 
     for instrument in instruments:
         check_instrument(scene, instrument, field="studies.instruments")

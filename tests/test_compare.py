@@ -12,12 +12,12 @@ import numpy as np
 import pytest
 
 from brdf_infer.cli.compare import comparison_table
-from brdf_infer.compare import PARETO_K_LIMIT, CompareSettings, compare_families
 from brdf_infer.error_model import NoiseScales
 from brdf_infer.model import family
 from brdf_infer.params import UV_PAPER
 from brdf_infer.posterior import build_posterior_model
 from brdf_infer.report._compare import compare_frame
+from brdf_infer.studies.compare import PARETO_K_LIMIT, CompareSettings, compare_families
 from tests.helpers import SUITE_WARMUP, run_cli
 
 # the posterior's target acceptance (compare's default is 0.9) and the suite's warmup: the
@@ -248,7 +248,7 @@ def test_refitted_terms_replace_psis_in_elpd_and_p_loo():
     elpd_loo (ArviZ's definition, lppd = Σᵢ ln mean_s exp(log_lik)) moves by the opposite
     amount; Pareto k of a refitted row counts as 0 afterwards."""
     from brdf_infer import _arviz as az
-    from brdf_infer.compare import FamilyResult, rank_families
+    from brdf_infer.studies.compare import FamilyResult, rank_families
 
     rng = np.random.default_rng(0)
     y = rng.normal(size=12)
@@ -280,9 +280,9 @@ def test_a_row_with_pareto_k_above_0_7_is_refitted_on_a_single_series_scene(tmp_
     term is computed by refitting without it; elpd_loo and p_loo of the ranking carry the
     exact term."""
     from brdf_infer import _arviz as az
-    from brdf_infer.compare import fit_family, rank_families
     from brdf_infer.scene import load_scene
-    from brdf_infer.synthetic import write_geometry_scene
+    from brdf_infer.studies.compare import fit_family, rank_families
+    from brdf_infer.studies.synthetic import write_geometry_scene
 
     scene = load_scene(write_geometry_scene(tmp_path, "single-series", UV_PAPER, seed=3))
     fit = fit_family(scene, scene.load_measurements(), "strumik2024", SMALL)

@@ -400,7 +400,7 @@ def test_scene_design_table_is_read(tmp_path):
 @pytest.mark.slow
 def test_expected_sd_ratio_agrees_with_refits_of_independently_simulated_data(nuts_run):
     """Design's sd ratio for TIS(70°) after one more row (a new session) against NUTS refits of
-    data a :class:`~brdf_infer.synthetic.SyntheticLab` measured from truths drawn from the
+    data a :class:`~brdf_infer.studies.synthetic.SyntheticLab` measured from truths drawn from the
     posterior (best, median, worst candidate; the benchmark runs 8 replicates)."""
     from brdf_infer.bench._design import RefitSettings, refit_check
 

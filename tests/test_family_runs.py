@@ -218,8 +218,8 @@ def extreme_quantities(result) -> list[str]:
 
 
 def _family_sbc(sigma_scale: float = 1.0):
-    from brdf_infer.sbc import SbcSettings, run_sbc
     from brdf_infer.scene import load_scene
+    from brdf_infer.studies.sbc import SbcSettings, run_sbc
 
     scene = load_scene("lya")
     settings = SbcSettings(**FAMILY_SBC, sigma_scale=sigma_scale)

@@ -180,7 +180,7 @@ def _simulated(scene, rows, truth, rng, misfit: float = 0.0):
     repeatability, one effect per physical sample and one calibration factor per series (the
     scene's 6.5 %), at the bundled posterior's scales; ``misfit``: a further lognormal scatter
     per row (a model that misses the data by that much)."""
-    from brdf_infer.synthetic import synthetic_measurements
+    from brdf_infer.studies.synthetic import synthetic_measurements
 
     errors = scene.errors
     settings = list(zip(rows.series, rows.sample, rows.theta_i_deg, strict=True))

@@ -212,7 +212,7 @@ def _planted(tmp_path: Path, module: str, source: str) -> Path:
         # a back-import at module level, up the data flow
         ("brdf_infer.measurements", "\nfrom brdf_infer import report\n"),
         # a function-level one, relative, naming a submodule through `from . import`
-        ("brdf_infer.posterior._bands", "\ndef f():\n    from .. import sbc\n"),
+        ("brdf_infer.posterior._bands", "\ndef f():\n    from ..studies import sbc\n"),
     ],
 )
 def test_a_planted_back_import_is_found(tmp_path, module, source):

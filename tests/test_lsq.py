@@ -15,7 +15,7 @@ from brdf_infer.model import family
 from brdf_infer.observations import build_observation_model
 from brdf_infer.params import PARAM_NAMES, UV_PAPER, VIS_PAPER
 from brdf_infer.scene import load_scene
-from brdf_infer.synthetic import synthetic_measurements
+from brdf_infer.studies.synthetic import synthetic_measurements
 from tests.helpers import assert_allclose, run_cli
 
 

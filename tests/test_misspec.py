@@ -20,7 +20,7 @@ from brdf_infer.bench._misspec import (
 )
 from brdf_infer.error_model import NoiseScales
 from brdf_infer.posterior import build_posterior_model
-from brdf_infer.sbc import SbcSettings
+from brdf_infer.studies.sbc import SbcSettings
 
 TRUTH = {  # internal coordinates (the sites of the simulate mode)
     "log_brdf0": np.log(0.012),

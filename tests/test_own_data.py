@@ -8,7 +8,7 @@ import pytest
 from brdf_infer.params import UV_PAPER
 from brdf_infer.posterior import run_posterior
 from brdf_infer.scene import load_scene
-from brdf_infer.synthetic import GEOMETRIES, write_geometry_scene
+from brdf_infer.studies.synthetic import GEOMETRIES, write_geometry_scene
 from tests.helpers import REPO, run_cli
 
 

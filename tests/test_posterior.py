@@ -25,7 +25,7 @@ from brdf_infer.posterior import (
 from brdf_infer.posterior._results import write_inference_data
 from brdf_infer.posterior._run import run_fingerprint
 from brdf_infer.scene import load_scene
-from brdf_infer.synthetic import simulate_measurements
+from brdf_infer.studies.synthetic import simulate_measurements
 from tests.helpers import REPO, SUITE_WARMUP, run_cli
 
 # the learned repeatability mixes slowest (autocorrelation ≈ 200 steps): 16000 steps left about 65

@@ -263,7 +263,7 @@ def test_report_shows_a_model_comparison_written_into_its_run(nuts_run, tmp_path
     comparison section with the table (best first) and the figure."""
     import shutil
 
-    from brdf_infer.compare import COMPARE_FILE
+    from brdf_infer.studies.compare import COMPARE_FILE
 
     run = tmp_path / "run"
     shutil.copytree(nuts_run.out, run)

@@ -11,15 +11,15 @@ import pytest
 from brdf_infer.errors import BadInputError
 from brdf_infer.posterior import build_posterior_model
 from brdf_infer.priors import Prior
-from brdf_infer.sbc import (
+from brdf_infer.scene import load_scene
+from brdf_infer.studies.sbc import (
     QUANTITIES,
     SbcSettings,
     assess_ranks,
     planted_inference,
     run_sbc,
 )
-from brdf_infer.scene import load_scene
-from brdf_infer.uniformity import ecdf_band
+from brdf_infer.studies.uniformity import ecdf_band
 from tests.helpers import run_cli
 
 N, L = 200, 100
@@ -130,9 +130,9 @@ def test_family_wise_bound_fails_a_bonferroni_over_the_quantities_only(monkeypat
     """The planted fault: each quantity's three tests at 0.01/9 instead of 0.01/27 fails the
     null verdict 3.1 % of the time at N = 200 (seed 12, 1500 runs: 3.13 %), 3 sd of 0.45 %
     above the bound of 1500 runs, 1.77 %: the check above can fail."""
-    import brdf_infer.sbc
+    import brdf_infer.studies.sbc
 
-    monkeypatch.setattr(brdf_infer.sbc, "TESTS_PER_QUANTITY", 1)
+    monkeypatch.setattr(brdf_infer.studies.sbc, "TESTS_PER_QUANTITY", 1)
     rate = null_failure_rate(N, simulations=1500, seed=12)
     assert rate > family_wise_bound(1500), rate
 

@@ -10,7 +10,7 @@ import pytest
 from brdf_infer.errors import BadInputError
 from brdf_infer.report import write_report, write_sensitivity
 from brdf_infer.scene import load_scene, tis_angles
-from brdf_infer.sensitivity import (
+from brdf_infer.studies.sensitivity import (
     SENSITIVITY_FIGURE,
     SENSITIVITY_FILE,
     SensitivitySettings,

@@ -1,7 +1,7 @@
-"""The virtual laboratory (:class:`brdf_infer.synthetic.SyntheticLab`) against the likelihood:
-its rows, drawn term by term with the angle errors moving the angles, follow the Gaussian the
-posterior model marginalises (mean and covariance, to first order in the 1° angle errors); a
-lab that drops the calibration effect must fail the same check."""
+"""The virtual laboratory (:class:`brdf_infer.studies.synthetic.SyntheticLab`) against the
+likelihood: its rows, drawn term by term with the angle errors moving the angles, follow the
+Gaussian the posterior model marginalises (mean and covariance, to first order in the 1° angle
+errors); a lab that drops the calibration effect must fail the same check."""
 
 from dataclasses import replace
 
@@ -12,7 +12,7 @@ from scipy.stats import chi2
 from brdf_infer.params import PARAM_NAMES, Params
 from brdf_infer.posterior import build_posterior_model
 from brdf_infer.scene import load_scene
-from brdf_infer.synthetic import SyntheticLab
+from brdf_infer.studies.synthetic import SyntheticLab
 
 LABS = 1000
 # the bundled run's posterior medians (a coating the scene's data allow)

@@ -4,7 +4,7 @@ independent simulation.
 What design estimates for one new row at a setting x is E_y[sd(T | D, y)] / sd(T | D), from the
 run's posterior draws and its own Gaussian conditional predictive of y. The check here shares
 neither: each replicate draws a truth from the bundled run's posterior (the coating and the
-noise scales), lets a :class:`~brdf_infer.synthetic.SyntheticLab` measure the initial rows D
+noise scales), lets a :class:`~brdf_infer.studies.synthetic.SyntheticLab` measure the initial rows D
 (the scene's geometry) and then the new row in a new session (its own reference measurement,
 its own rotation setting, the sample effect of the sample it is taken on — drawn term by term,
 the angle errors moving the angles), fits D alone and D with the row by NUTS with the same keys
@@ -38,7 +38,7 @@ from brdf_infer.measurements import Measurements
 from brdf_infer.params import PARAM_NAMES, Params
 from brdf_infer.posterior import NutsProgram, build_model_data, build_posterior_model, chain_keys
 from brdf_infer.scene import Scene
-from brdf_infer.synthetic import SyntheticLab
+from brdf_infer.studies.synthetic import SyntheticLab
 
 HEADERS = [
     "candidate",

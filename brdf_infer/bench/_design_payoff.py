@@ -1,7 +1,7 @@
 """Does ``brdf-infer design`` pay off over several rounds? A sequential study with known truths.
 
 Each seed draws a truth from the bundled run's posterior (coating and noise scales), lets a
-:class:`~brdf_infer.synthetic.SyntheticLab` measure an initial data set (the scene's rows of
+:class:`~brdf_infer.studies.synthetic.SyntheticLab` measure an initial data set (the scene's rows of
 one series: the article's first, specular campaign) and fits it by NUTS. Then K rounds, each a
 new session (a reference measurement of its own): three strategies each choose the round's rows
 — ``design`` (greedy on the expected sd of TIS(θ) given that strategy's data so far), ``random``

@@ -120,7 +120,8 @@ def design_section(quick: bool, figure: Path, progress=print) -> list[str]:
         "## Experimental design (`brdf-infer design`)",
         "",
         "Estimate against refit, from an independent simulation: per replicate a truth drawn "
-        "from the bundled posterior, a virtual lab (`brdf_infer.synthetic.SyntheticLab`: every "
+        "from the bundled posterior, a virtual lab "
+        "(`brdf_infer.studies.synthetic.SyntheticLab`: every "
         "effect drawn term by term, the angle errors moving the angles) measures the initial "
         "rows and then the candidate's row in a new session; NUTS fits both data sets with the "
         f"same keys ({fit}); design estimates the sd ratio of TIS(70°) from the replicate's "

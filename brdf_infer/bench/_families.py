@@ -12,7 +12,6 @@ import jax.numpy as jnp
 import numpy as np
 from scipy import integrate
 
-from brdf_infer.compare import CompareSettings, compare_families
 from brdf_infer.model import (
     CHECK_QUADRATURE,
     FIT_QUADRATURE,
@@ -21,6 +20,7 @@ from brdf_infer.model import (
     family,
     harvey_shack_integral,
 )
+from brdf_infer.studies.compare import CompareSettings, compare_families
 
 ABG = {"A": 2.0e-3, "B": 5.0e-3, "g": 1.8}
 HARVEY_SHACK = {"b0": 0.4, "L": 0.05, "S": -2.2}

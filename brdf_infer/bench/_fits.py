@@ -19,7 +19,7 @@ from brdf_infer.model import family
 from brdf_infer.observations import build_observation_model
 from brdf_infer.params import UV_PAPER, VIS_PAPER
 from brdf_infer.scene import Scene
-from brdf_infer.synthetic import synthetic_measurements
+from brdf_infer.studies.synthetic import synthetic_measurements
 
 
 @dataclass(frozen=True)

@@ -261,8 +261,8 @@ def ess_rows(scene: Scene, measurements, quick: bool, progress=print) -> list[Es
 
 
 def bias_rows(scene: Scene, measurements, quick: bool, progress=print) -> tuple[list, list]:
-    """The synthetic experiment (``brdf_infer.instrument_bias``) with several seeds."""
-    from brdf_infer.instrument_bias import bias_experiment
+    """The synthetic experiment (``brdf_infer.studies.instrument_bias``) with several seeds."""
+    from brdf_infer.studies.instrument_bias import bias_experiment
 
     seeds = [0] if quick else list(range(6))
     rows, experiments = [], []

@@ -1,6 +1,6 @@
 """Benchmark of what SBC cannot see: data simulated under one error model, fitted under another.
 
-SBC (:mod:`brdf_infer.sbc`) simulates from the inference's own likelihood, so it checks the
+SBC (:mod:`brdf_infer.studies.sbc`) simulates from the inference's own likelihood, so it checks the
 inference given the model and passes whatever the model gets wrong. Here each case simulates
 its replicates under one ``[errors]`` setting of the scene and fits them under another — the
 latent angle errors the likelihood linearises, a calibration it leaves out, the other rotation
@@ -9,7 +9,7 @@ replicates and how often the posterior intervals cover the truth, each coverage 
 binomial Monte Carlo standard error.
 
 Two blocks of truths. *Prior*: each replicate draws its truth from the scene's prior
-(:func:`brdf_infer.sbc.simulate`), as SBC does; but the prior's noise scales (sample sd,
+(:func:`brdf_infer.studies.sbc.simulate`), as SBC does; but the prior's noise scales (sample sd,
 repeatability) are several times the data's (the section states both blocks' medians), and
 beside such noise a left-out calibration of a few per cent barely shows. *Posterior*: each
 replicate's truth — the parameters and the learned noise scales — is a draw of the scene's
@@ -49,7 +49,8 @@ from brdf_infer.posterior import (
     programs_by_structure,
     run_nuts,
 )
-from brdf_infer.sbc import (
+from brdf_infer.scene import Scene
+from brdf_infer.studies.sbc import (
     SbcResult,
     SbcSettings,
     assess_ranks,
@@ -58,8 +59,7 @@ from brdf_infer.sbc import (
     replicate_data,
     simulate,
 )
-from brdf_infer.scene import Scene
-from brdf_infer.sensitivity import variant, variant_scene
+from brdf_infer.studies.sensitivity import variant, variant_scene
 
 REPORTED = ("tis70", "brdf0", "alpha", "theta_s0")  # the quantities of the table
 LABELS = {"tis70": "TIS(70°)", "brdf0": "π·BRDF0", "alpha": "α", "theta_s0": "θs0"}
@@ -288,7 +288,7 @@ def simulate_case(
     """The truth of every site and a simulated ``obs`` (ln R of every row) per replicate
     (leading axis) under the scene with the case's ``simulated`` keys changed, and how many
     replicates were drawn again (below). Without ``truths`` each replicate's truth is a prior
-    draw (:func:`brdf_infer.sbc.simulate`: the model in simulate mode); with them (one per
+    draw (:func:`brdf_infer.studies.sbc.simulate`: the model in simulate mode); with them (one per
     replicate) the model is simulated at them (:func:`simulate_at`). With ``angle_method =
     "latent"`` the angle errors are drawn and ln R evaluated at the perturbed angles.
 
@@ -464,7 +464,7 @@ def section_text(study: MisspecStudy) -> tuple[str, str, str, str]:
         "compiles it)."
     )
     prior_text = (
-        "**Truths from the prior** (`brdf_infer.sbc.simulate`): every parameter and noise "
+        "**Truths from the prior** (`brdf_infer.studies.sbc.simulate`): every parameter and noise "
         "scale of a replicate drawn from the scene's prior; the first row is SBC itself. The "
         "prior's noise scales are wide: the truths' median sample sd and repeatability are "
         f"{medians(study.prior_noise)}, against the bundled scene's 6.5 % calibration per "

@@ -8,8 +8,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from brdf_infer.sbc import SbcResult, SbcSettings, run_sbc
 from brdf_infer.scene import Scene, check_instrument
+from brdf_infer.studies.sbc import SbcResult, SbcSettings, run_sbc
 
 PLANTED_SIGMA_SCALE = 1.35
 

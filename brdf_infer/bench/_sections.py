@@ -417,7 +417,7 @@ def instrument_section(kernel_nodes: list, kernel_ess: list, biases: list) -> li
         "",
         markdown_table(ESS_HEADERS, [row.cells for row in kernel_ess]),
         "",
-        "Synthetic experiment (`brdf_infer.instrument_bias`): the ray tracer's dPs/Pi "
+        "Synthetic experiment (`brdf_infer.studies.instrument_bias`): the ray tracer's dPs/Pi "
         "(`aperture`) or Eq. (2) image ratio (`image`) at `uv-paper` for all 42 rows, times "
         "the noise of the scene's generative error model, analysed by Eq. (6) and by the "
         "generating kernel (NUTS 2 × (500 + 500) per data set); fraction of seeds whose 95 % "

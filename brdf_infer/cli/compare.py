@@ -1,5 +1,6 @@
-"""``brdf-infer compare``: model families ranked by PSIS-LOO (:mod:`brdf_infer.compare`) with
-the defaults of :class:`~brdf_infer.settings.CompareSettings`."""
+"""``brdf-infer compare``: model families ranked by PSIS-LOO
+(:mod:`brdf_infer.studies.compare`) with the defaults of
+:class:`~brdf_infer.settings.CompareSettings`."""
 
 from __future__ import annotations
 
@@ -61,12 +62,12 @@ def main(args: argparse.Namespace) -> int:
     """Compare the families (options checked before the scene's work starts) and print the
     ranking."""
     headless()
-    from brdf_infer.compare import (
+    from brdf_infer.report import write_comparison
+    from brdf_infer.studies.compare import (
         COMPARE_FILE,
         check_family_names,
         compare_families,
     )
-    from brdf_infer.report import write_comparison
 
     names = check_family_names(args.models)
     settings = record_from_args(CompareSettings, args, refit=not args.no_refit)

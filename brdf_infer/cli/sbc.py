@@ -1,5 +1,6 @@
 """``brdf-infer sbc``: simulation-based calibration of a scene's posterior
-(:func:`brdf_infer.sbc.run_sbc`) with the defaults of :class:`~brdf_infer.settings.SbcSettings`."""
+(:func:`brdf_infer.studies.sbc.run_sbc`) with the defaults of
+:class:`~brdf_infer.settings.SbcSettings`."""
 
 from __future__ import annotations
 
@@ -69,7 +70,7 @@ def main(args: argparse.Namespace) -> int:
     """Run SBC (every setting checked before any work), write it and print its verdict."""
     headless()
     from brdf_infer.report import write_sbc
-    from brdf_infer.sbc import COVERAGE_LEVELS, check_planted_fault, run_sbc
+    from brdf_infer.studies.sbc import COVERAGE_LEVELS, check_planted_fault, run_sbc
 
     check_family_name(args.model)
     settings = record_from_args(SbcSettings, args)

@@ -1,5 +1,5 @@
 """``brdf-infer sensitivity``: the posterior under the scene's error model and with each
-assumption changed (:mod:`brdf_infer.sensitivity`), with the defaults of
+assumption changed (:mod:`brdf_infer.studies.sensitivity`), with the defaults of
 :class:`~brdf_infer.settings.SensitivitySettings`."""
 
 from __future__ import annotations
@@ -60,7 +60,7 @@ def main(args: argparse.Namespace) -> int:
         sensitivity_rows,
         write_sensitivity,
     )
-    from brdf_infer.sensitivity import (
+    from brdf_infer.studies.sensitivity import (
         SENSITIVITY_FIGURE,
         SENSITIVITY_FILE,
         check_scene,

@@ -215,7 +215,7 @@ class PosteriorModel:
         for name in ("brdf0", "a1", "a2", "a3", "theta_s0"):
             numpyro.deterministic(name, getattr(params, name))
         # the physical prior: no mass on coatings with TIS > 1 (simulations reject such draws,
-        # brdf_infer.sbc.simulate)
+        # brdf_infer.studies.sbc.simulate)
         numpyro.factor(ENERGY_SITE, energy_log_factor(params, self.family.constants))
         return params
 

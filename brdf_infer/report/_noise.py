@@ -7,7 +7,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from brdf_infer import _arviz as az
-from brdf_infer.uniformity import ecdf_band
+from brdf_infer.studies.uniformity import ecdf_band
 
 
 def loo_pit_comparison(pits: dict[str, tuple[np.ndarray, float]]) -> Figure:

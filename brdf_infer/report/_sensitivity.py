@@ -13,7 +13,7 @@ from matplotlib.figure import Figure
 from brdf_infer.report import _html
 from brdf_infer.run_folder import SENSITIVITY_FIGURE, SENSITIVITY_FILE, RunFolder
 from brdf_infer.scene import TIS_ANGLE_DEG
-from brdf_infer.sensitivity import SensitivityResult
+from brdf_infer.studies.sensitivity import SensitivityResult
 
 PRIOR_SENSITIVITY_LIMIT = 0.05  # power-scaling sensitivity above which a component matters
 

@@ -79,7 +79,7 @@ Schema (keys other than these are errors; defaults in brackets)::
     [studies]                                # what `run` adds to the one posterior [none]
     error_models = ["spread"]                # [] posteriors under other error models
     sensitivity = true                       # [false] posteriors under each error-model
-                                             #   assumption changed (brdf_infer.sensitivity)
+                                             #   assumption changed (brdf_infer.studies.sensitivity)
     instruments = ["aperture", "image"]      # [] posteriors under other instrument models
     raytrace = true                          # [false] ray-trace the posterior ([raytrace])
     compare = ["strumik2024", "abg"]         # [] model families compared by PSIS-LOO

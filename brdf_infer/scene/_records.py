@@ -152,7 +152,7 @@ class Studies:
             ``[raytrace]`` setup (Sec. 6).
         compare: model families compared by PSIS-LOO (at least two).
         sensitivity: posteriors with each error-model assumption changed
-            (:mod:`brdf_infer.sensitivity`).
+            (:mod:`brdf_infer.studies.sensitivity`).
     """
 
     error_models: tuple[str, ...] = ()

@@ -1,6 +1,6 @@
 """Simultaneous bands for values that should be uniform: the ranks of simulation-based
-calibration (:mod:`brdf_infer.sbc`) and the ECDF of LOO-PIT values or randomised ranks, drawn
-behind their figures in the report."""
+calibration (:mod:`brdf_infer.studies.sbc`) and the ECDF of LOO-PIT values or randomised ranks,
+drawn behind their figures in the report."""
 
 from __future__ import annotations
 

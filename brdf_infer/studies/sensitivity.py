@@ -18,7 +18,7 @@ nothing); another error model (``model=spread``) compiles its own.
 Each row's pointwise log predictive density is that of its leave-one-out conditional
 (:func:`brdf_infer.posterior.loo_terms`), as in the run's PSIS-LOO; where Pareto k > 0.7 the
 row's term is computed exactly by refitting without it, through the same program
-(:func:`brdf_infer.compare.without_row`), as the model comparison does. The TIS follows the
+(:func:`brdf_infer.studies.compare.without_row`), as the model comparison does. The TIS follows the
 scene's ``[model] fold`` (its bands' convention).
 
 The baseline posterior is also checked for its sensitivity to the prior and to the likelihood
@@ -254,8 +254,8 @@ def _exact_terms(
     log of the mean over draws of p(yᵢ | y₋ᵢ, θ) from a posterior without row i."""
     from scipy.special import logsumexp
 
-    from brdf_infer.compare import without_row
     from brdf_infer.posterior import chain_keys, loo_terms
+    from brdf_infer.studies.compare import without_row
 
     keys = chain_keys(settings.seed, 1, settings.chains)[0]
     exact = pointwise.copy()
@@ -278,7 +278,6 @@ def _summarise(
     """TIS, π·BRDF0, PSIS-LOO (``refit(pointwise, rows)``: exact terms where Pareto k > 0.7)
     and the sampler's health of one variant's draws."""
     from brdf_infer import _arviz as az
-    from brdf_infer.compare import PARETO_K_LIMIT
     from brdf_infer.posterior import (
         FAMILY_TIS_DRAWS,
         NOISE_SITES,
@@ -287,6 +286,7 @@ def _summarise(
         loo_terms,
         tis_band,
     )
+    from brdf_infer.studies.compare import PARETO_K_LIMIT
 
     sites = output.sites
     log_lik = loo_terms(model, sites)[0]

@@ -60,7 +60,7 @@ def synthetic_data(
     """Rows with reflectance = ``truth`` × the noise factors of the scene's generative error
     model (drawn at ``params`` with the given learned scales)."""
     from brdf_infer.observations import build_observation_model
-    from brdf_infer.synthetic import simulate_measurements
+    from brdf_infer.studies.synthetic import simulate_measurements
 
     point = check_instrument(scene, "point")
     noisy = simulate_measurements(
