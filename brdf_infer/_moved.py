@@ -1,4 +1,5 @@
-"""The old import paths of the modules that moved into the grouped packages (``fit/``, ...).
+"""The old import paths of the modules that moved into the grouped packages (``fit/``,
+``studies/``, ``tables/``).
 
 For one release each old path still imports (``import brdf_infer.lsq``,
 ``from brdf_infer.lsq import fit_lsq``, ``from brdf_infer import lsq``) and gives the same
@@ -27,6 +28,11 @@ MOVED: dict[str, str] = {
     "brdf_infer.instrument_comparison": "brdf_infer.studies.instrument_comparison",
     "brdf_infer.synthetic": "brdf_infer.studies.synthetic",
     "brdf_infer.uniformity": "brdf_infer.studies.uniformity",
+    "brdf_infer.measurements": "brdf_infer.tables.measurements",
+    "brdf_infer.bsdf_file": "brdf_infer.tables.bsdf_file",
+    "brdf_infer.bsdf_measurements": "brdf_infer.tables.bsdf_measurements",
+    "brdf_infer.table_screening": "brdf_infer.tables.screening",
+    "brdf_infer.selections": "brdf_infer.tables.selections",
 }
 
 # the frames a warning skips to reach the importing line: the import system, this module, and

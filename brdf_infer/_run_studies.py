@@ -8,9 +8,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from brdf_infer.measurements import Measurements
 from brdf_infer.scene import Scene, Studies
 from brdf_infer.settings import RunSettings
+from brdf_infer.tables.measurements import Measurements
 
 
 @dataclass

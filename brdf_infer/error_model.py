@@ -72,7 +72,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from brdf_infer.errors import BadInputError
-from brdf_infer.measurements import Measurements
+from brdf_infer.tables.measurements import Measurements
 
 ERROR_MODELS = ("generative", "spread")
 CALIBRATIONS = ("per_series", "per_sample", "none")

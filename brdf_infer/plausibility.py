@@ -28,8 +28,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from brdf_infer.errors import BadInputError
-from brdf_infer.measurements import Measurements
 from brdf_infer.scene import Scene
+from brdf_infer.tables.measurements import Measurements
 
 RADIANS_LIMIT = math.pi / 2  # every |angle| within this: radians, not degrees
 RADIANS_DISTINCT = 2  # ... with at least this many distinct non-zero values

@@ -125,7 +125,7 @@ class Reference(TypedDict):
 
 
 class Dropout(TypedDict):
-    """One dropout of a .BSDF table, left out (:mod:`brdf_infer.table_screening`)."""
+    """One dropout of a .BSDF table, left out (:mod:`brdf_infer.tables.screening`)."""
 
     theta_i_deg: float
     theta_s_deg: float  # signed in the plane of incidence [deg]
@@ -135,7 +135,7 @@ class Dropout(TypedDict):
 
 
 class TableRecord(TypedDict):
-    """What reading a .BSDF table left out, by rule (:mod:`brdf_infer.table_screening`)."""
+    """What reading a .BSDF table left out, by rule (:mod:`brdf_infer.tables.screening`)."""
 
     zero_cells: int
     detection_limit: float  # the table's smallest positive value [sr⁻¹]
@@ -170,7 +170,7 @@ class PosteriorSummary(TypedDict):
     reference: NotRequired[list[Reference]]  # the scene's [reference] values
     seconds: dict[str, Any]  # sampling, compile, after_sampling (per step), total
     forced: list[str]  # plausibility checks the run went past
-    # a .BSDF table's zero cells and dropouts left out, by rule (brdf_infer.table_screening)
+    # a .BSDF table's zero cells and dropouts left out, by rule (brdf_infer.tables.screening)
     table: NotRequired[TableRecord]
     fingerprint: dict[str, str]  # what ran, for a resume
     verdict: VerdictRecord

@@ -21,7 +21,7 @@ alone carries more than a third of a headline 95 % width (TIS(70°), π·BRDF0;
 :mod:`brdf_infer.posterior._width`), a learned noise scale the data do not contract (set by
 its prior), a published reference value outside the 95 % interval, and, first, how many cells
 of a .BSDF table each reading rule left out (zero cells, dropouts, positive cells below the
-horizon; :mod:`brdf_infer.table_screening`; nothing for a CSV or a table no rule touched).
+horizon; :mod:`brdf_infer.tables.screening`; nothing for a CSV or a table no rule touched).
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ import numpy as np
 
 from brdf_infer.plausibility import answer_checks
 from brdf_infer.run_records import Bands, PosteriorSummary
-from brdf_infer.table_screening import table_facts
+from brdf_infer.tables.screening import table_facts
 
 PARETO_K_LIMIT = 0.7
 ALL_PASS = "every diagnostic passes"

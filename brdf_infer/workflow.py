@@ -42,13 +42,13 @@ from brdf_infer._run_studies import (
     instrument_study,
     sensitivity_study,
 )
-from brdf_infer.measurements import Measurements
 from brdf_infer.plausibility import Implausible
 from brdf_infer.run_folder import FIT_LSQ_FILE, FIT_PAPER_FILE, RunFolder
 from brdf_infer.run_folder import STUDIES_FILE as STUDIES_FILE  # the old name, kept
 from brdf_infer.run_records import PosteriorSummary
 from brdf_infer.scene import Scene, Studies
 from brdf_infer.settings import LSQ_STARTS, RunSettings
+from brdf_infer.tables.measurements import Measurements
 from brdf_infer.verdict import Verdict
 
 RUN_TRACE_RAYS = 2**18  # ~0.05 % MC error per configuration (NEE)

@@ -6,7 +6,7 @@ from pathlib import Path
 import pytest
 
 from brdf_infer.errors import BadInputError
-from brdf_infer.measurements import load_measurements
+from brdf_infer.tables.measurements import load_measurements
 from tests.helpers import run_cli, run_cli_process
 
 HEADER = "series,sample,theta_i_deg,theta_s_deg,reflectance,reflectance_err"

@@ -219,8 +219,8 @@ def _dense_conditional(run, candidates, draws, series):
     from dataclasses import replace
 
     from brdf_infer.design import candidate_measurements
-    from brdf_infer.measurements import Measurements
     from brdf_infer.posterior import build_posterior_model
+    from brdf_infer.tables.measurements import Measurements
 
     measured = run.measurements
     new = candidate_measurements(candidates, measured)

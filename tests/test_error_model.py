@@ -18,13 +18,13 @@ from brdf_infer.error_model import (
     value_sigma,
 )
 from brdf_infer.errors import BadInputError
-from brdf_infer.measurements import Measurements
 from brdf_infer.model import log_aperture_factor, log_brdf_inplane
 from brdf_infer.observations import log_reflectance_at
 from brdf_infer.params import PAPER_CONSTANTS, UV_PAPER
 from brdf_infer.posterior._loo import loo_pit, uniformity_p_value
 from brdf_infer.posterior._lowrank import leave_one_out_conditionals
 from brdf_infer.posterior._model import build_posterior_model
+from brdf_infer.tables.measurements import Measurements
 from tests.helpers import assert_allclose
 
 

@@ -191,7 +191,7 @@ def test_other_tools_files_tabs_and_header_order_are_read(tmp_path):
 def test_a_direction_listed_twice_is_one_measurement_row(tmp_path):
     """Radial 0 is the specular ray in every azimuth row: one row, not one per azimuth (a
     CSV may not repeat a row either); an angle of incidence of 90° or more is refused."""
-    from brdf_infer.bsdf_measurements import measurements_from_bsdf
+    from brdf_infer.tables.bsdf_measurements import measurements_from_bsdf
 
     path = tmp_path / "t.bsdf"
     path.write_text(GOOD.replace("AngleOfIncidence 1\n0", "AngleOfIncidence 1\n20"))

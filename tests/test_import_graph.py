@@ -210,7 +210,7 @@ def _planted(tmp_path: Path, module: str, source: str) -> Path:
     ("module", "source"),
     [
         # a back-import at module level, up the data flow
-        ("brdf_infer.measurements", "\nfrom brdf_infer import report\n"),
+        ("brdf_infer.tables.measurements", "\nfrom brdf_infer import report\n"),
         # a function-level one, relative, naming a submodule through `from . import`
         ("brdf_infer.posterior._bands", "\ndef f():\n    from ..studies import sbc\n"),
     ],

@@ -144,8 +144,8 @@ def test_bad_options_create_nothing(tmp_path, capsys, argv):
 
 
 def test_a_sigma_column_larger_than_its_values_is_warned_about(tmp_path):
-    from brdf_infer.measurements import load_measurements
     from brdf_infer.plausibility import measurement_warnings
+    from brdf_infer.tables.measurements import load_measurements
 
     path = tmp_path / "sigma.csv"
     path.write_text(

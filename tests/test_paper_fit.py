@@ -8,7 +8,7 @@ from brdf_infer.errors import BadInputError
 from brdf_infer.fit.paper import paper_fit, paper_grid_search, select_points
 from brdf_infer.model import reflectance_to_brdf, tis
 from brdf_infer.params import UV_PAPER, Params
-from brdf_infer.selections import SELECTIONS
+from brdf_infer.tables.selections import SELECTIONS
 
 # Half a unit of the last printed digit of what the article prints (Secs. 3, 5.3).
 PRINTED_UV_HALF_UNIT = Params(0.005e-2, 0.005e-4, 0.05e-11, 0.005e-12, 0.0, 0.0)  # α, θs0 fixed

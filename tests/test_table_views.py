@@ -13,9 +13,9 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pytest
 
-from brdf_infer.bsdf_file import specular_frame_to_model
 from brdf_infer.scene import load_scene
-from brdf_infer.table_screening import dropout_mask, table_facts
+from brdf_infer.tables.bsdf_file import specular_frame_to_model
+from brdf_infer.tables.screening import dropout_mask, table_facts
 from brdf_infer.verdict import answer_facts
 from tests import vendor_table as vendor
 

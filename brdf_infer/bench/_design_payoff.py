@@ -42,10 +42,10 @@ from brdf_infer.design import (
     load_design_run,
     reachable,
 )
-from brdf_infer.measurements import Measurements
 from brdf_infer.model import tis
 from brdf_infer.params import PARAM_NAMES, Params
 from brdf_infer.scene import Scene
+from brdf_infer.tables.measurements import Measurements
 
 STRATEGIES = ("design", "random", "article")
 NAMES = {"design": "design", "random": "random reachable", "article": "the article's plan"}

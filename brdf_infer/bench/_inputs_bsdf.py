@@ -9,7 +9,7 @@ import numpy as np
 from hypothesis import strategies as st
 
 from brdf_infer.bench._inputs import _LEVELS, _broken, _number_text, _scene_for_rows
-from brdf_infer.measurements import Measurements
+from brdf_infer.tables.measurements import Measurements
 
 _HEADER_VALUES = {
     "Source": ["Measured", "Unknown", "Measured data", ""],
@@ -97,7 +97,7 @@ def _write_bsdf(folder: Path, given: BsdfInput) -> Path:
 def _read_bsdf(path: Path, given: BsdfInput) -> Measurements:
     """Read a generated .BSDF file as a scene's measurements (``export --check`` reads it
     with the same reader)."""
-    from brdf_infer.bsdf_measurements import measurements_from_bsdf
+    from brdf_infer.tables.bsdf_measurements import measurements_from_bsdf
 
     return measurements_from_bsdf(path, given.keep_every_radial, given.keep_every_azimuth)
 

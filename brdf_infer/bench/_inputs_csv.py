@@ -10,7 +10,7 @@ import numpy as np
 from hypothesis import strategies as st
 
 from brdf_infer.bench._inputs import _LEVELS, _broken, _number_text, _scene_for_rows
-from brdf_infer.measurements import Measurements
+from brdf_infer.tables.measurements import Measurements
 
 _GOOD_CELLS: dict[str, st.SearchStrategy[str]] = {
     "series": st.sampled_from(["I", "II"]),
@@ -128,7 +128,7 @@ def _write_csv(folder: Path, given: CsvInput) -> Path:
 
 def _read_csv(path: Path, given: CsvInput) -> Measurements:
     """Read a generated CSV as the scene's loader does."""
-    from brdf_infer.measurements import load_measurements
+    from brdf_infer.tables.measurements import load_measurements
 
     return load_measurements(path, given.series_quantity, given.series_quantity)
 

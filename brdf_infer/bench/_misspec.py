@@ -40,7 +40,6 @@ import numpy as np
 from numpyro import handlers
 from numpyro.infer import Predictive
 
-from brdf_infer.measurements import Measurements
 from brdf_infer.posterior import (
     NOISE_SITES,
     PosteriorModel,
@@ -60,6 +59,7 @@ from brdf_infer.studies.sbc import (
     simulate,
 )
 from brdf_infer.studies.sensitivity import variant, variant_scene
+from brdf_infer.tables.measurements import Measurements
 
 REPORTED = ("tis70", "brdf0", "alpha", "theta_s0")  # the quantities of the table
 LABELS = {"tis70": "TIS(70°)", "brdf0": "π·BRDF0", "alpha": "α", "theta_s0": "θs0"}

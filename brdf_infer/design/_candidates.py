@@ -28,8 +28,8 @@ from pathlib import Path
 import numpy as np
 
 from brdf_infer.errors import BadInputError
-from brdf_infer.measurements import Measurements
 from brdf_infer.scene import DesignSettings, Scene, SeriesGeometry
+from brdf_infer.tables.measurements import Measurements
 
 
 @dataclass(frozen=True)

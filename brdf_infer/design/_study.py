@@ -54,7 +54,6 @@ from brdf_infer.error_model import (
     noise_layout,
 )
 from brdf_infer.errors import BadInputError
-from brdf_infer.measurements import Measurements
 from brdf_infer.model import (
     check_family_name,
     family,
@@ -72,6 +71,7 @@ from brdf_infer.posterior import build_posterior_model, interval95, run_scene
 from brdf_infer.run_folder import DESIGN_FIGURE, DESIGN_FILE, RunFolder
 from brdf_infer.scene import Scene, load_scene
 from brdf_infer.settings import DesignOptions
+from brdf_infer.tables.measurements import Measurements
 
 
 @dataclass(frozen=True)

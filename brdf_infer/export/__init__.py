@@ -1,16 +1,8 @@
 """Exports to ray tracers: Zemax tabular .BSDF files and TIS-preserving ABg fits, of one
 parameter set or of a posterior (median, 95 % bounds and single draws). The .BSDF format
-itself, its reader and writer and its specular frame, is :mod:`brdf_infer.bsdf_file`
+itself, its reader and writer and its specular frame, is :mod:`brdf_infer.tables.bsdf_file`
 (re-exported here)."""
 
-from brdf_infer.bsdf_file import (
-    BsdfFile,
-    format_bsdf,
-    read_bsdf,
-    scattered_direction,
-    specular_frame_to_model,
-    write_bsdf,
-)
 from brdf_infer.export._abg import AbgFit, fit_abg
 from brdf_infer.export._files import (
     ABG_COLUMNS,
@@ -30,6 +22,14 @@ from brdf_infer.export._grid import (
 from brdf_infer.export._source import Source, draw_indices, planned_files
 from brdf_infer.export._zemax import export_zemax
 from brdf_infer.run_folder import EXPORTS_FILE
+from brdf_infer.tables.bsdf_file import (
+    BsdfFile,
+    format_bsdf,
+    read_bsdf,
+    scattered_direction,
+    specular_frame_to_model,
+    write_bsdf,
+)
 
 __all__ = [
     "ABG_COLUMNS",

@@ -2,7 +2,7 @@
 hemisphere integral.
 
 Directions in the format's specular frame (ψ, r) map to the model's (θ, φ) as
-:mod:`brdf_infer.bsdf_file` describes.
+:mod:`brdf_infer.tables.bsdf_file` describes.
 """
 
 from __future__ import annotations
@@ -14,9 +14,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from brdf_infer.bsdf_file import scattered_direction, specular_frame_to_model
 from brdf_infer.model import log_brdf_hemisphere
 from brdf_infer.params import HemisphereConstants, Params
+from brdf_infer.tables.bsdf_file import scattered_direction, specular_frame_to_model
 
 DEFAULT_THETA_I_DEG = np.arange(0.0, 86.0, 5.0)  # 0°, 5°, …, 85°
 DEFAULT_AZIMUTH_STEP_DEG = 5.0

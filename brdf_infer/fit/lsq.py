@@ -51,12 +51,12 @@ from brdf_infer.fit.quality import (
     residual_trends,
     trend_regressors,
 )
-from brdf_infer.measurements import Measurements
 from brdf_infer.model import FAMILY_NAMES, ModelFamily, family
 from brdf_infer.observations import Observations, build_observation_model, log_reflectance
 from brdf_infer.params import Params
 from brdf_infer.scene import Scene
 from brdf_infer.settings import LSQ_STARTS
+from brdf_infer.tables.measurements import Measurements
 
 SOLVERS = {
     "lm": optx.LevenbergMarquardt,

@@ -4,7 +4,7 @@ search over (α, θs0).
 For fixed α and θs0, Eq. (7) is linear in (ln BRDF0, a1, a2, a3) on the basis
 [1, θi x, θi x^α, θi² x^α], x = θs − θs0 (x^α := 0 below θs0). Measured BRDFs come from raw
 reflectance through Eq. (6). Which rows enter changes the answer;
-:data:`brdf_infer.selections.SELECTIONS` names the choices, and ``paper`` is the one that
+:data:`brdf_infer.tables.selections.SELECTIONS` names the choices, and ``paper`` is the one that
 reproduces Sec. 5.3.
 """
 
@@ -16,11 +16,11 @@ import numpy as np
 
 from brdf_infer._precision import ensure_float64
 from brdf_infer.errors import BadInputError
-from brdf_infer.measurements import Measurements
 from brdf_infer.model import log_brdf_inplane
 from brdf_infer.params import Params
 from brdf_infer.scene import Scene
-from brdf_infer.selections import SELECTIONS
+from brdf_infer.tables.measurements import Measurements
+from brdf_infer.tables.selections import SELECTIONS
 
 
 @dataclass(frozen=True)

@@ -13,7 +13,6 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-from brdf_infer.measurements import Measurements
 from brdf_infer.posterior._bands import draws_physical
 from brdf_infer.posterior._learned import learned_record
 from brdf_infer.posterior._model import PosteriorModel
@@ -27,6 +26,7 @@ from brdf_infer.posterior._width import (
     headline_draws,
     width_attribution,
 )
+from brdf_infer.tables.measurements import Measurements
 
 PRIOR_DRAWS = 4000  # the prior predictive's 2.5 % quantile from ~100 draws beyond it
 # A refit's size (brdf_infer.posterior._width, "Monte Carlo error"): 2 × 500 draws, ESS ≈ 800

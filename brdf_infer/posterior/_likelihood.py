@@ -13,10 +13,10 @@ import numpyro
 import numpyro.distributions as dist
 
 from brdf_infer.error_model import ErrorSettings, NoiseLayout, NoiseScales, noise_layout
-from brdf_infer.measurements import Measurements
 from brdf_infer.observations import Observations, build_observation_model
 from brdf_infer.posterior._lowrank import low_rank_normal_log_density
 from brdf_infer.scene import Scene
+from brdf_infer.tables.measurements import Measurements
 
 
 class ModelData(NamedTuple):

@@ -46,7 +46,6 @@ import numpyro.distributions as dist
 from brdf_infer.coordinates import ANGLE_SCALE_DEG, from_internal
 from brdf_infer.error_model import NoiseScales, angle_slopes, covariance_factors
 from brdf_infer.errors import BadInputError
-from brdf_infer.measurements import Measurements
 from brdf_infer.model import (
     ModelFamily,
     Physical,
@@ -73,6 +72,7 @@ from brdf_infer.posterior._whitening import (
 )
 from brdf_infer.priors import Prior
 from brdf_infer.scene import Scene
+from brdf_infer.tables.measurements import Measurements
 
 LINEAR = ("brdf0", "a1", "a2", "a3")  # priors of c = (ln BRDF0, b1, b2, b3)
 LINEAR_SITES = ("log_brdf0", "b1", "b2", "b3")

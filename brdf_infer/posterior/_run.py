@@ -20,7 +20,6 @@ from brdf_infer._outlock import writing
 from brdf_infer._precision import ensure_float64
 from brdf_infer.error_model import ERROR_MODELS
 from brdf_infer.errors import BadInputError
-from brdf_infer.measurements import Measurements
 from brdf_infer.model import check_family_name, family
 from brdf_infer.posterior._answer import answer_records
 from brdf_infer.posterior._bands import (
@@ -56,6 +55,7 @@ from brdf_infer.run_folder import CHECKPOINT_FILE
 from brdf_infer.run_records import Bands, PosteriorSummary
 from brdf_infer.scene import Scene, check_instrument, load_scene, parse_scene
 from brdf_infer.settings import PosteriorSettings
+from brdf_infer.tables.measurements import Measurements
 from brdf_infer.verdict import PARETO_K_LIMIT, posterior_verdict
 
 
@@ -440,7 +440,7 @@ def complete_run(
         **answer,  # width, learned, reference
         "seconds": dict(result.seconds),
         "forced": list(forced),
-        # what reading a .BSDF table left out, by rule (brdf_infer.table_screening); a CSV: none
+        # what reading a .BSDF table left out, by rule (brdf_infer.tables.screening); a CSV: none
         **({} if measurements.screening is None else {"table": measurements.screening.as_json()}),
         "fingerprint": run_fingerprint(model, measurements),  # what ran: for a resume
     }

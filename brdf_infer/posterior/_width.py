@@ -50,10 +50,10 @@ from scipy.stats import norm
 
 from brdf_infer import _arviz as az
 from brdf_infer.error_model import ErrorSettings
-from brdf_infer.measurements import Measurements
 from brdf_infer.model import ModelFamily
 from brdf_infer.posterior._model import PosteriorModel, build_posterior_model
 from brdf_infer.posterior._power_scaling import log_likelihood_draws
+from brdf_infer.tables.measurements import Measurements
 
 PARETO_K_LIMIT = 0.7
 HEADLINE_TIS_DEG = 70.0  # the article's TIS angle (Sec. 7)

@@ -11,11 +11,11 @@ from pathlib import Path
 import numpy as np
 
 from brdf_infer.errors import BadInputError
-from brdf_infer.measurements import Measurements
 from brdf_infer.params import Params
 from brdf_infer.raytrace._images import simulate_images
 from brdf_infer.run_folder import DETECTOR_IMAGES_FILE, RunFolder
 from brdf_infer.scene import Scene
+from brdf_infer.tables.measurements import Measurements
 
 _ARRAYS = ("scattered", "reference", "x_edges_mm", "y_edges_mm", "signal_half_size_mm")
 

@@ -5,11 +5,11 @@ from __future__ import annotations
 import jax
 import numpy as np
 
-from brdf_infer.measurements import Measurements
 from brdf_infer.params import Params
 from brdf_infer.raytrace._setup import build_setup, configurations
 from brdf_infer.raytrace._trace import detector_images
 from brdf_infer.scene import Scene
+from brdf_infer.tables.measurements import Measurements
 
 
 def simulate_images(

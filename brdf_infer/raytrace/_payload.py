@@ -5,10 +5,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from brdf_infer.measurements import Measurements
 from brdf_infer.params import Params, params_to_dict
 from brdf_infer.raytrace._series import RaytraceResult, raytrace_posterior, raytrace_series
 from brdf_infer.scene import Scene
+from brdf_infer.tables.measurements import Measurements
 
 
 def _payload(scene: Scene, result: RaytraceResult, params: Params, source: str, draws) -> dict:

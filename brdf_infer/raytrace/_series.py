@@ -25,7 +25,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from brdf_infer.measurements import Measurements
 from brdf_infer.model import brdf_hemisphere
 from brdf_infer.params import Params
 from brdf_infer.raytrace._setup import (
@@ -46,6 +45,7 @@ from brdf_infer.raytrace._tally import (
 )
 from brdf_infer.raytrace._trace import ESTIMATORS, Setup
 from brdf_infer.scene import Scene
+from brdf_infer.tables.measurements import Measurements
 
 BAND_QUANTILES = {"lo95": 0.025, "median": 0.5, "hi95": 0.975}
 

@@ -8,11 +8,11 @@ from dataclasses import dataclass, replace
 import jax.numpy as jnp
 import numpy as np
 
-from brdf_infer.measurements import Measurements
 from brdf_infer.model import brdf_hemisphere, solid_angle
 from brdf_infer.params import Params
 from brdf_infer.raytrace._trace import Setup
 from brdf_infer.scene import RaytraceSettings, Scene
+from brdf_infer.tables.measurements import Measurements
 
 
 @dataclass(frozen=True)

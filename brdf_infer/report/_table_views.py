@@ -1,7 +1,7 @@
 """Views of a table as a scatterometer writes it: which rows are in the plane of incidence, a
 panel grid that stays legible at many angles of incidence, the residuals of every row on the
 hemisphere (one small polar panel per angle of incidence), and what reading the table left
-out (its zero cells and dropouts, counted by :mod:`brdf_infer.table_screening`'s rules)."""
+out (its zero cells and dropouts, counted by :mod:`brdf_infer.tables.screening`'s rules)."""
 
 from __future__ import annotations
 
@@ -10,9 +10,9 @@ from typing import Any
 import matplotlib.pyplot as plt
 import numpy as np
 
-from brdf_infer.measurements import Measurements
 from brdf_infer.report import _html
-from brdf_infer.table_screening import DROPOUT_RULE, ZERO_RULE, dropout_words
+from brdf_infer.tables.measurements import Measurements
+from brdf_infer.tables.screening import DROPOUT_RULE, ZERO_RULE, dropout_words
 
 LEAST_LIMIT = 0.05  # the residual map's colour scale spans at least ±0.05 (±5 %) [ln units]
 

@@ -43,7 +43,7 @@ Schema (keys other than these are errors; defaults in brackets)::
     [paper_fit]
     alpha = 4.5                              # [4.5] fixed α of the linear regression
     theta_s0_deg = -12.0                     # [-12.0] fixed θs0 [deg]
-    selection = "paper"                      # ["paper"] see brdf_infer.selections.SELECTIONS
+    selection = "paper"                      # ["paper"] see brdf_infer.tables.selections.SELECTIONS
     [outputs]
     theta_i_deg = [18, 45, 60, 75, 80]       # [every measured θi] BRDF bands [deg]
     tis = true                               # [true] TIS band (needs out_of_plane)

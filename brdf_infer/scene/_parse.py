@@ -4,9 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from brdf_infer.bsdf_measurements import BSDF_SERIES, is_bsdf_path
 from brdf_infer.errors import BadInputError
-from brdf_infer.measurements import QUANTITIES
 from brdf_infer.params import PAPER_CONSTANTS, PARAM_NAMES, PARAMETER_SETS, HemisphereConstants
 from brdf_infer.priors import DEFAULT_PRIORS, parse_prior
 from brdf_infer.scene._errors import parse_errors
@@ -27,6 +25,8 @@ from brdf_infer.scene._tables import (
     _scene_name,
     _selection,
 )
+from brdf_infer.tables.bsdf_measurements import BSDF_SERIES, is_bsdf_path
+from brdf_infer.tables.measurements import QUANTITIES
 
 _TOP_KEYS = {
     "instrument",

@@ -9,12 +9,12 @@ from pathlib import Path
 
 import numpy as np
 
-from brdf_infer.bsdf_measurements import is_bsdf_path, measurements_from_bsdf
 from brdf_infer.error_model import ErrorSettings
 from brdf_infer.errors import BadInputError
-from brdf_infer.measurements import Measurements, load_measurements
 from brdf_infer.params import PAPER_CONSTANTS, PARAM_NAMES, HemisphereConstants
 from brdf_infer.priors import DEFAULT_PRIORS, Prior
+from brdf_infer.tables.bsdf_measurements import is_bsdf_path, measurements_from_bsdf
+from brdf_infer.tables.measurements import Measurements, load_measurements
 
 
 @dataclass(frozen=True)
@@ -80,7 +80,7 @@ class PaperFitSettings:
     Attributes:
         alpha: fixed exponent α [-].
         theta_s0_deg: fixed θs0 [deg].
-        selection: name of the data selection (``brdf_infer.selections.SELECTIONS``).
+        selection: name of the data selection (``brdf_infer.tables.selections.SELECTIONS``).
     """
 
     alpha: float = 4.5

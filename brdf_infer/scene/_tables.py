@@ -16,7 +16,7 @@ from brdf_infer.scene._fields import (
     _table,
 )
 from brdf_infer.scene._records import DesignSettings, ReferenceValue, Studies, tis_angle_deg
-from brdf_infer.selections import SELECTIONS
+from brdf_infer.tables.selections import SELECTIONS
 
 
 def _model_family(model: dict, path: Path) -> str:
@@ -136,7 +136,7 @@ def _scene_name(document: dict, path: Path) -> str:
 
 
 def _selection(paper: dict, path: Path) -> str:
-    """``[paper_fit] selection``: a name of :data:`brdf_infer.selections.SELECTIONS`."""
+    """``[paper_fit] selection``: a name of :data:`brdf_infer.tables.selections.SELECTIONS`."""
     name = _string(paper, "selection", path, default="paper")
     if name not in SELECTIONS:
         raise BadInputError(

@@ -37,7 +37,6 @@ from scipy.special import logsumexp
 from brdf_infer import _arviz as az
 from brdf_infer._precision import ensure_float64
 from brdf_infer.errors import BadInputError
-from brdf_infer.measurements import Measurements
 from brdf_infer.model import check_family_name, family
 from brdf_infer.posterior import (
     THRESHOLDS,
@@ -52,6 +51,7 @@ from brdf_infer.posterior import (
 from brdf_infer.run_folder import COMPARE_FILE as COMPARE_FILE  # the old name, kept
 from brdf_infer.scene import Scene
 from brdf_infer.settings import CompareSettings
+from brdf_infer.tables.measurements import Measurements
 
 PARETO_K_LIMIT = 0.7
 TIS_DRAWS = 400  # posterior draws the TIS band is computed from

@@ -18,9 +18,9 @@ from typing import Any
 
 import numpy as np
 
-from brdf_infer.measurements import Measurements
 from brdf_infer.params import Params, params_to_dict
 from brdf_infer.scene import Scene, check_instrument
+from brdf_infer.tables.measurements import Measurements
 
 TRACED_QUANTITY = {"aperture": "simulated", "image": "image_ratio"}
 QUANTITIES = ("brdf0", "alpha", "tis_70deg")

@@ -19,12 +19,12 @@ import numpy as np
 from brdf_infer import _arviz as az
 from brdf_infer.errors import BadInputError
 from brdf_infer.instrument import INSTRUMENT_MODELS
-from brdf_infer.measurements import Measurements
 from brdf_infer.posterior import interval95
 from brdf_infer.run_folder import INSTRUMENT_FILE as INSTRUMENT_FILE  # the old name, kept
 from brdf_infer.run_folder import RunFolder
 from brdf_infer.run_records import PosteriorSummary
 from brdf_infer.scene import Scene, check_instrument
+from brdf_infer.tables.measurements import Measurements
 
 TRACE_DRAWS = 16
 TRACE_RAYS = 16_384  # per draw and configuration (NEE)

@@ -46,7 +46,6 @@ import numpy as np
 from scipy import stats
 
 from brdf_infer.errors import BadInputError
-from brdf_infer.measurements import Measurements
 from brdf_infer.model import ModelFamily, check_family_name, family
 from brdf_infer.params import PARAM_NAMES
 from brdf_infer.posterior import (
@@ -63,6 +62,7 @@ from brdf_infer.priors import Prior
 from brdf_infer.run_folder import SBC_FILE as SBC_FILE  # the old name, kept
 from brdf_infer.scene import Scene
 from brdf_infer.settings import SbcSettings, check_planted_fault_name
+from brdf_infer.tables.measurements import Measurements
 
 QUANTITIES: tuple[str, ...] = (*PARAM_NAMES, "tis70")  # ranked for strumik2024
 NOISE_QUANTITIES: tuple[str, ...] = NOISE_SITES

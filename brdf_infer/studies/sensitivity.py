@@ -41,12 +41,12 @@ import numpy as np
 
 from brdf_infer.error_model import CALIBRATIONS, ROTATION_COUPLINGS
 from brdf_infer.errors import BadInputError
-from brdf_infer.measurements import Measurements
 from brdf_infer.model import family
 from brdf_infer.run_folder import SENSITIVITY_FIGURE as SENSITIVITY_FIGURE  # the old name, kept
 from brdf_infer.run_folder import SENSITIVITY_FILE as SENSITIVITY_FILE  # the old name, kept
 from brdf_infer.scene import TIS_ANGLE_DEG, Scene, parse_errors, tis_angles
 from brdf_infer.settings import SensitivitySettings
+from brdf_infer.tables.measurements import Measurements
 
 if TYPE_CHECKING:  # ArviZ is imported where it is used: the command line's parser stays light
     from brdf_infer._arviz import InferenceData

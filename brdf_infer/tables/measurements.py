@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from brdf_infer.errors import BadInputError
-from brdf_infer.table_screening import TableScreening
+from brdf_infer.tables.screening import TableScreening
 
 COLUMNS: tuple[str, ...] = (
     "series",
@@ -55,7 +55,7 @@ class Measurements:
         phi_s_deg: azimuth of each out-of-plane row [deg] (NaN for in-plane rows), or None
             when every row is in the plane.
         screening: what reading a .BSDF table left out, counted by its rules
-            (:class:`brdf_infer.table_screening.TableScreening`); None for a CSV.
+            (:class:`brdf_infer.tables.screening.TableScreening`); None for a CSV.
     """
 
     path: Path

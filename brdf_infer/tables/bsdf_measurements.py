@@ -2,7 +2,7 @@
 sphere's BRDF table, read as BRDF rows of one series ``bsdf`` and one sample ``bsdf``.
 
 Each table value at (AOI, azimuth, radial) of the file's specular frame becomes a row at the
-model's (θi, θ, φ) (:func:`brdf_infer.bsdf_file.specular_frame_to_model`). Rows in the plane
+model's (θi, θ, φ) (:func:`brdf_infer.tables.bsdf_file.specular_frame_to_model`). Rows in the plane
 of incidence (φ = 180° or 0° to 1e-9°) get a signed θs like CSV rows; the others keep their
 azimuth. A direction the table lists more than once (radial 0, the specular ray, in every
 azimuth row; a negative radial that mirrors another azimuth) is one row, the first listed: a
@@ -10,7 +10,7 @@ CSV must not repeat a row either. ``keep_every_radial`` / ``keep_every_azimuth``
 table (every k-th radial and azimuth sample, counted from the first), since a full table
 holds 10⁴–10⁵ values.
 
-Left out, each counted by the rule :mod:`brdf_infer.table_screening` states (the run's
+Left out, each counted by the rule :mod:`brdf_infer.tables.screening` states (the run's
 verdict names the counts): directions below the horizon, zero cells (below the detection
 limit) and dropouts (a value far below every neighbour). The record rides on the rows as
 :attr:`Measurements.screening`.
@@ -23,10 +23,10 @@ from typing import NamedTuple
 
 import numpy as np
 
-from brdf_infer.bsdf_file import BsdfFile, read_bsdf, specular_frame_to_model
 from brdf_infer.errors import BadInputError
-from brdf_infer.measurements import Measurements
-from brdf_infer.table_screening import TableScreening, dropout_mask, neighbour_median
+from brdf_infer.tables.bsdf_file import BsdfFile, read_bsdf, specular_frame_to_model
+from brdf_infer.tables.measurements import Measurements
+from brdf_infer.tables.screening import TableScreening, dropout_mask, neighbour_median
 
 BSDF_SERIES = "bsdf"
 IN_PLANE_TOLERANCE_DEG = 1e-9
@@ -87,7 +87,7 @@ class _Cells(NamedTuple):
     value: np.ndarray  # [sr⁻¹]
     above: np.ndarray  # above the horizon (θ < 90°)
     below: np.ndarray  # below it (not on it, to HORIZON_TOLERANCE)
-    dropout: np.ndarray  # brdf_infer.table_screening.dropout_mask
+    dropout: np.ndarray  # brdf_infer.tables.screening.dropout_mask
     around: np.ndarray  # the median of its neighbours [sr⁻¹]
 
 
@@ -130,7 +130,7 @@ def _directions(cells: _Cells, mask: np.ndarray) -> set[tuple[float, float, floa
 
 
 def _screening(cells: _Cells, usable: np.ndarray) -> TableScreening:
-    """What the rows leave out (:mod:`brdf_infer.table_screening`), each direction once."""
+    """What the rows leave out (:mod:`brdf_infer.tables.screening`), each direction once."""
     theta_i, theta_s, phi_s, value, above, below, dropout, around = cells
     kept = _directions(cells, usable)
     zero_rows = _directions(cells, above & (value == 0.0)) - kept

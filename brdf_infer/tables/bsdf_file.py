@@ -1,5 +1,5 @@
 """Zemax / Radiant "BSDF Data Interchange" tabular files (.BSDF): their reader and writer, and
-their specular frame. Read as measurements (:mod:`brdf_infer.bsdf_measurements`) and written
+their specular frame. Read as measurements (:mod:`brdf_infer.tables.bsdf_measurements`) and written
 as exports (:mod:`brdf_infer.export`).
 
 Layout (one keyword per line; ``#`` starts a comment line)::
