@@ -18,6 +18,8 @@ from dataclasses import dataclass
 from brdf_infer.errors import BadInputError
 from brdf_infer.params import PARAM_NAMES
 
+DESIGN_BUDGET = 3  # rows chosen together by default (the scene's [design] and --budget)
+
 TARGET_FORMS = "tis:THETA, pi_brdf0, a parameter (" + ", ".join(PARAM_NAMES) + ")"
 TARGET_FORMS += ", brdf:THETA_I,THETA_S or all"
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+from brdf_infer._design_target import DESIGN_BUDGET
 from brdf_infer.errors import BadInputError
 
 if TYPE_CHECKING:
@@ -252,7 +253,7 @@ class DesignOptions:
 
     draws: int = 1000
     simulations: int = 128
-    budget: int = 3
+    budget: int = DESIGN_BUDGET
     seed: int = 0
 
     def __post_init__(self) -> None:

@@ -71,9 +71,6 @@ def test_the_library_functions_default_to_the_records():
             assert options[name] == parameter.default, name
     assert options["starts"] == RunSettings().lsq_starts
     assert options_of(["design", "run-folder"])["budget"] is None  # the scene's [design] one
-    from brdf_infer.scene import DesignSettings
-
-    assert DesignSettings().budget == DesignOptions().budget
 
 
 @pytest.mark.parametrize(

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from brdf_infer._design_target import DESIGN_BUDGET
 from brdf_infer.error_model import ErrorSettings
 from brdf_infer.errors import BadInputError
 from brdf_infer.params import PAPER_CONSTANTS, PARAM_NAMES, HemisphereConstants
@@ -203,7 +204,7 @@ class DesignSettings:
     source_clearance_deg: float = 10.0
     series: str | None = None
     same_session: str | None = None
-    budget: int = 3  # as brdf_infer.settings.DesignOptions (a test holds them equal)
+    budget: int = DESIGN_BUDGET
 
 
 @dataclass(frozen=True)
