@@ -31,11 +31,12 @@ def check_points(scene, measurements, count: int = POINTS, seed: int = 0) -> lis
     candidates = Predictive(model, num_samples=8 * count, return_sites=[*free, *noise])(
         jax.random.PRNGKey(seed), model.data, mode="simulate"
     )
-    possible = [
-        k
-        for k in range(8 * count)
-        if np.isfinite(_log_density(model, {s: candidates[s][k] for s in [*free, *noise]}))
-    ]
+    possible = []  # the first ``count`` candidates our prior allows (each one a traced density)
+    for k in range(8 * count):
+        if len(possible) == count:
+            break
+        if np.isfinite(_log_density(model, {s: candidates[s][k] for s in [*free, *noise]})):
+            possible.append(k)
     prior = {site: np.asarray(candidates[site])[possible] for site in [*free, *noise]}
     centre = dict(
         zip(("log_brdf0", "b1", "b2", "b3", "alpha", "t_s0"), to_internal(UV_PAPER), strict=True)
