@@ -30,7 +30,8 @@ class Band(Interval):
 
 class Diagnostics(TypedDict):
     """Sampler health: ArviZ's R-hat and ESS over the sampled parameters, the failures in
-    words; NUTS adds divergences and BFMI, emcee its autocorrelation time."""
+    words; NUTS adds divergences and BFMI (and why Laplace was refused, where it was),
+    Laplace its importance weights' record, emcee its autocorrelation time."""
 
     r_hat_max: float
     ess_bulk_min: float
@@ -40,6 +41,9 @@ class Diagnostics(TypedDict):
     failures: list[str]
     divergences: NotRequired[int]  # NUTS
     bfmi_min: NotRequired[float | None]  # NUTS
+    laplace_refused: NotRequired[str]  # NUTS after a refused Laplace approximation
+    # Laplace: pareto_k, ess (Kish), proposals, distinct_draws, adaptations
+    importance: NotRequired[dict[str, float]]
     steps_per_autocorrelation_time: NotRequired[float]  # emcee
     autocorrelation_time_max: NotRequired[float]  # emcee
     acceptance_fraction: NotRequired[float]  # emcee

@@ -23,7 +23,8 @@ if TYPE_CHECKING:
 LSQ_STARTS = 16  # least-squares starts of a fit
 NUTS_WARMUP = 1000  # NUTS warmup iterations per chain of a posterior run
 EMCEE_BURN_IN = 4000  # emcee burn-in steps of a posterior run
-SAMPLERS: tuple[str, ...] = ("nuts", "emcee")
+SAMPLERS: tuple[str, ...] = ("auto", "nuts", "laplace", "emcee")
+LAPLACE_MIN_ROWS = 1000  # "auto" samples tables of this many rows by Laplace + PSIS
 BATCH_MODES: tuple[str, ...] = ("auto", "threads", "vmap")
 PLANTED_FAULTS: dict[str, str] = {  # planted in the inference only; the simulations keep none
     "jacobian": "the whitening's log-Jacobian dropped from the inference's density",
@@ -84,13 +85,24 @@ class RunSettings:
         check_family_name(self.model)
 
 
+def resolved_sampler(sampler: str, rows: int) -> str:
+    """The sampler a run of ``rows`` rows starts with: ``auto`` resolved by
+    :data:`LAPLACE_MIN_ROWS`, any other as it is."""
+    if sampler != "auto":
+        return sampler
+    return "laplace" if rows >= LAPLACE_MIN_ROWS else "nuts"
+
+
 @dataclass(frozen=True)
 class PosteriorSettings:
     """How a posterior is sampled (:func:`brdf_infer.posterior.run_posterior`).
 
     Attributes:
-        sampler: ``nuts`` or ``emcee``.
-        chains, draws: NUTS chains and draws per chain.
+        sampler: ``nuts``, ``laplace`` (Laplace's approximation corrected by Pareto-smoothed
+            importance sampling, NUTS where its diagnostics refuse it), ``emcee``, or ``auto``
+            (the default: ``laplace`` from :data:`LAPLACE_MIN_ROWS` rows, ``nuts`` below).
+        chains, draws: NUTS chains and draws per chain (Laplace: chains × draws proposals,
+            each chain's resampled from its own).
         warmup: NUTS warmup per chain, or emcee's burn-in in steps (None: :data:`NUTS_WARMUP`
             or :data:`EMCEE_BURN_IN`, by sampler).
         walkers, steps: emcee walkers (None: max(24, 2 × dimension)) and steps.
@@ -98,7 +110,7 @@ class PosteriorSettings:
         target_accept: NUTS target acceptance probability.
     """
 
-    sampler: str = "nuts"
+    sampler: str = "auto"
     chains: int = 4
     draws: int = 1000
     warmup: int | None = None
@@ -113,7 +125,7 @@ class PosteriorSettings:
                 f"unknown sampler {self.sampler!r} ({', '.join(SAMPLERS)})", field="sampler"
             )
         if self.warmup is None:
-            default = NUTS_WARMUP if self.sampler == "nuts" else EMCEE_BURN_IN
+            default = EMCEE_BURN_IN if self.sampler == "emcee" else NUTS_WARMUP
             object.__setattr__(self, "warmup", default)
         check_nuts(self.chains, self.draws, self.warmup, self.target_accept)
         if self.walkers is not None:

@@ -25,19 +25,28 @@ from brdf_infer.cli._options import (
 )
 from brdf_infer.settings import (
     EMCEE_BURN_IN,
+    LAPLACE_MIN_ROWS,
     NUTS_WARMUP,
     SAMPLERS,
     PosteriorSettings,
     check_family_name,
+    resolved_sampler,
 )
 
 
 def add_parser(commands) -> argparse.ArgumentParser:
     """The options of ``brdf-infer posterior``."""
     defaults = PosteriorSettings
-    parser = scene_command_parser(commands, "posterior", "sample the posterior with NUTS or emcee")
+    parser = scene_command_parser(
+        commands,
+        "posterior",
+        "sample the posterior (NUTS, Laplace + PSIS for large tables, or emcee)",
+    )
     parser.add_argument(
-        "--sampler", choices=list(SAMPLERS), default=defaults.sampler, help="sampler"
+        "--sampler",
+        choices=list(SAMPLERS),
+        default=defaults.sampler,
+        help=f"sampler (auto: laplace from {LAPLACE_MIN_ROWS} rows, nuts below)",
     )
     add_nuts_arguments(
         parser,
@@ -79,7 +88,10 @@ def main(args: argparse.Namespace) -> int:
     scene, measurements = scene_and_measurements(args.scene, args.instrument, args.force)
     passed = forced(scene, measurements)
     out = claimed_output_dir(
-        args, args.out or Path("reports") / scene.name / args.sampler, "posterior"
+        args,
+        args.out
+        or Path("reports") / scene.name / resolved_sampler(args.sampler, len(measurements)),
+        "posterior",
     )
     run = run_posterior(
         scene,

@@ -14,6 +14,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from brdf_infer.posterior._bands import draws_physical
+from brdf_infer.posterior._laplace import laplace_draws
 from brdf_infer.posterior._learned import learned_record
 from brdf_infer.posterior._model import PosteriorModel
 from brdf_infer.posterior._power_scaling import log_likelihood_draws
@@ -49,11 +50,13 @@ def _refit(draws: Draws, seed: int, tis_angles: Sequence[float]):
     :data:`REFIT_CHAINS` × (the run's warmup + :data:`REFIT_DRAWS`), at most the run's chains
     and draws, through the run's own compiled program where it serves the variant (None: the
     run was not NUTS; such a variant is reported unreliable)."""
-    if draws.sampler != "nuts":
+    if draws.sampler not in ("nuts", "laplace"):
         return None
     settings = draws.settings
     chains = min(REFIT_CHAINS, settings["chains"])
     count = min(REFIT_DRAWS, settings["draws"])
+    if draws.sampler == "laplace":
+        return _laplace_refit(chains, count, seed, tis_angles, draws.program)
 
     def refit(variant: PosteriorModel) -> Refitted:
         sampled = run_nuts(
@@ -70,6 +73,22 @@ def _refit(draws: Draws, seed: int, tis_angles: Sequence[float]):
         flat = headline_draws(variant.family, physical, tis_angles)
         headline = {name: values.reshape(chains, count) for name, values in flat.items()}
         return Refitted(headline, {"chains": chains, "warmup": settings["warmup"], "draws": count})
+
+    return refit
+
+
+def _laplace_refit(chains: int, count: int, seed: int, tis_angles: Sequence[float], program):
+    """:func:`_refit` of a Laplace run: the variant by Laplace + PSIS (through the run's
+    ``program`` where it serves the variant), None where refused."""
+
+    def refit(variant: PosteriorModel) -> Refitted | None:
+        sampled = laplace_draws(variant, chains=chains, draws=count, seed=seed, program=program)
+        if isinstance(sampled, str):
+            return None
+        physical = draws_physical(sampled.sites, variant.family)
+        flat = headline_draws(variant.family, physical, tis_angles)
+        headline = {name: values.reshape(chains, count) for name, values in flat.items()}
+        return Refitted(headline, {"chains": chains, "draws": count, "sampler": "laplace"})
 
     return refit
 

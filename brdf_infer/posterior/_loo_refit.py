@@ -12,8 +12,8 @@ sample p(θ | y₋ᵢ) and average the row's leave-one-out conditional over thos
 
 and its LOO-PIT likewise, mean_s P(ỹᵢ ≤ yᵢ | y₋ᵢ, θ_s). The row is left out by giving it σ =
 :data:`LEFT_OUT_SIGMA` in ln R: its information leaves the likelihood, the data keep their
-shape, and the run's compiled NUTS program samples the refit (nothing is compiled again).
-A run refits at most :data:`MAX_REFIT_ROWS` rows: more rows above 0.7 point at the model rather
+shape, and the run's compiled NUTS or Laplace program samples the refit (nothing is compiled
+again). A run refits at most :data:`MAX_REFIT_ROWS` rows: more rows above 0.7 point at the model rather
 than at single rows, and the verdict names them as before.
 """
 
@@ -25,7 +25,7 @@ from scipy.special import logsumexp
 from brdf_infer import _arviz as az
 from brdf_infer.posterior._likelihood import ModelData
 from brdf_infer.posterior._model import PosteriorModel
-from brdf_infer.posterior._nuts import chain_keys
+from brdf_infer.posterior._nuts import NutsProgram, chain_keys
 from brdf_infer.posterior._results import loo_terms
 from brdf_infer.posterior._samplers import Draws
 
@@ -52,26 +52,38 @@ def _converged(sites: dict[str, np.ndarray], stats: dict[str, np.ndarray]) -> bo
     return all(float(r_hat[name]) <= REFIT_R_HAT for name in scalars)
 
 
+def _refit(draws: Draws, data: ModelData) -> dict[str, np.ndarray] | None:
+    """The sites of a refit with ``data`` through the run's program (NUTS, or Laplace + PSIS)
+    with the run's chains and seed and at most :data:`REFIT_DRAWS` draws per chain; None when
+    NUTS's chains diverge or disagree or Laplace's diagnostics refuse it."""
+    settings = draws.settings
+    count = min(REFIT_DRAWS, settings["draws"])
+    if isinstance(draws.program, NutsProgram):
+        keys = chain_keys(settings["seed"], 1, settings["chains"])[0]
+        refit = draws.program.run(data, keys, count)
+        return refit.sites if _converged(refit.sites, refit.stats) else None
+    sampled = draws.program.sample(
+        data, chains=settings["chains"], draws=count, seed=settings["seed"]
+    )
+    return None if isinstance(sampled, str) else sampled.sites
+
+
 def exact_loo_rows(
     model: PosteriorModel, draws: Draws, pareto_k: np.ndarray, limit: float
 ) -> dict[int, tuple[float, float]]:
     """Row → (exact ln p(yᵢ | y₋ᵢ), exact LOO-PIT) for every row whose k̂ exceeds ``limit``,
-    by a NUTS refit without it (module docstring) with the run's chains, warmup, seed and
-    target acceptance and at most :data:`REFIT_DRAWS` draws per chain; a refit whose chains
-    diverge or disagree (R-hat) leaves its row out. Empty when no row exceeds ``limit``, when
-    more than :data:`MAX_REFIT_ROWS` do, or when the run was not NUTS."""
+    by a refit without it (module docstring, :func:`_refit`); a refit that fails its checks
+    leaves its row out. Empty when no row exceeds ``limit``, when more than
+    :data:`MAX_REFIT_ROWS` do, or when the run was emcee's."""
     rows = np.flatnonzero(np.asarray(pareto_k) > limit)
     if draws.program is None or not 0 < rows.size <= MAX_REFIT_ROWS:
         return {}
-    settings = draws.settings
-    keys = chain_keys(settings["seed"], 1, settings["chains"])[0]
-    count = min(REFIT_DRAWS, settings["draws"])
     exact = {}
     for row in map(int, rows):
-        refit = draws.program.run(without_row(model, row), keys, count)
-        if not _converged(refit.sites, refit.stats):
+        sites = _refit(draws, without_row(model, row))
+        if sites is None:
             continue  # the row stays a failure of the verdict
-        log_lik, cdf = loo_terms(model, refit.sites)
+        log_lik, cdf = loo_terms(model, sites)
         terms = np.asarray(log_lik[..., row], float).reshape(-1)
         pit = float(np.mean(np.asarray(cdf[..., row], float)))
         exact[row] = (float(logsumexp(terms) - np.log(terms.size)), pit)

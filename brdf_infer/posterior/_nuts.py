@@ -108,18 +108,10 @@ class NutsProgram:
         model's data options aside; data of the same shapes), so a variant of a run's model
         whose options are data (e.g. zero angle-error scales) reuses the run's compiled
         programs."""
-        mine = self.model
-        scene_fields = (f.name for f in dataclasses.fields(mine.scene) if f.name != "errors")
         return (
             warmup == self.warmup
             and target_accept == self._kernel_options["target_accept_prob"]
-            and model.family is mine.family
-            and (model.whiten, model.sigma_scale, model.drop_log_jacobian)
-            == (mine.whiten, mine.sigma_scale, mine.drop_log_jacobian)
-            and all(getattr(model.scene, f) is getattr(mine.scene, f) for f in scene_fields)
-            and model.errors.structure() == mine.errors.structure()
-            and jax.tree_util.tree_structure(model.data) == jax.tree_util.tree_structure(mine.data)
-            and _shapes(model.data) == _shapes(mine.data)
+            and same_structure(model, self.model)
         )
 
     # ---------------------------------------------------------------- one chain, one data set
@@ -427,6 +419,22 @@ def _compiler_options() -> dict | None:
     except Exception:  # XLA's "No such compile option" (JaxRuntimeError)
         return None
     return CPU_COMPILER_OPTIONS
+
+
+def same_structure(model: PosteriorModel, mine: PosteriorModel) -> bool:
+    """Whether ``model`` is ``mine`` but for its data (the same family, priors, scene and
+    error-model structure, the error model's data options aside; data of the same shapes):
+    a program compiled for one serves the other."""
+    scene_fields = (f.name for f in dataclasses.fields(mine.scene) if f.name != "errors")
+    return (
+        model.family is mine.family
+        and (model.whiten, model.sigma_scale, model.drop_log_jacobian)
+        == (mine.whiten, mine.sigma_scale, mine.drop_log_jacobian)
+        and all(getattr(model.scene, f) is getattr(mine.scene, f) for f in scene_fields)
+        and model.errors.structure() == mine.errors.structure()
+        and jax.tree_util.tree_structure(model.data) == jax.tree_util.tree_structure(mine.data)
+        and _shapes(model.data) == _shapes(mine.data)
+    )
 
 
 def _shapes(arguments) -> tuple:

@@ -192,6 +192,10 @@ def inference_data(
     return idata
 
 
+# the Laplace sampler's importance-sampling record (brdf_infer.posterior._laplace)
+IMPORTANCE_KEYS = ("pareto_k", "ess", "proposals", "distinct_draws", "adaptations")
+
+
 def diagnostics(
     idata: az.InferenceData,
     draws: Draws,
@@ -200,7 +204,9 @@ def diagnostics(
 ) -> dict[str, Any]:
     """R-hat, bulk/tail ESS per sampled physical parameter (``parameters``, in their units)
     and learned noise scale (``fixed`` parameters are listed apart), divergences and BFMI
-    (NUTS), run length in autocorrelation times (emcee), and the list of thresholds that
+    (NUTS; with the reason where Laplace was refused), the importance weights' Pareto k and
+    Kish ESS (Laplace; the ESS bounds ArviZ's), run length in autocorrelation times (emcee),
+    and the list of thresholds that
     failed (:data:`THRESHOLDS`). A statistic that is undefined (a chain that never moved)
     counts as failed."""
     sampled = [name for name in parameters if name not in fixed]
@@ -226,6 +232,14 @@ def diagnostics(
     if draws.sampler == "nuts":
         result["divergences"] = int(np.sum(draws.stats["diverging"]))
         result["bfmi_min"] = float(np.min(az.bfmi(idata)))
+        if "laplace_refused" in draws.extra:
+            result["laplace_refused"] = draws.extra["laplace_refused"]
+    elif draws.sampler == "laplace":
+        # resampled draws repeat, so ArviZ's ESS of them overstates; Kish's of the weights
+        importance = {key: draws.extra[key] for key in IMPORTANCE_KEYS}
+        result["importance"] = importance
+        result["ess_bulk_min"] = min(result["ess_bulk_min"], importance["ess"])
+        result["ess_tail_min"] = min(result["ess_tail_min"], importance["ess"])
     else:
         result["steps_per_autocorrelation_time"] = draws.extra["steps_per_autocorrelation_time"]
         result["autocorrelation_time_max"] = float(np.max(draws.extra["autocorrelation_time"]))

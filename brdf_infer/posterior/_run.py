@@ -27,6 +27,7 @@ from brdf_infer.posterior._bands import (
     interval95,
     posterior_bands,
 )
+from brdf_infer.posterior._laplace import laplace_draws
 from brdf_infer.posterior._loo import (
     LeaveOneOut,
     psis_loo,
@@ -54,7 +55,7 @@ from brdf_infer.posterior._samplers import (
 from brdf_infer.run_folder import CHECKPOINT_FILE
 from brdf_infer.run_records import Bands, PosteriorSummary
 from brdf_infer.scene import Scene, check_instrument, load_scene, parse_scene
-from brdf_infer.settings import PosteriorSettings
+from brdf_infer.settings import PosteriorSettings, resolved_sampler
 from brdf_infer.tables.measurements import Measurements
 from brdf_infer.verdict import PARETO_K_LIMIT, posterior_verdict
 
@@ -277,7 +278,15 @@ def run_posterior(
         _check_memory(model, measurements, settings)
         if announce is not None:
             announce(f"posterior of scene '{scene.name}' ({name}) with {settings.sampler}: {what}")
-        result = _sample(model, measurements, settings, out=out, resume=resume, progress=progress)
+        result = _sample(
+            model,
+            measurements,
+            settings,
+            out=out,
+            resume=resume,
+            progress=progress,
+            announce=announce,
+        )
         return complete_run(
             model, measurements, result, settings.seed, out, started, forced=forced, refit=refit
         )
@@ -305,7 +314,7 @@ def posterior_settings(
 def _check_memory(model, measurements, settings: PosteriorSettings) -> None:
     """:func:`~brdf_infer.posterior._memory.check_memory` of the run's rows and draws (emcee:
     walkers × steps, an upper bound)."""
-    if settings.sampler == "nuts":
+    if settings.sampler != "emcee":
         total = settings.chains * settings.draws
     else:
         total = (settings.walkers or 24) * settings.steps
@@ -317,8 +326,13 @@ def _describe(model, measurements, settings: PosteriorSettings, out, resume) -> 
     """The run's sampler settings in words (:func:`run_posterior`'s ``announce``); an emcee
     checkpoint to resume is checked first."""
     warmup = settings.warmup
-    if settings.sampler == "nuts":
-        return f"{settings.chains} chains x ({warmup} warmup + {settings.draws} draws)"
+    nuts = f"{settings.chains} chains x ({warmup} warmup + {settings.draws} draws)"
+    sampler = resolved_sampler(settings.sampler, len(measurements))
+    if sampler == "nuts":
+        return nuts
+    if sampler == "laplace":
+        proposals = settings.chains * settings.draws
+        return f"Laplace + PSIS, {proposals} proposals (NUTS {nuts} where refused)"
     dimension = FlatPotential(model).dimension
     emcee = emcee_settings(dimension, settings.walkers, settings.steps, warmup, settings.seed)
     if resume:
@@ -327,10 +341,25 @@ def _describe(model, measurements, settings: PosteriorSettings, out, resume) -> 
     return f"{emcee['walkers']} walkers x {settings.steps} steps ({warmup} burn-in)"
 
 
-def _sample(model, measurements, settings: PosteriorSettings, *, out, resume, progress) -> Draws:
-    """The draws of :func:`run_posterior`'s sampler (emcee: checkpointed in ``out``)."""
-    if settings.sampler == "nuts":
-        return run_nuts(
+def _sample(
+    model, measurements, settings: PosteriorSettings, *, out, resume, progress, announce=None
+) -> Draws:
+    """The draws of :func:`run_posterior`'s sampler (``auto`` resolved by the rows; Laplace
+    falls back to NUTS where its diagnostics refuse it, the reason in ``extra`` and said to
+    ``announce``; emcee: checkpointed in ``out``)."""
+    sampler = resolved_sampler(settings.sampler, len(measurements))
+    refusal = None
+    if sampler == "laplace":
+        drawn = laplace_draws(
+            model, chains=settings.chains, draws=settings.draws, seed=settings.seed
+        )
+        if not isinstance(drawn, str):
+            return drawn
+        refusal = drawn
+        if announce is not None:
+            announce(f"Laplace + PSIS refused ({refusal}); sampling with NUTS")
+    if sampler in ("nuts", "laplace"):
+        result = run_nuts(
             model,
             chains=settings.chains,
             warmup=settings.warmup,
@@ -339,6 +368,9 @@ def _sample(model, measurements, settings: PosteriorSettings, *, out, resume, pr
             target_accept=settings.target_accept,
             progress=progress,
         )
+        if refusal is not None:
+            result.extra["laplace_refused"] = refusal
+        return result
     checkpoint = None if out is None else out / CHECKPOINT_FILE
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)

@@ -43,8 +43,8 @@ class Draws:
             burn-in and steps), of the emcee MAP search ("initialise"), and the JAX "compile"
             time, which the others exclude.
         extra: sampler-specific results (emcee: autocorrelation times, acceptance).
-        program: the NUTS program that drew them (None for emcee): a variant of the model
-            that differs in data only samples through it, its programs already compiled.
+        program: the NUTS or Laplace program that drew them (None for emcee): a variant of the
+            model that differs in data only samples through it, its programs already compiled.
     """
 
     sites: dict[str, np.ndarray]
@@ -53,7 +53,7 @@ class Draws:
     settings: dict
     seconds: dict[str, float]
     extra: dict = field(default_factory=dict)
-    program: NutsProgram | None = field(default=None, repr=False, compare=False)
+    program: Any = field(default=None, repr=False, compare=False)  # NutsProgram, LaplaceProgram
 
 
 def _progress_enabled(progress: bool | None) -> bool:

@@ -104,7 +104,7 @@ class Refitted:
     """
 
     headline: dict[str, np.ndarray]
-    settings: dict[str, int]
+    settings: dict[str, int | str]
 
     def record(self, name: str) -> dict[str, Any]:
         """The refit's settings and the MC standard errors of ``name``'s 95 % endpoints
