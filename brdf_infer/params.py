@@ -12,7 +12,7 @@ import sys
 from pathlib import Path
 from typing import Any, NamedTuple
 
-from brdf_infer._resources import read_data_toml
+from brdf_infer._internal.resources import read_data_toml
 from brdf_infer.errors import BadInputError
 from brdf_infer.run_folder import read_json_file
 

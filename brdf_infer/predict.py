@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from brdf_infer._precision import ensure_float64
+from brdf_infer._internal.precision import ensure_float64
 from brdf_infer.observations import build_observation_model
 from brdf_infer.params import Params, params_to_dict
 from brdf_infer.scene import Scene, check_instrument

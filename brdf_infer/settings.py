@@ -14,7 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from brdf_infer._design_target import DESIGN_BUDGET
+from brdf_infer._internal.design_target import DESIGN_BUDGET
 from brdf_infer.errors import BadInputError
 
 if TYPE_CHECKING:

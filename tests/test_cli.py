@@ -234,7 +234,7 @@ def test_single_scene_commands_compute_on_the_cpu_and_batch_on_the_default_devic
     import jax
     import jax.numpy as jnp
 
-    from brdf_infer._device import placement
+    from brdf_infer.cli._device import placement
 
     cpu = jax.devices("cpu")[0]
     with placement("posterior"):

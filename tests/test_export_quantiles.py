@@ -9,7 +9,7 @@ import re
 import numpy as np
 import pytest
 
-from brdf_infer import _arviz as az
+from brdf_infer._internal import arviz as az
 from brdf_infer.export import brdf_table
 from brdf_infer.model import tis
 from brdf_infer.params import PAPER_CONSTANTS, UV_PAPER, Params

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from scipy import integrate, stats
 
-from brdf_infer import _arviz as az
+from brdf_infer._internal import arviz as az
 from brdf_infer.model import family
 from brdf_infer.params import PAPER_CONSTANTS
 from brdf_infer.posterior import posterior_bands, tis_band

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from brdf_infer import _arviz as az
+from brdf_infer._internal import arviz as az
 from brdf_infer.model import strumik_family, tis
 from brdf_infer.params import PAPER_CONSTANTS, UV_PAPER, Params
 from brdf_infer.posterior import draws_params, posterior_bands

@@ -17,11 +17,11 @@ is where it is written down):
 
 * a private attribute may be imported only by a module in the same directory;
 * a private module may be imported by a module of its own package, which for Python includes
-  the package's subpackages: ``brdf_infer/_atomic.py`` (like ``_outlock``, ``_units``) is a
-  private helper of the top package and every module of ``brdf_infer`` may use its public
-  names, while ``brdf_infer/posterior/_nuts.py`` is private to ``brdf_infer.posterior`` and
-  the rest of the toolkit reaches what it needs through ``brdf_infer.posterior``'s
-  re-exports;
+  the package's subpackages: ``brdf_infer/_internal/`` (``atomic``, ``outlock``, ``units``, …)
+  is the private package of the top package's shared helpers and every module of
+  ``brdf_infer`` may use the public names of its modules, while
+  ``brdf_infer/posterior/_nuts.py`` is private to ``brdf_infer.posterior`` and the rest of the
+  toolkit reaches what it needs through ``brdf_infer.posterior``'s re-exports;
 * a private name of another distribution (``jax._src``, ``numpyro.infer._x``) is never
   imported.
 """
@@ -231,7 +231,11 @@ def test_a_planted_back_import_is_found(tmp_path, module, source):
         # a private module named through `from package import`, relative, in a function
         ("brdf_infer.report._build", "\ndef f():\n    from ..posterior import _bands\n", "_bands"),
         # a private name of a shared helper of the top package, from a subpackage
-        ("brdf_infer.posterior._run", "\nfrom brdf_infer._units import _x\n", "_units import _x"),
+        (
+            "brdf_infer.posterior._run",
+            "\nfrom brdf_infer._internal.units import _x\n",
+            "units import _x",
+        ),
         # a private module of another distribution
         ("brdf_infer.bench._tis", "\nimport jax._src.core\n", "jax._src"),
     ],
@@ -246,8 +250,11 @@ def test_a_planted_private_import_is_found(tmp_path, module, source, found):
     ("module", "source"),
     [
         ("brdf_infer.posterior._run", "\nfrom ._nuts import stack_data\n"),  # same package
-        ("brdf_infer.posterior._run", "\nfrom brdf_infer._atomic import atomic_write_json\n"),
-        ("brdf_infer.report._sbc", "\nfrom brdf_infer import _outlock\n"),  # a top helper module
+        (
+            "brdf_infer.posterior._run",
+            "\nfrom brdf_infer._internal.atomic import atomic_write_json\n",
+        ),
+        ("brdf_infer.report._sbc", "\nfrom brdf_infer._internal import outlock\n"),  # a helper
         ("brdf_infer.fit.paper", "\nfrom brdf_infer.fit.lsq import _x\n"),  # the same directory
         ("brdf_infer.report", "\nfrom brdf_infer.report._html import page\n"),  # its __init__
     ],

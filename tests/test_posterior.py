@@ -12,7 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from brdf_infer import _arviz as az
+from brdf_infer._internal import arviz as az
 from brdf_infer.errors import BadInputError
 from brdf_infer.params import PARAM_NAMES, UV_PAPER
 from brdf_infer.posterior import (

@@ -306,7 +306,7 @@ def test_report_draws_the_pareto_k_its_run_recorded_and_computes_none(nuts_run, 
 
     import numpy as np
 
-    from brdf_infer import _arviz as az
+    from brdf_infer._internal import arviz as az
     from brdf_infer.verdict import PARETO_K_LIMIT
 
     loo = nuts_run.summary["predictive"]

@@ -23,7 +23,7 @@ scene's name is always a complete run. A batch stops within seconds when cancell
 :func:`run_batch_until_signalled`), keeping the folders that were complete and no partial one;
 killed outright, it leaves the same (and half-written folders under temporary names, which the
 next batch into the folder removes). The output folder has one writer at a time
-(:mod:`brdf_infer._outlock`) and stays marked incomplete until a batch into it finishes.
+(:mod:`brdf_infer._internal.outlock`) and stays marked incomplete until a batch into it finishes.
 
 ``resume=True`` (``brdf-infer batch --resume``) keeps every scene whose run folder is in place
 and was written by the same scene text, rows, model options, family and NUTS settings (the

@@ -15,9 +15,9 @@ from typing import Any
 import jax
 import numpy as np
 
-from brdf_infer._outlock import note_written, require_complete, writing
-from brdf_infer._precision import ensure_float64
-from brdf_infer._processes import Processes
+from brdf_infer._internal.outlock import note_written, require_complete, writing
+from brdf_infer._internal.precision import ensure_float64
+from brdf_infer._internal.processes import Processes
 from brdf_infer.batch._entries import (
     BatchInterrupted,
     BatchResult,

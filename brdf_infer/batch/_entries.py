@@ -56,7 +56,7 @@ class BatchResult:
     (``interrupted``: the batch was cancelled; entries not ``done`` have no run folder).
 
     Attributes:
-        processes: the processes that ran the batch (:mod:`brdf_infer.batch._processes`).
+        processes: the processes that ran the batch (:mod:`brdf_infer._internal.processes`).
         remote: the ``batch.json`` entries of scenes another process ran, by scene number.
         compile_seconds: [s] compiling, summed over the processes.
     """

@@ -11,7 +11,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from brdf_infer import _arviz as az
+from brdf_infer._internal import arviz as az
 from brdf_infer.instrument import (
     DEFAULT_CANDIDATES,
     NODE_SHAPES,

@@ -55,7 +55,7 @@ def _run_child(arrays: Path, sampler: str, out: Path, settings, env: dict, blas:
 def _run_ours(scene: str, out: Path, cache: Path, settings, env: dict):
     """Wall time of one ``brdf-infer posterior SCENE --json`` process, its summary, draws and
     mean leapfrog steps per draw."""
-    from brdf_infer import _arviz as az
+    from brdf_infer._internal import arviz as az
 
     chains, warmup, draws, seed = settings
     argv = [
@@ -152,7 +152,7 @@ class PeerRow:
 
 
 def _statistics(draws: dict[str, np.ndarray]) -> tuple[float, dict, dict]:
-    from brdf_infer import _arviz as az
+    from brdf_infer._internal import arviz as az
 
     ess = min(float(az.ess(np.asarray(draws[q]), method="bulk")) for q in QUANTITIES)
     medians = {q: float(np.median(draws[q])) for q in QUANTITIES}

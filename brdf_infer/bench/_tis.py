@@ -13,7 +13,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from brdf_infer._units import DEG
+from brdf_infer._internal.units import DEG
 from brdf_infer.bench._timing import timed
 from brdf_infer.model import log_brdf_hemisphere, tis
 from brdf_infer.params import UV_PAPER, Params

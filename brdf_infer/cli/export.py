@@ -10,10 +10,10 @@ from pathlib import Path
 
 import numpy as np
 
-from brdf_infer._outdir import check_output_dir
-from brdf_infer._outlock import writing
+from brdf_infer._internal.outlock import writing
 from brdf_infer.cli._common import emit_json, progress, scene_command_parser, table
 from brdf_infer.cli._options import add_fold_arguments, angles, chosen_fold, folded_family
+from brdf_infer.cli._outdir import check_output_dir
 from brdf_infer.errors import BadInputError
 
 MAX_INTEGRAL_ERROR = 0.01  # a table whose own hemisphere integral misses its TIS by more

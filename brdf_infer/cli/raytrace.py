@@ -120,7 +120,7 @@ def _payload(args: argparse.Namespace, scene, measurements) -> dict:
 
 
 def _write_raytrace(out: Path, scene, measurements, payload: dict) -> None:
-    from brdf_infer._atomic import atomic_write_bytes
+    from brdf_infer._internal.atomic import atomic_write_bytes
     from brdf_infer.raytrace import write_traces
     from brdf_infer.report import figure_png, plot_detector_images, plot_raytrace
 

@@ -1,7 +1,7 @@
 """Where to measure next: Bayesian experimental design from a posterior run
 (``brdf-infer design``)."""
 
-from brdf_infer._design_target import DesignTarget, parse_target
+from brdf_infer._internal.design_target import DesignTarget, parse_target
 from brdf_infer.design._candidates import (
     Candidates,
     design_series,

@@ -29,8 +29,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from brdf_infer._design_target import DesignTarget, parse_target
-from brdf_infer._precision import ensure_float64
+from brdf_infer._internal.design_target import DesignTarget, parse_target
+from brdf_infer._internal.precision import ensure_float64
 from brdf_infer.design._candidates import (
     REACH_LIMITS,
     Candidates,
@@ -97,8 +97,8 @@ def load_design_run(run: str | Path, scene: Scene | str | None = None) -> Design
         BadInputError: no readable posterior.nc, a run of another scene or other rows, a run
             of a family other than ``strumik2024``.
     """
-    from brdf_infer import _arviz as az
-    from brdf_infer._outlock import require_complete
+    from brdf_infer._internal import arviz as az
+    from brdf_infer._internal.outlock import require_complete
 
     require_complete(run)  # not a folder a writer is writing or left unfinished
     path = RunFolder(run).posterior_file
@@ -343,7 +343,7 @@ def design(
 
     Args:
         run: the run folder's draws and scene (:func:`load_design_run`).
-        target: a target string (:mod:`brdf_infer._design_target`) or a parsed one.
+        target: a target string (:mod:`brdf_infer._internal.design_target`) or a parsed one.
         candidates: the settings to consider (default: the reachable settings of the scene's
             ``[design]`` grid in the design series).
         options: draws, simulations, budget and seed (default :class:`DesignOptions`).

@@ -46,8 +46,8 @@ from pathlib import Path
 
 import numpy as np
 
-from brdf_infer._atomic import atomic_write_bytes, atomic_write_json
-from brdf_infer._outlock import writing
+from brdf_infer._internal.atomic import atomic_write_bytes, atomic_write_json
+from brdf_infer._internal.outlock import writing
 from brdf_infer.errors import BadInputError
 from brdf_infer.export._abg import AbgFit, fit_abg
 from brdf_infer.export._grid import ScatterGrid

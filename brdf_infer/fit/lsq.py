@@ -34,7 +34,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from brdf_infer._precision import ensure_float64
+from brdf_infer._internal.precision import ensure_float64
 from brdf_infer.error_model import noise_layout
 from brdf_infer.errors import BadInputError
 from brdf_infer.fit._reweighting import REWEIGHT_TOLERANCE as REWEIGHT_TOLERANCE

@@ -28,7 +28,7 @@ from pathlib import Path
 import jax
 import jax.numpy as jnp
 
-from brdf_infer._units import DEG
+from brdf_infer._internal.units import DEG
 from brdf_infer.errors import BadInputError
 from brdf_infer.model._hemisphere import log_brdf_hemisphere
 from brdf_infer.model._inplane import log_brdf_inplane

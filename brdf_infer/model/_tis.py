@@ -23,7 +23,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.typing import ArrayLike
 
-from brdf_infer._units import DEG
+from brdf_infer._internal.units import DEG
 from brdf_infer.model._hemisphere import azimuthal_weight_integral
 from brdf_infer.model._inplane import log_brdf_inplane
 from brdf_infer.params import PAPER_CONSTANTS, HemisphereConstants, Params

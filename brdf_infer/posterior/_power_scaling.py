@@ -32,7 +32,7 @@ import jax.numpy as jnp
 import numpy as np
 import numpyro.distributions as dist
 
-from brdf_infer import _arviz as az
+from brdf_infer._internal import arviz as az
 from brdf_infer.coordinates import ANGLE_SCALE_DEG
 from brdf_infer.model import energy_log_factor
 from brdf_infer.params import PARAM_NAMES, Params

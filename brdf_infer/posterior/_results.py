@@ -15,9 +15,9 @@ import numpy as np
 from numpyro.infer import Predictive
 
 import brdf_infer
-from brdf_infer import _arviz as az
-from brdf_infer._atomic import atomic_write_bytes
-from brdf_infer._outlock import require_complete
+from brdf_infer._internal import arviz as az
+from brdf_infer._internal.atomic import atomic_write_bytes
+from brdf_infer._internal.outlock import require_complete
 from brdf_infer.errors import BadInputError
 from brdf_infer.model import ModelFamily, family, run_family_name
 from brdf_infer.params import PARAM_NAMES

@@ -15,9 +15,9 @@ from typing import Any
 
 import numpy as np
 
-from brdf_infer import _arviz as az
-from brdf_infer._outlock import writing
-from brdf_infer._precision import ensure_float64
+from brdf_infer._internal import arviz as az
+from brdf_infer._internal.outlock import writing
+from brdf_infer._internal.precision import ensure_float64
 from brdf_infer.error_model import ERROR_MODELS
 from brdf_infer.errors import BadInputError
 from brdf_infer.model import check_family_name, family

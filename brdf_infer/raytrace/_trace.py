@@ -31,7 +31,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from brdf_infer._units import DEG
+from brdf_infer._internal.units import DEG
 from brdf_infer.model import log_brdf_hemisphere
 from brdf_infer.params import HemisphereConstants, Params
 

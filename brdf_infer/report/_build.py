@@ -6,8 +6,8 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from brdf_infer import _arviz as az
-from brdf_infer._outlock import require_complete, writing
+from brdf_infer._internal import arviz as az
+from brdf_infer._internal.outlock import require_complete, writing
 from brdf_infer.errors import BadInputError
 from brdf_infer.model import fold_statement
 from brdf_infer.posterior import THRESHOLDS, draws_params, family_draws, run_scene
@@ -71,7 +71,7 @@ def write_report(run: Path, progress=print) -> tuple[Path, Verdict]:
     verdict (the one the run recorded, rendered as it stands).
 
     Raises:
-        BadInputError: ``run`` is no complete run folder (:mod:`brdf_infer._outlock`: one
+        BadInputError: ``run`` is no complete run folder (:mod:`brdf_infer._internal.outlock`: one
             being written, or left incomplete by a writer that stopped), or another process
             writes its report.
     """

@@ -12,7 +12,7 @@ import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
 
-from brdf_infer import _arviz as az
+from brdf_infer._internal import arviz as az
 from brdf_infer.posterior import THRESHOLDS
 from brdf_infer.report._html import escape
 from brdf_infer.report._html import figure as html_figure

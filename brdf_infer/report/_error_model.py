@@ -3,7 +3,7 @@ this run and of its spread variant, PSIS-LOO and the comparison with the run's m
 
 from __future__ import annotations
 
-from brdf_infer import _arviz as az
+from brdf_infer._internal import arviz as az
 from brdf_infer.report import _html
 from brdf_infer.run_folder import SUMMARY_FILE, VARIANTS_DIR, RunFolder
 from brdf_infer.run_records import PosteriorSummary

@@ -9,7 +9,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.colors import BoundaryNorm, ListedColormap
 
-from brdf_infer import _arviz as az
+from brdf_infer._internal import arviz as az
 from brdf_infer.model import ModelFamily, brdf_inplane, family, run_family_name
 from brdf_infer.params import PARAM_NAMES, PARAMETER_SETS
 from brdf_infer.report._table_views import in_plane, panel_grid, value_label

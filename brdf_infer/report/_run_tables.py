@@ -7,7 +7,7 @@ import json
 
 import numpy as np
 
-from brdf_infer import _arviz as az
+from brdf_infer._internal import arviz as az
 from brdf_infer.model import fold_statement
 from brdf_infer.report import _html
 from brdf_infer.report._instruments import MEANINGS

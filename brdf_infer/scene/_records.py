@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from brdf_infer._design_target import DESIGN_BUDGET
+from brdf_infer._internal.design_target import DESIGN_BUDGET
 from brdf_infer.error_model import ErrorSettings
 from brdf_infer.errors import BadInputError
 from brdf_infer.params import PAPER_CONSTANTS, PARAM_NAMES, HemisphereConstants

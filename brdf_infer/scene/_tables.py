@@ -75,7 +75,7 @@ def _parse_studies(document: dict, path: Path) -> Studies:
 
 
 def _design_target(table: dict, path: Path) -> str | None:
-    from brdf_infer._design_target import parse_target
+    from brdf_infer._internal.design_target import parse_target
 
     if "design" not in table:
         return None

@@ -34,8 +34,8 @@ import jax.numpy as jnp
 import numpy as np
 from scipy.special import logsumexp
 
-from brdf_infer import _arviz as az
-from brdf_infer._precision import ensure_float64
+from brdf_infer._internal import arviz as az
+from brdf_infer._internal.precision import ensure_float64
 from brdf_infer.errors import BadInputError
 from brdf_infer.model import check_family_name, family
 from brdf_infer.posterior import (

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from brdf_infer import _arviz as az
+from brdf_infer._internal import arviz as az
 from brdf_infer.errors import BadInputError
 from brdf_infer.instrument import INSTRUMENT_MODELS
 from brdf_infer.posterior import interval95

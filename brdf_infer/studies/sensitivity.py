@@ -49,7 +49,7 @@ from brdf_infer.settings import SensitivitySettings
 from brdf_infer.tables.measurements import Measurements
 
 if TYPE_CHECKING:  # ArviZ is imported where it is used: the command line's parser stays light
-    from brdf_infer._arviz import InferenceData
+    from brdf_infer._internal.arviz import InferenceData
 
 BASELINE = "default"
 
@@ -277,7 +277,7 @@ def _summarise(
 ) -> VariantResult:
     """TIS, π·BRDF0, PSIS-LOO (``refit(pointwise, rows)``: exact terms where Pareto k > 0.7)
     and the sampler's health of one variant's draws."""
-    from brdf_infer import _arviz as az
+    from brdf_infer._internal import arviz as az
     from brdf_infer.posterior import (
         FAMILY_TIS_DRAWS,
         NOISE_SITES,

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from brdf_infer._precision import ensure_float64
+from brdf_infer._internal.precision import ensure_float64
 from brdf_infer.observations import build_observation_model, predicted_log_reflectance
 from brdf_infer.params import Params
 from brdf_infer.scene import Scene

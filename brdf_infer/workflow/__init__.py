@@ -22,7 +22,8 @@ whose π·BRDF0 or TIS exceeds 1) and stops on the first that fails, unless
 ``RunSettings(force=True)``; then the run goes on and its verdict names every failed check.
 
 The fit summaries (:func:`paper_fit_summary`, :func:`lsq_summary`) are the JSON objects of
-``brdf-infer fit --json``.
+``brdf-infer fit --json``. The job's numbered steps and the studies, one function each, are in
+``_studies`` (private to this package).
 """
 
 from __future__ import annotations
@@ -33,15 +34,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from brdf_infer._precision import ensure_float64
-from brdf_infer._run_studies import (
-    Job,
-    compare_study,
-    design_study,
-    error_model_posterior,
-    instrument_study,
-    sensitivity_study,
-)
+from brdf_infer._internal.precision import ensure_float64
 from brdf_infer.plausibility import Implausible
 from brdf_infer.run_folder import FIT_LSQ_FILE, FIT_PAPER_FILE, RunFolder
 from brdf_infer.run_folder import STUDIES_FILE as STUDIES_FILE  # the old name, kept
@@ -50,6 +43,14 @@ from brdf_infer.scene import Scene, Studies
 from brdf_infer.settings import LSQ_STARTS, RunSettings
 from brdf_infer.tables.measurements import Measurements
 from brdf_infer.verdict import Verdict
+from brdf_infer.workflow._studies import (
+    Job,
+    compare_study,
+    design_study,
+    error_model_posterior,
+    instrument_study,
+    sensitivity_study,
+)
 
 RUN_TRACE_RAYS = 2**18  # ~0.05 % MC error per configuration (NEE)
 RUN_TRACE_DRAWS = 64
@@ -320,7 +321,7 @@ def run(
             ``out``; nothing is written then.
     """
     ensure_float64()
-    from brdf_infer._outlock import writing
+    from brdf_infer._internal.outlock import writing
 
     with writing(out, "run"):  # one writer; an interrupted run leaves ``out`` incomplete
         return _run(scene, measurements, out, settings, example=example, progress=progress)
