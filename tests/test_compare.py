@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 from brdf_infer.cli.compare import comparison_table
-from brdf_infer.error_model import NoiseScales
 from brdf_infer.model import family
-from brdf_infer.params import UV_PAPER
+from brdf_infer.model.error_model import NoiseScales
+from brdf_infer.model.params import UV_PAPER
 from brdf_infer.posterior import build_posterior_model
 from brdf_infer.report._compare import compare_frame
 from brdf_infer.studies.compare import PARETO_K_LIMIT, CompareSettings, compare_families

@@ -45,7 +45,7 @@ def parse(path):
 @pytest.fixture(scope="module")
 def good_report(nuts_run, lya):
     """The report of the reduced run, with ray traces as ``brdf-infer run`` writes them."""
-    from brdf_infer.params import UV_PAPER
+    from brdf_infer.model.params import UV_PAPER
     from brdf_infer.posterior import draws_params
     from brdf_infer.raytrace import (
         raytrace_payload,

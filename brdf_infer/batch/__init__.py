@@ -41,7 +41,7 @@ others (:class:`PeerFailed`), also one that stops sending heartbeats.
 
 A scene that fails to load or validate is reported with its error and skipped; it never takes
 the batch down. So is a scene whose rows fail a plausibility check (values that look like
-percent, angles that look like radians; :mod:`brdf_infer.plausibility`), unless
+percent, angles that look like radians; :mod:`brdf_infer.verdict.plausibility`), unless
 ``BatchSettings(force=True)``: then it runs and its verdict names the check.
 """
 

@@ -8,8 +8,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from brdf_infer.run_folder import BATCH_FILE
-from brdf_infer.run_records import Bands, PosteriorSummary
+from brdf_infer.runs.folder import BATCH_FILE
+from brdf_infer.runs.records import Bands, PosteriorSummary
 from brdf_infer.scene import Scene
 
 INTERRUPTED = "interrupted before its run was complete"

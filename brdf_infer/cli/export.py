@@ -82,9 +82,9 @@ def _checked_options(args: argparse.Namespace) -> None:
 def _source(args: argparse.Namespace, scene_name: str):
     from brdf_infer.export import Source
     from brdf_infer.model import strumik_family
-    from brdf_infer.params import params_to_dict, resolve_params
+    from brdf_infer.model.params import params_to_dict, resolve_params
     from brdf_infer.posterior import load_run_family
-    from brdf_infer.run_folder import RunFolder
+    from brdf_infer.runs.folder import RunFolder
 
     if args.run is not None:
         run = Path(args.run)

@@ -29,7 +29,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from brdf_infer._internal.design_target import DesignTarget, parse_target
 from brdf_infer._internal.precision import ensure_float64
 from brdf_infer.design._candidates import (
     REACH_LIMITS,
@@ -47,12 +46,6 @@ from brdf_infer.design._estimate import (
     candidate_outcomes,
     row_predictive,
 )
-from brdf_infer.error_model import (
-    angle_slopes,
-    calibration_groups,
-    group_members,
-    noise_layout,
-)
 from brdf_infer.errors import BadInputError
 from brdf_infer.model import (
     check_family_name,
@@ -61,15 +54,22 @@ from brdf_infer.model import (
     run_family_name,
     tis,
 )
-from brdf_infer.observations import (
+from brdf_infer.model.error_model import (
+    angle_slopes,
+    calibration_groups,
+    group_members,
+    noise_layout,
+)
+from brdf_infer.model.params import PARAM_NAMES, Params
+from brdf_infer.posterior import build_posterior_model, interval95, run_scene
+from brdf_infer.predict.observations import (
     build_observation_model,
     log_reflectance_at,
     predicted_log_reflectance,
 )
-from brdf_infer.params import PARAM_NAMES, Params
-from brdf_infer.posterior import build_posterior_model, interval95, run_scene
-from brdf_infer.run_folder import DESIGN_FIGURE, DESIGN_FILE, RunFolder
+from brdf_infer.runs.folder import DESIGN_FIGURE, DESIGN_FILE, RunFolder
 from brdf_infer.scene import Scene, load_scene
+from brdf_infer.scene.design_target import DesignTarget, parse_target
 from brdf_infer.settings import DesignOptions
 from brdf_infer.tables.measurements import Measurements
 
@@ -343,7 +343,7 @@ def design(
 
     Args:
         run: the run folder's draws and scene (:func:`load_design_run`).
-        target: a target string (:mod:`brdf_infer._internal.design_target`) or a parsed one.
+        target: a target string (:mod:`brdf_infer.scene.design_target`) or a parsed one.
         candidates: the settings to consider (default: the reachable settings of the scene's
             ``[design]`` grid in the design series).
         options: draws, simulations, budget and seed (default :class:`DesignOptions`).

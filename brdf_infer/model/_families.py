@@ -41,8 +41,8 @@ from brdf_infer.model._lobes import (
     harvey_shack_log_bsdf,
 )
 from brdf_infer.model._tis import log_tis
-from brdf_infer.params import PAPER_CONSTANTS, PARAM_NAMES, HemisphereConstants, Params
-from brdf_infer.priors import Prior
+from brdf_infer.model.params import PAPER_CONSTANTS, PARAM_NAMES, HemisphereConstants, Params
+from brdf_infer.model.priors import Prior
 
 Physical = dict[str, jnp.ndarray]
 

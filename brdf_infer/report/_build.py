@@ -29,7 +29,7 @@ from brdf_infer.report._run_tables import run_section, summary_table
 from brdf_infer.report._sensitivity import sensitivity_section
 from brdf_infer.report._table_views import residual_hemisphere, value_words
 from brdf_infer.report._traces import raytrace_table
-from brdf_infer.run_folder import (
+from brdf_infer.runs.folder import (
     FIGURE_DIR,
     POSTERIOR_FILE,
     REPORT_FILE,

@@ -48,7 +48,7 @@ from brdf_infer.posterior import (
     loo_terms,
     without_row,
 )
-from brdf_infer.run_folder import COMPARE_FILE as COMPARE_FILE  # the old name, kept
+from brdf_infer.runs.folder import COMPARE_FILE as COMPARE_FILE  # the old name, kept
 from brdf_infer.scene import Scene
 from brdf_infer.settings import CompareSettings
 from brdf_infer.tables.measurements import Measurements

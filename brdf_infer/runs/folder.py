@@ -25,7 +25,7 @@ goes through :class:`RunFolder`, so the folder's layout is written down once, he
 A study folder of its own (``sbc --out``, ``batch --out``) uses the same writers with
 ``sbc.json`` and ``batch.json``. Readers of old run folders keep working: a study's file that
 is absent reads as None (or an empty list), never as an error. Units inside the files:
-:mod:`brdf_infer.run_records`.
+:mod:`brdf_infer.runs.records`.
 """
 
 from __future__ import annotations
@@ -38,7 +38,7 @@ from typing import Any
 from brdf_infer._internal.atomic import atomic_write_bytes, atomic_write_json
 from brdf_infer._internal.outlock import ADDING_LOCK_FILE, LOCK_FILE
 from brdf_infer.errors import BadInputError
-from brdf_infer.run_records import Bands, PosteriorSummary
+from brdf_infer.runs.records import Bands, PosteriorSummary
 
 POSTERIOR_FILE = "posterior.nc"
 SUMMARY_FILE = "summary.json"
