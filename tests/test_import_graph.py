@@ -8,6 +8,11 @@ An arrow goes from the importing module to the module it names; ``from x import 
 ``p/__init__.py`` first, so it is also an arrow to ``p`` (the top package ``brdf_infer`` is left
 out of that: every module sits inside it).
 
+Rooms. Every entry of the top level (``scene/``, ``model/``, ``errors.py``, ``_internal/``, …)
+is a room, and a room imports every room its modules import. The rooms make no cycle either, so
+they stand on floors, each above every room it imports: a cycle between two rooms is an arrow
+back up even where no module cycle shows it.
+
 Private names. A name is private when it starts with one underscore (dunder names such as
 ``__version__`` are not private): a module (``posterior._nuts``) or an attribute
 (``lsq._residuals``). Where a private name sits is a directory: a private module ``d/_m.py`` (or
@@ -185,6 +190,36 @@ def private_crossings(root: Path = ROOT) -> list[Crossing]:
 def test_the_package_imports_without_a_cycle():
     cycle = find_cycle(import_graph())
     assert cycle is None, "import cycle: " + " → ".join(cycle)
+
+
+def room_graph(root: Path = ROOT) -> dict[str, set[str]]:
+    """The top level's entries (``scene``, ``model``, ``_internal``, …; a room each) → the rooms
+    its modules import: the module graph with every module inside its room."""
+    rooms: dict[str, set[str]] = {}
+    for module, targets in import_graph(root).items():
+        room = module.split(".")[1] if "." in module else None
+        if room is None:
+            continue  # the package's own __init__ re-exports: it sits above every room
+        rooms.setdefault(room, set())
+        rooms[room] |= {t.split(".")[1] for t in targets if "." in t} - {room}
+    return rooms
+
+
+def test_the_top_level_rooms_import_without_a_cycle():
+    """Rooms on floors: no room imports a room that imports it back, even where the modules
+    themselves make no cycle (a back-arrow between two packages)."""
+    cycle = find_cycle(room_graph())
+    assert cycle is None, "rooms importing each other: " + " → ".join(cycle)
+
+
+def test_a_planted_back_arrow_between_rooms_is_found(tmp_path):
+    # the run folder (low: the tables' screening writes its records) naming a table module that
+    # imports nothing of it: no module cycle, but the rooms `runs` and `tables` import each other
+    copy = _planted(
+        tmp_path, "brdf_infer.runs.folder", "\nfrom brdf_infer.tables import selections\n"
+    )
+    assert find_cycle(import_graph(copy)) is None
+    assert {"runs", "tables"} <= set(find_cycle(room_graph(copy)) or [])
 
 
 def test_no_private_name_is_imported_from_another_package():
