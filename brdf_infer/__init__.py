@@ -13,9 +13,9 @@ before using the model functions directly.
 """
 
 from brdf_infer import _moved
-from brdf_infer._precision import Float32Error, use_float64
-from brdf_infer._resources import data_path
-from brdf_infer.params import UV_PAPER, VIS_PAPER, Params
+from brdf_infer._internal.precision import Float32Error, use_float64
+from brdf_infer._internal.resources import data_path
+from brdf_infer.model.params import UV_PAPER, VIS_PAPER, Params
 
 __version__ = "0.1.0"
 __all__ = [

@@ -1,5 +1,5 @@
 """The old import paths of the modules that moved into the grouped packages (``fit/``,
-``studies/``, ``tables/``).
+``studies/``, ``tables/``, ``model/``, ``runs/``, ``predict/``, ``verdict/``).
 
 For one release each old path still imports (``import brdf_infer.lsq``,
 ``from brdf_infer.lsq import fit_lsq``, ``from brdf_infer import lsq``) and gives the same
@@ -33,6 +33,14 @@ MOVED: dict[str, str] = {
     "brdf_infer.bsdf_measurements": "brdf_infer.tables.bsdf_measurements",
     "brdf_infer.table_screening": "brdf_infer.tables.screening",
     "brdf_infer.selections": "brdf_infer.tables.selections",
+    "brdf_infer.params": "brdf_infer.model.params",
+    "brdf_infer.priors": "brdf_infer.model.priors",
+    "brdf_infer.coordinates": "brdf_infer.model.coordinates",
+    "brdf_infer.error_model": "brdf_infer.model.error_model",
+    "brdf_infer.run_folder": "brdf_infer.runs.folder",
+    "brdf_infer.run_records": "brdf_infer.runs.records",
+    "brdf_infer.observations": "brdf_infer.predict.observations",
+    "brdf_infer.plausibility": "brdf_infer.verdict.plausibility",
 }
 
 # the frames a warning skips to reach the importing line: the import system, this module, and

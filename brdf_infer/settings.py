@@ -14,8 +14,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from brdf_infer._design_target import DESIGN_BUDGET
 from brdf_infer.errors import BadInputError
+from brdf_infer.scene.design_target import DESIGN_BUDGET
 
 if TYPE_CHECKING:
     from brdf_infer.scene import Studies

@@ -16,7 +16,7 @@ from scipy.special import logsumexp
 
 from brdf_infer.errors import BadInputError
 from brdf_infer.model import ENERGY_THETA_I_DEG, conserves_energy, log_tis
-from brdf_infer.params import PARAM_NAMES, PARAMETER_SETS, Params
+from brdf_infer.model.params import PARAM_NAMES, PARAMETER_SETS, Params
 from brdf_infer.posterior import build_posterior_model, prior_draws, run_posterior
 from brdf_infer.posterior._power_scaling import log_likelihood_draws
 from brdf_infer.posterior._width import (

@@ -1,6 +1,6 @@
-"""ArviZ behind one adapter: ``brdf_infer/_arviz.py`` is the only module of the package that
-imports ``arviz``, and the others use only the names it defines (so that the port to ArviZ 1.x
-changes that file alone). Parsed with ``ast``: nothing is imported."""
+"""ArviZ behind one adapter: ``brdf_infer/_internal/arviz.py`` is the only module of the package
+that imports ``arviz``, and the others use only the names it defines (so that the port to ArviZ
+1.x changes that file alone). Parsed with ``ast``: nothing is imported."""
 
 import ast
 from pathlib import Path
@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-ADAPTER = ROOT / "brdf_infer" / "_arviz.py"
+ADAPTER = ROOT / "brdf_infer" / "_internal" / "arviz.py"
 
 
 def _imported_modules(tree: ast.AST) -> list[tuple[int, str]]:
@@ -27,18 +27,18 @@ def _adapter_names() -> set[str]:
             isinstance(t, ast.Name) and t.id == "__all__" for t in node.targets
         ):
             return set(ast.literal_eval(node.value))
-    raise AssertionError("brdf_infer/_arviz.py has no __all__")
+    raise AssertionError("brdf_infer/_internal/arviz.py has no __all__")
 
 
 def _adapter_aliases(tree: ast.AST) -> set[str]:
-    """The names under which a module binds the adapter (``from brdf_infer import _arviz as
-    az``)."""
+    """The names under which a module binds the adapter (``from brdf_infer._internal import
+    arviz as az``)."""
     return {
         alias.asname or alias.name
         for node in ast.walk(tree)
-        if isinstance(node, ast.ImportFrom) and node.module == "brdf_infer"
+        if isinstance(node, ast.ImportFrom) and node.module == "brdf_infer._internal"
         for alias in node.names
-        if alias.name == "_arviz"
+        if alias.name == "arviz"
     }
 
 
@@ -50,7 +50,7 @@ def test_only_the_adapter_imports_arviz():
         for line, module in _imported_modules(ast.parse(path.read_text()))
         if module == "arviz" or module.startswith("arviz.")
     ]
-    assert offenders == [], "import ArviZ through brdf_infer/_arviz.py"
+    assert offenders == [], "import ArviZ through brdf_infer/_internal/arviz.py"
 
 
 @pytest.mark.parametrize("folder", ["brdf_infer", "tests", "tools"])
@@ -69,10 +69,10 @@ def test_every_arviz_name_used_is_defined_by_the_adapter(folder):
             and node.attr not in names
             and not node.attr.startswith("__")
         ]
-    assert missing == [], "add these to brdf_infer/_arviz.py (and its __all__)"
+    assert missing == [], "add these to brdf_infer/_internal/arviz.py (and its __all__)"
 
 
 def test_the_adapter_defines_what_it_lists():
-    from brdf_infer import _arviz
+    from brdf_infer._internal import arviz
 
-    assert [name for name in _arviz.__all__ if not hasattr(_arviz, name)] == []
+    assert [name for name in arviz.__all__ if not hasattr(arviz, name)] == []

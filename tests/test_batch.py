@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from brdf_infer import _arviz as az
-from brdf_infer._outlock import LOCK_FILE
+from brdf_infer._internal import arviz as az
+from brdf_infer._internal.outlock import LOCK_FILE
 from tests.helpers import (
     SUITE_WARMUP,
     fewer_rows,

@@ -16,8 +16,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from brdf_infer import _arviz as az
-from brdf_infer._processes import Processes, resolve_processes
+from brdf_infer._internal import arviz as az
+from brdf_infer._internal.processes import Processes, resolve_processes
 from brdf_infer.errors import BadInputError
 from tests.helpers import fewer_rows, lya_scene_file, run_cli, scaled_rows
 
@@ -260,7 +260,7 @@ def test_a_failing_coordinator_stops_the_other_with_one_line(pair_run, tmp_path)
 def test_a_coordinator_that_cannot_hold_the_folder_stops_both(tmp_path):
     """Another writer holds --out: process 0 says so (exit 2), process 1 that process 0 could
     not start the batch (exit 1); nothing is written."""
-    from brdf_infer._outlock import writing
+    from brdf_infer._internal.outlock import writing
 
     out = tmp_path / "out"
     with writing(out, "test"):

@@ -9,7 +9,7 @@ import sys
 import numpy as np
 import pytest
 
-from brdf_infer.params import PARAM_NAMES
+from brdf_infer.model.params import PARAM_NAMES
 from tests.helpers import run_cli, run_cli_process
 
 
@@ -104,9 +104,9 @@ def help_of(capsys, monkeypatch, command: str) -> str:
 
 @pytest.mark.parametrize("command", ["run", "posterior", "fit", "sbc", "batch"])
 def test_help_lists_the_names_each_option_allows_from_its_registry(capsys, monkeypatch, command):
-    from brdf_infer.error_model import ERROR_MODELS
     from brdf_infer.instrument import INSTRUMENT_MODELS
     from brdf_infer.model import FAMILY_NAMES
+    from brdf_infer.model.error_model import ERROR_MODELS
 
     # one block per option: its invocation and its help (on the next line for long ones)
     blocks = re.split(r"\n(?=  -)", help_of(capsys, monkeypatch, command))
@@ -234,7 +234,7 @@ def test_single_scene_commands_compute_on_the_cpu_and_batch_on_the_default_devic
     import jax
     import jax.numpy as jnp
 
-    from brdf_infer._device import placement
+    from brdf_infer.cli._device import placement
 
     cpu = jax.devices("cpu")[0]
     with placement("posterior"):

@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 from brdf_infer.cli.compare import comparison_table
-from brdf_infer.error_model import NoiseScales
 from brdf_infer.model import family
-from brdf_infer.params import UV_PAPER
+from brdf_infer.model.error_model import NoiseScales
+from brdf_infer.model.params import UV_PAPER
 from brdf_infer.posterior import build_posterior_model
 from brdf_infer.report._compare import compare_frame
 from brdf_infer.studies.compare import PARETO_K_LIMIT, CompareSettings, compare_families
@@ -232,7 +232,7 @@ def _psis_only(fit):
 def _with_refit_effect(fit, table):
     """The rows of a ranking ``table`` by name, and the exact minus the PSIS terms of the
     refitted rows of ``fit``."""
-    from brdf_infer import _arviz as az
+    from brdf_infer._internal import arviz as az
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -247,7 +247,7 @@ def test_refitted_terms_replace_psis_in_elpd_and_p_loo():
     elpd_loo is the PSIS sum with the refitted rows' exact terms put in, and p_loo = lppd −
     elpd_loo (ArviZ's definition, lppd = Σᵢ ln mean_s exp(log_lik)) moves by the opposite
     amount; Pareto k of a refitted row counts as 0 afterwards."""
-    from brdf_infer import _arviz as az
+    from brdf_infer._internal import arviz as az
     from brdf_infer.studies.compare import FamilyResult, rank_families
 
     rng = np.random.default_rng(0)
@@ -279,7 +279,7 @@ def test_a_row_with_pareto_k_above_0_7_is_refitted_on_a_single_series_scene(tmp_
     seed 3): with 2 × 300 draws row 0 (θi = 10°, θs = 0°) has Pareto k ≈ 0.8, so its LOO
     term is computed by refitting without it; elpd_loo and p_loo of the ranking carry the
     exact term."""
-    from brdf_infer import _arviz as az
+    from brdf_infer._internal import arviz as az
     from brdf_infer.scene import load_scene
     from brdf_infer.studies.compare import fit_family, rank_families
     from brdf_infer.studies.synthetic import write_geometry_scene

@@ -148,7 +148,7 @@ def test_design_json_contract_and_map(nuts_run, candidates_csv, tmp_path, capsys
     assert json.loads((out / "design.json").read_text())["target"] == "tis_70deg"
     assert (out / "design.png").read_bytes()[:4] == b"\x89PNG"
     from brdf_infer.report._design import design_section
-    from brdf_infer.run_folder import RunFolder
+    from brdf_infer.runs.folder import RunFolder
 
     section = "".join(design_section(RunFolder(out)))
     assert "Where to measure next" in section and "<img" in section

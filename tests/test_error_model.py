@@ -9,7 +9,9 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from brdf_infer.error_model import (
+from brdf_infer.errors import BadInputError
+from brdf_infer.model import log_aperture_factor, log_brdf_inplane
+from brdf_infer.model.error_model import (
     ErrorSettings,
     NoiseScales,
     angle_slopes,
@@ -17,13 +19,11 @@ from brdf_infer.error_model import (
     noise_layout,
     value_sigma,
 )
-from brdf_infer.errors import BadInputError
-from brdf_infer.model import log_aperture_factor, log_brdf_inplane
-from brdf_infer.observations import log_reflectance_at
-from brdf_infer.params import PAPER_CONSTANTS, UV_PAPER
+from brdf_infer.model.params import PAPER_CONSTANTS, UV_PAPER
 from brdf_infer.posterior._loo import loo_pit, uniformity_p_value
 from brdf_infer.posterior._lowrank import leave_one_out_conditionals
 from brdf_infer.posterior._model import build_posterior_model
+from brdf_infer.predict.observations import log_reflectance_at
 from brdf_infer.tables.measurements import Measurements
 from tests.helpers import assert_allclose
 

@@ -17,7 +17,7 @@ from brdf_infer.export import (
     specular_frame_to_model,
     write_bsdf,
 )
-from brdf_infer.params import UV_PAPER
+from brdf_infer.model.params import UV_PAPER
 from brdf_infer.posterior import draws_params
 from tests import independent_bsdf as oracle
 from tests.helpers import reference_brdf_hemisphere, run_cli

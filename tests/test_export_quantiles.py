@@ -9,10 +9,10 @@ import re
 import numpy as np
 import pytest
 
-from brdf_infer import _arviz as az
+from brdf_infer._internal import arviz as az
 from brdf_infer.export import brdf_table
 from brdf_infer.model import tis
-from brdf_infer.params import PAPER_CONSTANTS, UV_PAPER, Params
+from brdf_infer.model.params import PAPER_CONSTANTS, UV_PAPER, Params
 from brdf_infer.posterior import draws_params
 from tests import independent_bsdf as oracle
 from tests.helpers import run_cli

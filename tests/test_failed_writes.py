@@ -16,8 +16,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from brdf_infer import _arviz as az
-from brdf_infer._atomic import atomic_write_bytes
+from brdf_infer._internal import arviz as az
+from brdf_infer._internal.atomic import atomic_write_bytes
 from brdf_infer.posterior._results import write_inference_data
 from tests.helpers import run_cli
 

@@ -13,7 +13,7 @@ from jax.test_util import check_grads
 from scipy import integrate
 
 from brdf_infer.model import FAMILIES, FAMILY_NAMES, family
-from brdf_infer.params import UV_PAPER
+from brdf_infer.model.params import UV_PAPER
 from tests.helpers import assert_allclose, reference_brdf_hemisphere
 
 PHYSICAL = {

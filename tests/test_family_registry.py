@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from brdf_infer.model import FAMILIES, family, log_brdf_hemisphere, log_brdf_inplane, log_tis
-from brdf_infer.params import PAPER_CONSTANTS, UV_PAPER
+from brdf_infer.model.params import PAPER_CONSTANTS, UV_PAPER
 
 ROOT = Path(__file__).resolve().parent.parent
 REGISTRY = {"brdf_infer/model/_families.py", "brdf_infer/model/__init__.py"}

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 from scipy import integrate, stats
 
-from brdf_infer import _arviz as az
+from brdf_infer._internal import arviz as az
 from brdf_infer.model import family
-from brdf_infer.params import PAPER_CONSTANTS
+from brdf_infer.model.params import PAPER_CONSTANTS
 from brdf_infer.posterior import posterior_bands, tis_band
 from tests import independent_bsdf as oracle
 from tests.helpers import SUITE_WARMUP, run_cli

@@ -236,7 +236,7 @@ def test_a_vendor_like_28_percent_misfit_is_poor(lya):
     """A 28 % lognormal misfit per row on top of the generative noise (a vendor table's
     scatter about its model): every one of 4 fits is poor by its repeatability (over 20
     such fits: σ_rep median 0.30, interval's lower end 0.24 > 0.13, all poor)."""
-    from brdf_infer.params import UV_PAPER
+    from brdf_infer.model.params import UV_PAPER
 
     scene, rows = lya
     rng = np.random.default_rng(2)
@@ -247,7 +247,7 @@ def test_a_vendor_like_28_percent_misfit_is_poor(lya):
 
 def _alpha_fault_truth():
     """uv-paper with α 20 % low (3.6), b2 = a2·90^(1+α) and b3 kept (the prior's coordinates)."""
-    from brdf_infer.params import UV_PAPER
+    from brdf_infer.model.params import UV_PAPER
 
     shift = 90.0**0.9
     return UV_PAPER._replace(alpha=3.6, a2=UV_PAPER.a2 * shift, a3=UV_PAPER.a3 * shift)
@@ -260,7 +260,7 @@ def test_false_alarms_are_rare_and_a_planted_alpha_fault_is_found_at_its_measure
     when measured (assert ≤ 3: a rate ≤ 0.03). The same noise about a coating with α = 3.6,
     fitted with α fixed at 4.5 (lya-fixed): poor in 32.5 ± 7.4 % of 40 when measured (13 of
     40, by residual trends, θs mostly); assert ≥ 15 % of 100 (2.4 binomial sd below)."""
-    from brdf_infer.params import UV_PAPER
+    from brdf_infer.model.params import UV_PAPER
     from brdf_infer.scene import load_scene
 
     scene, rows = lya

@@ -12,9 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from brdf_infer import _arviz as az
+from brdf_infer._internal import arviz as az
 from brdf_infer.model import strumik_family, tis
-from brdf_infer.params import PAPER_CONSTANTS, UV_PAPER, Params
+from brdf_infer.model.params import PAPER_CONSTANTS, UV_PAPER, Params
 from brdf_infer.posterior import draws_params, posterior_bands
 from brdf_infer.posterior._results import write_inference_data
 from tests import independent_bsdf as oracle

@@ -12,7 +12,7 @@ from brdf_infer.model import (
     brdf_inplane,
     log_brdf_hemisphere,
 )
-from brdf_infer.params import PAPER_CONSTANTS, UV_PAPER, VIS_PAPER
+from brdf_infer.model.params import PAPER_CONSTANTS, UV_PAPER, VIS_PAPER
 from tests.helpers import assert_allclose, reference_brdf_hemisphere
 
 

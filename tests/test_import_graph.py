@@ -8,6 +8,11 @@ An arrow goes from the importing module to the module it names; ``from x import 
 ``p/__init__.py`` first, so it is also an arrow to ``p`` (the top package ``brdf_infer`` is left
 out of that: every module sits inside it).
 
+Rooms. Every entry of the top level (``scene/``, ``model/``, ``errors.py``, ``_internal/``, …)
+is a room, and a room imports every room its modules import. The rooms make no cycle either, so
+they stand on floors, each above every room it imports: a cycle between two rooms is an arrow
+back up even where no module cycle shows it.
+
 Private names. A name is private when it starts with one underscore (dunder names such as
 ``__version__`` are not private): a module (``posterior._nuts``) or an attribute
 (``lsq._residuals``). Where a private name sits is a directory: a private module ``d/_m.py`` (or
@@ -17,11 +22,11 @@ is where it is written down):
 
 * a private attribute may be imported only by a module in the same directory;
 * a private module may be imported by a module of its own package, which for Python includes
-  the package's subpackages: ``brdf_infer/_atomic.py`` (like ``_outlock``, ``_units``) is a
-  private helper of the top package and every module of ``brdf_infer`` may use its public
-  names, while ``brdf_infer/posterior/_nuts.py`` is private to ``brdf_infer.posterior`` and
-  the rest of the toolkit reaches what it needs through ``brdf_infer.posterior``'s
-  re-exports;
+  the package's subpackages: ``brdf_infer/_internal/`` (``atomic``, ``outlock``, ``units``, …)
+  is the private package of the top package's shared helpers and every module of
+  ``brdf_infer`` may use the public names of its modules, while
+  ``brdf_infer/posterior/_nuts.py`` is private to ``brdf_infer.posterior`` and the rest of the
+  toolkit reaches what it needs through ``brdf_infer.posterior``'s re-exports;
 * a private name of another distribution (``jax._src``, ``numpyro.infer._x``) is never
   imported.
 """
@@ -187,6 +192,36 @@ def test_the_package_imports_without_a_cycle():
     assert cycle is None, "import cycle: " + " → ".join(cycle)
 
 
+def room_graph(root: Path = ROOT) -> dict[str, set[str]]:
+    """The top level's entries (``scene``, ``model``, ``_internal``, …; a room each) → the rooms
+    its modules import: the module graph with every module inside its room."""
+    rooms: dict[str, set[str]] = {}
+    for module, targets in import_graph(root).items():
+        room = module.split(".")[1] if "." in module else None
+        if room is None:
+            continue  # the package's own __init__ re-exports: it sits above every room
+        rooms.setdefault(room, set())
+        rooms[room] |= {t.split(".")[1] for t in targets if "." in t} - {room}
+    return rooms
+
+
+def test_the_top_level_rooms_import_without_a_cycle():
+    """Rooms on floors: no room imports a room that imports it back, even where the modules
+    themselves make no cycle (a back-arrow between two packages)."""
+    cycle = find_cycle(room_graph())
+    assert cycle is None, "rooms importing each other: " + " → ".join(cycle)
+
+
+def test_a_planted_back_arrow_between_rooms_is_found(tmp_path):
+    # the run folder (low: the tables' screening writes its records) naming a table module that
+    # imports nothing of it: no module cycle, but the rooms `runs` and `tables` import each other
+    copy = _planted(
+        tmp_path, "brdf_infer.runs.folder", "\nfrom brdf_infer.tables import selections\n"
+    )
+    assert find_cycle(import_graph(copy)) is None
+    assert {"runs", "tables"} <= set(find_cycle(room_graph(copy)) or [])
+
+
 def test_no_private_name_is_imported_from_another_package():
     crossings = private_crossings()
     assert not crossings, "private names imported across packages:\n" + "\n".join(
@@ -231,7 +266,11 @@ def test_a_planted_back_import_is_found(tmp_path, module, source):
         # a private module named through `from package import`, relative, in a function
         ("brdf_infer.report._build", "\ndef f():\n    from ..posterior import _bands\n", "_bands"),
         # a private name of a shared helper of the top package, from a subpackage
-        ("brdf_infer.posterior._run", "\nfrom brdf_infer._units import _x\n", "_units import _x"),
+        (
+            "brdf_infer.posterior._run",
+            "\nfrom brdf_infer._internal.units import _x\n",
+            "units import _x",
+        ),
         # a private module of another distribution
         ("brdf_infer.bench._tis", "\nimport jax._src.core\n", "jax._src"),
     ],
@@ -246,8 +285,11 @@ def test_a_planted_private_import_is_found(tmp_path, module, source, found):
     ("module", "source"),
     [
         ("brdf_infer.posterior._run", "\nfrom ._nuts import stack_data\n"),  # same package
-        ("brdf_infer.posterior._run", "\nfrom brdf_infer._atomic import atomic_write_json\n"),
-        ("brdf_infer.report._sbc", "\nfrom brdf_infer import _outlock\n"),  # a top helper module
+        (
+            "brdf_infer.posterior._run",
+            "\nfrom brdf_infer._internal.atomic import atomic_write_json\n",
+        ),
+        ("brdf_infer.report._sbc", "\nfrom brdf_infer._internal import outlock\n"),  # a helper
         ("brdf_infer.fit.paper", "\nfrom brdf_infer.fit.lsq import _x\n"),  # the same directory
         ("brdf_infer.report", "\nfrom brdf_infer.report._html import page\n"),  # its __init__
     ],

@@ -9,7 +9,7 @@ import pytest
 from jax.test_util import check_grads
 
 from brdf_infer.model import brdf_inplane, log_brdf_inplane, log_fold, positive_power
-from brdf_infer.params import UV_PAPER, VIS_PAPER, Params
+from brdf_infer.model.params import UV_PAPER, VIS_PAPER, Params
 from tests.helpers import assert_allclose, params_from_unit_scale, reference_brdf_inplane
 
 

@@ -23,9 +23,9 @@ from brdf_infer.instrument import (
     sobol_uniforms,
 )
 from brdf_infer.model import log_aperture_factor, log_brdf_hemisphere, log_brdf_inplane
-from brdf_infer.observations import build_observation_model
-from brdf_infer.params import UV_PAPER, Params
+from brdf_infer.model.params import UV_PAPER, Params
 from brdf_infer.predict import predict_rows
+from brdf_infer.predict.observations import build_observation_model
 from brdf_infer.raytrace import raytrace_series
 from brdf_infer.scene import SeriesGeometry, check_instrument, load_scene
 from tests.helpers import run_cli

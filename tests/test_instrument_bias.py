@@ -5,8 +5,8 @@ kernel of the quantity that generated them. One seed here; more in the benchmark
 import numpy as np
 import pytest
 
-from brdf_infer.observations import build_observation_model
-from brdf_infer.params import UV_PAPER
+from brdf_infer.model.params import UV_PAPER
+from brdf_infer.predict.observations import build_observation_model
 from brdf_infer.scene import check_instrument
 from brdf_infer.studies.instrument_bias import bias_experiment, traced_values
 

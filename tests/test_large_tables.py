@@ -11,7 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from brdf_infer import _arviz as az
+from brdf_infer._internal import arviz as az
 from brdf_infer.posterior import _blocks as blocks
 from brdf_infer.posterior import _results as results
 from brdf_infer.posterior._loo import loo_pit, psis_loo, relative_efficiency

@@ -7,13 +7,13 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from brdf_infer.coordinates import INTERNAL_NAMES, from_internal, to_internal
 from brdf_infer.errors import BadInputError
 from brdf_infer.fit.lsq import fit_lsq
 from brdf_infer.fit.paper import paper_fit
 from brdf_infer.model import family
-from brdf_infer.observations import build_observation_model
-from brdf_infer.params import PARAM_NAMES, UV_PAPER, VIS_PAPER
+from brdf_infer.model.coordinates import INTERNAL_NAMES, from_internal, to_internal
+from brdf_infer.model.params import PARAM_NAMES, UV_PAPER, VIS_PAPER
+from brdf_infer.predict.observations import build_observation_model
 from brdf_infer.scene import load_scene
 from brdf_infer.studies.synthetic import synthetic_measurements
 from tests.helpers import assert_allclose, run_cli

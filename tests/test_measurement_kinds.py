@@ -12,7 +12,7 @@ import pytest
 from brdf_infer.errors import BadInputError
 from brdf_infer.fit.lsq import fit_lsq
 from brdf_infer.model import brdf_hemisphere, family
-from brdf_infer.params import UV_PAPER
+from brdf_infer.model.params import UV_PAPER
 from brdf_infer.posterior import run_posterior
 from brdf_infer.scene import load_scene
 from brdf_infer.studies.compare import CompareSettings, fit_family

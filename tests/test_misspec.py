@@ -18,7 +18,7 @@ from brdf_infer.bench._misspec import (
     run_cases,
     simulate_at,
 )
-from brdf_infer.error_model import NoiseScales
+from brdf_infer.model.error_model import NoiseScales
 from brdf_infer.posterior import build_posterior_model
 from brdf_infer.studies.sbc import SbcSettings
 

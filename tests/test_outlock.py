@@ -12,8 +12,8 @@ import time
 
 import pytest
 
-from brdf_infer._atomic import atomic_write_json
-from brdf_infer._outlock import ADDING_LOCK_FILE, LOCK_FILE, require_complete, writing
+from brdf_infer._internal.atomic import atomic_write_json
+from brdf_infer._internal.outlock import ADDING_LOCK_FILE, LOCK_FILE, require_complete, writing
 from brdf_infer.errors import BadInputError
 from tests.helpers import run_cli
 
@@ -23,8 +23,8 @@ _HOLDER = textwrap.dedent(
     """
     import sys, time
     from pathlib import Path
-    from brdf_infer._atomic import atomic_write_json
-    from brdf_infer._outlock import writing
+    from brdf_infer._internal.atomic import atomic_write_json
+    from brdf_infer._internal.outlock import writing
 
     folder = Path(sys.argv[1])
     with writing(folder, "run"):
@@ -137,11 +137,11 @@ _SECOND = textwrap.dedent(
     import sys
     from pathlib import Path
     import brdf_infer
-    from brdf_infer import _oslock
-    from brdf_infer._outlock import LOCK_FILE, require_complete, writing
+    from brdf_infer._internal import oslock
+    from brdf_infer._internal.outlock import LOCK_FILE, require_complete, writing
     from brdf_infer.errors import BadInputError
 
-    assert _oslock.BACKEND == "record", _oslock.BACKEND
+    assert oslock.BACKEND == "record", oslock.BACKEND
     folder = Path(sys.argv[1])
     try:
         require_complete(folder)

@@ -5,7 +5,7 @@ import json
 
 import pytest
 
-from brdf_infer.params import UV_PAPER
+from brdf_infer.model.params import UV_PAPER
 from brdf_infer.posterior import run_posterior
 from brdf_infer.scene import load_scene
 from brdf_infer.studies.synthetic import GEOMETRIES, write_geometry_scene
@@ -144,8 +144,8 @@ def test_bad_options_create_nothing(tmp_path, capsys, argv):
 
 
 def test_a_sigma_column_larger_than_its_values_is_warned_about(tmp_path):
-    from brdf_infer.plausibility import measurement_warnings
     from brdf_infer.tables.measurements import load_measurements
+    from brdf_infer.verdict.plausibility import measurement_warnings
 
     path = tmp_path / "sigma.csv"
     path.write_text(

@@ -7,7 +7,7 @@ import pytest
 from brdf_infer.errors import BadInputError
 from brdf_infer.fit.paper import paper_fit, paper_grid_search, select_points
 from brdf_infer.model import reflectance_to_brdf, tis
-from brdf_infer.params import UV_PAPER, Params
+from brdf_infer.model.params import UV_PAPER, Params
 from brdf_infer.tables.selections import SELECTIONS
 
 # Half a unit of the last printed digit of what the article prints (Secs. 3, 5.3).

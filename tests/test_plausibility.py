@@ -14,16 +14,16 @@ import numpy as np
 import pytest
 
 from brdf_infer.errors import BadInputError
-from brdf_infer.params import UV_PAPER, Params
-from brdf_infer.plausibility import (
+from brdf_infer.model.params import UV_PAPER, Params
+from brdf_infer.report._html import verdict_box
+from brdf_infer.scene import load_scene, scene_file
+from brdf_infer.verdict import ALL_PASS, FORCED, IMPLAUSIBLE, Verdict, posterior_verdict
+from brdf_infer.verdict.plausibility import (
     answer_checks,
     fit_checks,
     measurement_checks,
     require_plausible,
 )
-from brdf_infer.report._html import verdict_box
-from brdf_infer.scene import load_scene, scene_file
-from brdf_infer.verdict import ALL_PASS, FORCED, IMPLAUSIBLE, Verdict, posterior_verdict
 from tests.helpers import run_cli
 
 FORCED_NUTS = ["--chains", "2", "--warmup", "500", "--draws", "150"]  # batch's shapes

@@ -12,9 +12,9 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from brdf_infer import _arviz as az
+from brdf_infer._internal import arviz as az
 from brdf_infer.errors import BadInputError
-from brdf_infer.params import PARAM_NAMES, UV_PAPER
+from brdf_infer.model.params import PARAM_NAMES, UV_PAPER
 from brdf_infer.posterior import (
     CHECKPOINT_FILE,
     build_posterior_model,

@@ -9,7 +9,7 @@ import textwrap
 import jax
 import pytest
 
-from brdf_infer._precision import Float32Error, require_float64
+from brdf_infer._internal.precision import Float32Error, require_float64
 from tests.helpers import REPO, run_cli
 
 

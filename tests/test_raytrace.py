@@ -10,7 +10,7 @@ import jax
 import numpy as np
 import pytest
 
-from brdf_infer.params import UV_PAPER
+from brdf_infer.model.params import UV_PAPER
 from brdf_infer.raytrace import (
     TALLIES,
     build_setup,
@@ -242,7 +242,7 @@ def test_cli_writes_figures_and_warns_when_no_ray_arrives(tmp_path, capsys):
     for name in ("raytrace.png", "detector_images.png"):
         assert (tmp_path / name).stat().st_size > 10_000
     # the images the report draws are the ones simulated, read back from the folder
-    from brdf_infer.params import UV_PAPER
+    from brdf_infer.model.params import UV_PAPER
     from brdf_infer.raytrace import load_detector_images, simulate_images
     from brdf_infer.scene import load_scene
 
@@ -325,7 +325,7 @@ _SHARDED_TRACE = textwrap.dedent(
     import sys, json
     import jax
     import brdf_infer
-    from brdf_infer.params import UV_PAPER
+    from brdf_infer.model.params import UV_PAPER
     from brdf_infer.raytrace import raytrace_series
     from brdf_infer.scene import load_scene
 

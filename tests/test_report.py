@@ -45,7 +45,7 @@ def parse(path):
 @pytest.fixture(scope="module")
 def good_report(nuts_run, lya):
     """The report of the reduced run, with ray traces as ``brdf-infer run`` writes them."""
-    from brdf_infer.params import UV_PAPER
+    from brdf_infer.model.params import UV_PAPER
     from brdf_infer.posterior import draws_params
     from brdf_infer.raytrace import (
         raytrace_payload,
@@ -306,7 +306,7 @@ def test_report_draws_the_pareto_k_its_run_recorded_and_computes_none(nuts_run, 
 
     import numpy as np
 
-    from brdf_infer import _arviz as az
+    from brdf_infer._internal import arviz as az
     from brdf_infer.verdict import PARETO_K_LIMIT
 
     loo = nuts_run.summary["predictive"]

@@ -1,4 +1,4 @@
-"""The run folder's one owner (brdf_infer.run_folder): its writers and typed readers round
+"""The run folder's one owner (brdf_infer.runs.folder): its writers and typed readers round
 trip, a missing or corrupt record is one clear error naming the file, an old folder without
 a study's file reads as None, and no module outside it parses a run folder's JSON itself."""
 
@@ -8,9 +8,9 @@ from pathlib import Path
 
 import pytest
 
-from brdf_infer import run_folder
 from brdf_infer.errors import BadInputError
-from brdf_infer.run_folder import (
+from brdf_infer.runs import folder as run_folder
+from brdf_infer.runs.folder import (
     BANDS_FILE,
     COMPARE_FILE,
     DESIGN_FILE,
@@ -151,7 +151,7 @@ def test_no_module_but_run_folder_parses_a_json_file():
             continue
         tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
         found += [f"{path.relative_to(ROOT)}:{line}" for line in _json_reads(tree)]
-    assert not found, "JSON files read outside brdf_infer.run_folder:\n" + "\n".join(found)
+    assert not found, "JSON files read outside brdf_infer.runs.folder:\n" + "\n".join(found)
 
 
 def test_the_check_finds_a_planted_read():

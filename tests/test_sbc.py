@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from brdf_infer.errors import BadInputError
+from brdf_infer.model.priors import Prior
 from brdf_infer.posterior import build_posterior_model
-from brdf_infer.priors import Prior
 from brdf_infer.scene import load_scene
 from brdf_infer.studies.sbc import (
     QUANTITIES,

@@ -10,9 +10,9 @@ import pytest
 
 from brdf_infer.errors import BadInputError
 from brdf_infer.model import family, tis
-from brdf_infer.observations import build_observation_model
-from brdf_infer.params import UV_PAPER, VIS_PAPER
+from brdf_infer.model.params import UV_PAPER, VIS_PAPER
 from brdf_infer.posterior import run_posterior
+from brdf_infer.predict.observations import build_observation_model
 from brdf_infer.scene import BUILTIN_SCENES, load_scene
 from tests.helpers import REPO, run_cli
 from tests.test_bad_input import GOOD_ROWS, HEADER, SCENE, write_scene

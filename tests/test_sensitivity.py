@@ -127,7 +127,7 @@ def test_library_json_follows_the_contract(calibration_study, lya):
     # are the only ones taken from the study. A sign flip, a row order mixed up between the
     # posteriors or an se without √n fails (planted by hand); the identity Δ = elpd − elpd_base
     # that stood here held by construction.
-    from brdf_infer import _arviz as az
+    from brdf_infer._internal import arviz as az
 
     diffs = []
     for result in (calibration_study.baseline, calibration_study.variants[0]):

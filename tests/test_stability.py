@@ -15,11 +15,11 @@ from hypothesis import example, given
 from hypothesis import strategies as st
 from jax.test_util import check_grads
 
-from brdf_infer.coordinates import from_internal
 from brdf_infer.fit.lsq import fit_lsq
 from brdf_infer.model import log_brdf_hemisphere, log_brdf_inplane, log_tis, tis
-from brdf_infer.observations import build_observation_model
-from brdf_infer.params import PAPER_CONSTANTS, UV_PAPER, Params
+from brdf_infer.model.coordinates import from_internal
+from brdf_infer.model.params import PAPER_CONSTANTS, UV_PAPER, Params
+from brdf_infer.predict.observations import build_observation_model
 
 
 @pytest.fixture(autouse=True, scope="module")
@@ -196,7 +196,7 @@ def test_steep_folding_constants_stay_finite(params, a, theta_sf, theta, theta_i
 def test_ln_cos_theta_s_is_finite_past_grazing_with_a_finite_gradient():
     """A latent scattering angle pushed past 90° (``angle_method = "latent"``) gives the
     grazing limit's ln cos θs and a zero slope, never NaN; below the limit it is ln cos θs."""
-    from brdf_infer.observations import GRAZING_LIMIT_DEG, log_cos_theta_s
+    from brdf_infer.predict.observations import GRAZING_LIMIT_DEG, log_cos_theta_s
 
     angles = jnp.array([0.0, 45.0, 85.0, 89.89, 90.0, 95.0, 180.0, -91.0])
     values = log_cos_theta_s(angles)

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from brdf_infer.params import PARAM_NAMES, Params
+from brdf_infer.model.params import PARAM_NAMES, Params
 from brdf_infer.posterior import build_posterior_model
 from brdf_infer.scene import load_scene
 from brdf_infer.studies.synthetic import SyntheticLab

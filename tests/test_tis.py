@@ -9,9 +9,9 @@ import pytest
 from jax.test_util import check_grads
 from scipy.integrate import quad
 
-from brdf_infer._resources import data_path
+from brdf_infer._internal.resources import data_path
 from brdf_infer.model import tis, tis_with_error
-from brdf_infer.params import UV_PAPER, VIS_PAPER, Params
+from brdf_infer.model.params import UV_PAPER, VIS_PAPER, Params
 from tests.helpers import assert_allclose, params_from_unit_scale, reference_brdf_hemisphere
 from tests.test_paper_fit import PRINTED_UV_HALF_UNIT
 

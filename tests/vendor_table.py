@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from brdf_infer.model import brdf_hemisphere
-from brdf_infer.params import UV_PAPER
+from brdf_infer.model.params import UV_PAPER
 from brdf_infer.tables.bsdf_file import BsdfFile, specular_frame_to_model, write_bsdf
 
 AOI_DEG = (10.0, 30.0, 50.0, 70.0)

@@ -20,7 +20,7 @@ import subprocess
 import time
 from pathlib import Path
 
-from brdf_infer._atomic import atomic_write_bytes
+from brdf_infer._internal.atomic import atomic_write_bytes
 
 
 def sbc(report: Path) -> list[str]:

@@ -117,7 +117,7 @@ def _neutral(text: str) -> str:
 
 
 def _draws(path: Path) -> dict:
-    from brdf_infer import _arviz as az
+    from brdf_infer._internal import arviz as az
 
     posterior = az.from_netcdf(path).posterior
     return {

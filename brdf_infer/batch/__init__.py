@@ -23,7 +23,7 @@ scene's name is always a complete run. A batch stops within seconds when cancell
 :func:`run_batch_until_signalled`), keeping the folders that were complete and no partial one;
 killed outright, it leaves the same (and half-written folders under temporary names, which the
 next batch into the folder removes). The output folder has one writer at a time
-(:mod:`brdf_infer._outlock`) and stays marked incomplete until a batch into it finishes.
+(:mod:`brdf_infer._internal.outlock`) and stays marked incomplete until a batch into it finishes.
 
 ``resume=True`` (``brdf-infer batch --resume``) keeps every scene whose run folder is in place
 and was written by the same scene text, rows, model options, family and NUTS settings (the
@@ -41,7 +41,7 @@ others (:class:`PeerFailed`), also one that stops sending heartbeats.
 
 A scene that fails to load or validate is reported with its error and skipped; it never takes
 the batch down. So is a scene whose rows fail a plausibility check (values that look like
-percent, angles that look like radians; :mod:`brdf_infer.plausibility`), unless
+percent, angles that look like radians; :mod:`brdf_infer.verdict.plausibility`), unless
 ``BatchSettings(force=True)``: then it runs and its verdict names the check.
 """
 

@@ -15,9 +15,9 @@ from typing import Any
 import jax
 import numpy as np
 
-from brdf_infer._outlock import note_written, require_complete, writing
-from brdf_infer._precision import ensure_float64
-from brdf_infer._processes import Processes
+from brdf_infer._internal.outlock import note_written, require_complete, writing
+from brdf_infer._internal.precision import ensure_float64
+from brdf_infer._internal.processes import Processes
 from brdf_infer.batch._entries import (
     BatchInterrupted,
     BatchResult,
@@ -34,7 +34,6 @@ from brdf_infer.batch._folders import (
 from brdf_infer.batch._groups import _site_shapes, expand_sources, structure_key
 from brdf_infer.batch._team import Team
 from brdf_infer.errors import BadInputError
-from brdf_infer.plausibility import measurement_checks, require_plausible
 from brdf_infer.posterior import (
     Cancelled,
     NutsProgram,
@@ -49,7 +48,7 @@ from brdf_infer.posterior import (
     run_fingerprint,
     stack_data,
 )
-from brdf_infer.run_folder import (
+from brdf_infer.runs.folder import (
     BANDS_FILE,
     BATCH_FILE,
     POSTERIOR_FILE,
@@ -58,6 +57,7 @@ from brdf_infer.run_folder import (
 )
 from brdf_infer.scene import load_scene
 from brdf_infer.settings import BatchSettings
+from brdf_infer.verdict.plausibility import measurement_checks, require_plausible
 
 
 def _silent(message: str) -> None:

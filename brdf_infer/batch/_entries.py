@@ -8,8 +8,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from brdf_infer.run_folder import BATCH_FILE
-from brdf_infer.run_records import Bands, PosteriorSummary
+from brdf_infer.runs.folder import BATCH_FILE
+from brdf_infer.runs.records import Bands, PosteriorSummary
 from brdf_infer.scene import Scene
 
 INTERRUPTED = "interrupted before its run was complete"
@@ -56,7 +56,7 @@ class BatchResult:
     (``interrupted``: the batch was cancelled; entries not ``done`` have no run folder).
 
     Attributes:
-        processes: the processes that ran the batch (:mod:`brdf_infer.batch._processes`).
+        processes: the processes that ran the batch (:mod:`brdf_infer._internal.processes`).
         remote: the ``batch.json`` entries of scenes another process ran, by scene number.
         compile_seconds: [s] compiling, summed over the processes.
     """

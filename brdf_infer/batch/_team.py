@@ -34,7 +34,7 @@ from typing import Any
 import jax
 import numpy as np
 
-from brdf_infer._processes import Processes
+from brdf_infer._internal.processes import Processes
 from brdf_infer.errors import BadInputError
 
 LEAVE_SECONDS = 10.0  # [s] how long process 0 waits for the others to disconnect

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from brdf_infer.bench._tables import markdown_table
-from brdf_infer.run_folder import RunFolder
+from brdf_infer.runs.folder import RunFolder
 
 SCATTER = 0.05  # lognormal 1σ of the synthetic table's values
 CHAINS, WARMUP, DRAWS = 2, 200, 200  # the curve's reduced NUTS settings

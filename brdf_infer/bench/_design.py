@@ -34,7 +34,7 @@ from brdf_infer.design import (
     parse_target,
     target_values,
 )
-from brdf_infer.params import PARAM_NAMES, Params
+from brdf_infer.model.params import PARAM_NAMES, Params
 from brdf_infer.posterior import NutsProgram, build_model_data, build_posterior_model, chain_keys
 from brdf_infer.scene import Scene
 from brdf_infer.studies.synthetic import SyntheticLab

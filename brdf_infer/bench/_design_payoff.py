@@ -43,7 +43,7 @@ from brdf_infer.design import (
     reachable,
 )
 from brdf_infer.model import tis
-from brdf_infer.params import PARAM_NAMES, Params
+from brdf_infer.model.params import PARAM_NAMES, Params
 from brdf_infer.scene import Scene
 from brdf_infer.tables.measurements import Measurements
 

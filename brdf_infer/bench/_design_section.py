@@ -6,7 +6,7 @@ from __future__ import annotations
 import tempfile
 from pathlib import Path
 
-from brdf_infer._atomic import atomic_write_bytes
+from brdf_infer._internal.atomic import atomic_write_bytes
 from brdf_infer.bench._design import HEADERS as REFIT_HEADERS
 from brdf_infer.bench._design import RefitSettings, rank_line, refit_check, refit_rows
 from brdf_infer.bench._design_payoff import (

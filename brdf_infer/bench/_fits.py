@@ -11,12 +11,12 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from brdf_infer.bench._timing import timed
-from brdf_infer.coordinates import from_internal
 from brdf_infer.fit.lsq import fit_lsq, fit_space, internal_bounds, start_points
 from brdf_infer.fit.paper import paper_fit
 from brdf_infer.model import family
-from brdf_infer.observations import build_observation_model
-from brdf_infer.params import UV_PAPER, VIS_PAPER
+from brdf_infer.model.coordinates import from_internal
+from brdf_infer.model.params import UV_PAPER, VIS_PAPER
+from brdf_infer.predict.observations import build_observation_model
 from brdf_infer.scene import Scene
 from brdf_infer.studies.synthetic import synthetic_measurements
 from brdf_infer.tables.measurements import Measurements

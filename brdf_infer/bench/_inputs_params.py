@@ -46,7 +46,7 @@ class ParamsInput:
 def parameter_inputs(draw) -> ParamsInput:
     """A parameter set: the six fields, well-formed or with wrong types, odd numbers, odd
     nesting, broken text."""
-    from brdf_infer.params import PARAM_NAMES, UV_PAPER
+    from brdf_infer.model.params import PARAM_NAMES, UV_PAPER
 
     level = draw(_LEVELS)
     fields: dict[str, Any] = {}
@@ -88,7 +88,7 @@ def _write_params(folder: Path, given: ParamsInput) -> str:
 
 def _read_params(argument: str, given: ParamsInput):
     """Resolve a generated ``--params`` as the command line does."""
-    from brdf_infer.params import resolve_params
+    from brdf_infer.model.params import resolve_params
 
     return resolve_params(argument)
 

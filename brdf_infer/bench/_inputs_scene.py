@@ -96,7 +96,7 @@ def _geometry(values: _Values) -> dict[str, st.SearchStrategy[Any]]:
 
 def _errors_table(values: _Values) -> st.SearchStrategy[dict]:
     """The ``[errors]`` table."""
-    from brdf_infer.error_model import (
+    from brdf_infer.model.error_model import (
         ANGLE_METHODS,
         CALIBRATIONS,
         ERROR_MODELS,
@@ -134,8 +134,8 @@ def _model_tables(values: _Values) -> dict[str, st.SearchStrategy[Any]]:
     """The optional keys of the model and its fit: description, wavelength, ``[errors]``,
     ``[model]``, ``[paper_fit]``, ``[outputs]`` and ``[priors]``."""
     from brdf_infer.model import FAMILY_NAMES
-    from brdf_infer.params import PARAM_NAMES, PARAMETER_SETS, HemisphereConstants
-    from brdf_infer.priors import KINDS
+    from brdf_infer.model.params import PARAM_NAMES, PARAMETER_SETS, HemisphereConstants
+    from brdf_infer.model.priors import KINDS
 
     choice, number, table = values.choice, values.number, values.table
     prior = table(
@@ -183,9 +183,9 @@ def _model_tables(values: _Values) -> dict[str, st.SearchStrategy[Any]]:
 def _study_tables(values: _Values) -> dict[str, st.SearchStrategy[Any]]:
     """The optional tables of the instrument and the studies: ``[raytrace]``,
     ``[instrument]``, ``[studies]``, ``compare`` and ``[bsdf]``."""
-    from brdf_infer.error_model import ERROR_MODELS
     from brdf_infer.instrument import INSTRUMENT_MODELS, NODE_SHAPES
     from brdf_infer.model import FAMILY_NAMES
+    from brdf_infer.model.error_model import ERROR_MODELS
 
     level, choice, number, table = values.level, values.choice, values.number, values.table
     names, geometry = values.names(), _geometry(values)

@@ -11,7 +11,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from brdf_infer import _arviz as az
+from brdf_infer._internal import arviz as az
 from brdf_infer.instrument import (
     DEFAULT_CANDIDATES,
     NODE_SHAPES,
@@ -23,8 +23,8 @@ from brdf_infer.instrument import (
     sobol_uniforms,
 )
 from brdf_infer.model import log_brdf_hemisphere
-from brdf_infer.observations import build_observation_model
-from brdf_infer.params import PARAM_NAMES, UV_PAPER, Params
+from brdf_infer.model.params import PARAM_NAMES, UV_PAPER, Params
+from brdf_infer.predict.observations import build_observation_model
 from brdf_infer.scene import Scene, check_instrument
 
 OTHER = Params(0.006, 2e-4, -1e-9, 5e-12, 3.5, -20.0)

@@ -21,7 +21,7 @@ need not be uniform even when the model is right: its well-specified row is the 
 the other rows are read against.
 
 The fits whose settings differ only in options that are data of the compiled likelihood
-(:data:`brdf_infer.error_model.DATA_OPTIONS`) share one compiled NUTS program, their data
+(:data:`brdf_infer.model.error_model.DATA_OPTIONS`) share one compiled NUTS program, their data
 padded to one shape (:mod:`brdf_infer.posterior._padding`: a zero calibration column adds
 nothing); ``angle_method`` only the simulator changes. Every case of a block uses the same
 seeds and truths, so the cases share their truths and NUTS keys and differ only in how the data

@@ -7,7 +7,7 @@ the unwhitened NumPyro model (``build_posterior_model(..., reparametrise=False)`
 sites on the same coordinates (α, θs0/90°, ln BRDF0, b1, b2, b3, and the learned noise scales),
 ln R of Eq. (7) in internal coordinates plus the row's ln(Ω cos θs) (and Eq. 10's fold where the
 scene turns it on), and one multivariate normal of the rows' ln R with covariance
-D + W Wᵀ (:func:`brdf_infer.error_model.covariance_factors`), written out as a dense 42 × 42
+D + W Wᵀ (:func:`brdf_infer.model.error_model.covariance_factors`), written out as a dense 42 × 42
 matrix for ``pm.MvNormal``. The linearised angle slopes are the analytic derivatives of ln R.
 :func:`brdf_infer.bench._peers_check.log_density_check` compares the two log densities at
 random points.
@@ -30,7 +30,7 @@ import time
 import numpy as np
 
 PEER_PACKAGES = ("pymc", "nutpie")
-ANGLE_SCALE_DEG = 90.0  # brdf_infer.coordinates.ANGLE_SCALE_DEG (not imported: no JAX here)
+ANGLE_SCALE_DEG = 90.0  # brdf_infer.model.coordinates.ANGLE_SCALE_DEG (not imported: no JAX here)
 DEG = math.pi / 180.0
 PARAMETER_SITES = ("alpha", "t_s0", "log_brdf0", "b1", "b2", "b3")
 PRIOR_NAMES = ("alpha", "theta_s0", "brdf0", "a1", "a2", "a3")  # the scene's name of each site

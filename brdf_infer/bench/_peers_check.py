@@ -20,8 +20,8 @@ def check_points(scene, measurements, count: int = POINTS, seed: int = 0) -> lis
     import jax
     from numpyro.infer import Predictive
 
-    from brdf_infer.coordinates import to_internal
-    from brdf_infer.params import UV_PAPER
+    from brdf_infer.model.coordinates import to_internal
+    from brdf_infer.model.params import UV_PAPER
     from brdf_infer.posterior import build_posterior_model
 
     model = build_posterior_model(scene, measurements, reparametrise=False)

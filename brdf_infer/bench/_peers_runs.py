@@ -22,7 +22,7 @@ from brdf_infer.bench._peers import (
     model_arrays,
 )
 from brdf_infer.bench._peers_check import log_density_check
-from brdf_infer.run_folder import RunFolder
+from brdf_infer.runs.folder import RunFolder
 
 QUANTITIES = ("brdf0", "alpha", "theta_s0", "tis70")
 LABELS = {"brdf0": "BRDF0", "alpha": "α", "theta_s0": "θs0", "tis70": "TIS(70°)"}
@@ -55,7 +55,7 @@ def _run_child(arrays: Path, sampler: str, out: Path, settings, env: dict, blas:
 def _run_ours(scene: str, out: Path, cache: Path, settings, env: dict):
     """Wall time of one ``brdf-infer posterior SCENE --json`` process, its summary, draws and
     mean leapfrog steps per draw."""
-    from brdf_infer import _arviz as az
+    from brdf_infer._internal import arviz as az
 
     chains, warmup, draws, seed = settings
     argv = [
@@ -87,9 +87,9 @@ def physical_draws(sites: dict[str, np.ndarray], scene) -> dict[str, np.ndarray]
     """BRDF0, α, θs0 and TIS(70°) of every draw, shape (chains, draws): from the paper-unit
     parameters (ours) or from the internal sites (a peer's), TIS by Eq. (9) with the scene's
     fold switch, as every TIS band of a run (``brdf_infer.posterior._bands``)."""
-    from brdf_infer.coordinates import from_internal
     from brdf_infer.model import tis
-    from brdf_infer.params import Params
+    from brdf_infer.model.coordinates import from_internal
+    from brdf_infer.model.params import Params
 
     shape = next(iter(sites.values())).shape[:2]
     if "brdf0" in sites:
@@ -152,7 +152,7 @@ class PeerRow:
 
 
 def _statistics(draws: dict[str, np.ndarray]) -> tuple[float, dict, dict]:
-    from brdf_infer import _arviz as az
+    from brdf_infer._internal import arviz as az
 
     ess = min(float(az.ess(np.asarray(draws[q]), method="bulk")) for q in QUANTITIES)
     medians = {q: float(np.median(draws[q])) for q in QUANTITIES}

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import jax
 
-from brdf_infer.params import UV_PAPER
+from brdf_infer.model.params import UV_PAPER
 from brdf_infer.raytrace import (
     CHUNK_RAYS,
     build_setup,

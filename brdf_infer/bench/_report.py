@@ -5,7 +5,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from brdf_infer._atomic import atomic_write_bytes
+from brdf_infer._internal.atomic import atomic_write_bytes
 from brdf_infer.bench._batch import batch_rows
 from brdf_infer.bench._cache import cache_rows
 from brdf_infer.bench._cost_curve import cost_rows, cost_section

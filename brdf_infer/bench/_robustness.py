@@ -10,7 +10,7 @@ import traceback
 from collections import Counter
 from dataclasses import dataclass
 
-from brdf_infer.params import UV_PAPER
+from brdf_infer.model.params import UV_PAPER
 from brdf_infer.posterior import run_posterior
 from brdf_infer.scene import Scene, load_scene
 from brdf_infer.studies.synthetic import GEOMETRIES, write_geometry_scene

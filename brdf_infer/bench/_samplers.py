@@ -6,8 +6,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from brdf_infer import _arviz as az
-from brdf_infer.params import PARAM_NAMES
+from brdf_infer._internal import arviz as az
+from brdf_infer.model.params import PARAM_NAMES
 from brdf_infer.posterior import Draws, build_posterior_model, run_emcee, run_nuts
 from brdf_infer.scene import Scene
 

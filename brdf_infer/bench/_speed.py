@@ -134,7 +134,7 @@ def gradient_rows(scene: Scene, measurements) -> list[list[str]]:
 def write_speed_report(out: Path, quick: bool, progress=print) -> Path:
     """``brdf-infer bench --speed``: the main job's cost, the peers on the same posterior,
     the concurrency stress test and a batch of unequal scenes, measured in one run."""
-    from brdf_infer._atomic import atomic_write_bytes
+    from brdf_infer._internal.atomic import atomic_write_bytes
     from brdf_infer.bench._peers_section import peer_section
     from brdf_infer.bench._timing import machine_description
     from brdf_infer.scene import load_scene
@@ -194,7 +194,7 @@ def write_speed_report(out: Path, quick: bool, progress=print) -> Path:
 def write_stress_report(out: Path, quick: bool, progress=print) -> Path:
     """``brdf-infer bench --stress``: every concurrent path 20 times (``quick``: 2) under the
     watchdog. Timing does not matter here, only hangs: it may run beside other work."""
-    from brdf_infer._atomic import atomic_write_bytes
+    from brdf_infer._internal.atomic import atomic_write_bytes
     from brdf_infer.bench._stress import HEADERS as STRESS_HEADERS
     from brdf_infer.bench._stress import StressSettings, stress_rows
     from brdf_infer.bench._timing import machine_description

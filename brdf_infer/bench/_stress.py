@@ -52,7 +52,7 @@ POTENTIAL_SCRIPT = textwrap.dedent(
     faulthandler.register(signal.SIGUSR1, all_threads=True)
     import jax, jax.numpy as jnp
     import brdf_infer
-    from brdf_infer._cache import enable_compilation_cache
+    from brdf_infer._internal.cache import enable_compilation_cache
     from brdf_infer.posterior import build_posterior_model
     from brdf_infer.posterior._potential import FlatPotential
     from brdf_infer.scene import load_scene

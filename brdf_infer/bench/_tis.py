@@ -13,10 +13,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from brdf_infer._units import DEG
+from brdf_infer._internal.units import DEG
 from brdf_infer.bench._timing import timed
 from brdf_infer.model import log_brdf_hemisphere, tis
-from brdf_infer.params import UV_PAPER, Params
+from brdf_infer.model.params import UV_PAPER, Params
 
 THETA_I = np.array([5.0, 30.0, 50.0, 70.0])
 FOLD = True

@@ -18,7 +18,6 @@ from collections.abc import Sequence
 from typing import NoReturn
 
 import brdf_infer
-from brdf_infer._device import placement
 from brdf_infer.cli import (
     batch,
     bench,
@@ -38,6 +37,7 @@ from brdf_infer.cli import (
     tis,
 )
 from brdf_infer.cli._common import EXIT_BAD_INPUT, HelpFormatter, Parser, named_by_flag
+from brdf_infer.cli._device import placement
 from brdf_infer.errors import BadInputError
 
 # in the order ``brdf-infer --help`` lists them
@@ -84,13 +84,13 @@ def _interrupt(signum, frame) -> NoReturn:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the exit code (2 for bad input)."""
-    from brdf_infer._precision import Float32Error, require_float64
+    from brdf_infer._internal.precision import Float32Error, require_float64
 
     args = build_parser().parse_args(argv)
     brdf_infer.use_float64(cache=not args.no_cache)  # before anything is compiled
     signal.signal(signal.SIGTERM, _interrupt)
     if args.no_cache:  # before anything is compiled
-        from brdf_infer._cache import disable_compilation_cache
+        from brdf_infer._internal.cache import disable_compilation_cache
 
         disable_compilation_cache()
     try:

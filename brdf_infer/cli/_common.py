@@ -11,10 +11,10 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, NoReturn, TypeVar
 
-from brdf_infer._device import DEVICES
-from brdf_infer._outdir import claim_output_dir
+from brdf_infer.cli._device import DEVICES
+from brdf_infer.cli._outdir import claim_output_dir
 from brdf_infer.errors import BadInputError
-from brdf_infer.run_records import PosteriorSummary
+from brdf_infer.runs.records import PosteriorSummary
 
 EXIT_BAD_INPUT = 2
 T = TypeVar("T")

@@ -12,7 +12,7 @@ from brdf_infer.cli._common import progress
 from brdf_infer.errors import BadInputError
 
 # where each registry of names lives (module, attribute): read only when a help text is printed
-ERROR_MODEL_REGISTRY = ("brdf_infer.error_model", "ERROR_MODELS")
+ERROR_MODEL_REGISTRY = ("brdf_infer.model.error_model", "ERROR_MODELS")
 INSTRUMENT_REGISTRY = ("brdf_infer.instrument", "INSTRUMENT_MODELS")
 FAMILY_REGISTRY = ("brdf_infer.model", "FAMILY_NAMES")
 
@@ -123,11 +123,15 @@ def checked_instrument(name: str | None) -> None:
 
 def scene_and_measurements(name: str, instrument: str | None = None, force: bool | None = None):
     """The scene (every file it names checked; predicting through ``instrument`` when given)
-    and its rows, checked for plausibility (:mod:`brdf_infer.plausibility`): a failed check
+    and its rows, checked for plausibility (:mod:`brdf_infer.verdict.plausibility`): a failed check
     stops the command unless ``force`` (:func:`forced` then reports it); a command without
     ``--force`` (``force=None``) only warns. Other warnings on stderr."""
-    from brdf_infer.plausibility import measurement_checks, measurement_warnings, require_plausible
     from brdf_infer.scene import check_instrument, load_scene
+    from brdf_infer.verdict.plausibility import (
+        measurement_checks,
+        measurement_warnings,
+        require_plausible,
+    )
 
     checked_instrument(instrument)
     scene = load_scene(name)
@@ -147,7 +151,7 @@ def scene_and_measurements(name: str, instrument: str | None = None, force: bool
 
 def forced(scene, measurements) -> list[str]:
     """The input checks a ``--force`` command goes past, one line each (also on stderr)."""
-    from brdf_infer.plausibility import measurement_checks
+    from brdf_infer.verdict.plausibility import measurement_checks
 
     lines = [found.record for found in measurement_checks(scene, measurements)]
     for line in lines:

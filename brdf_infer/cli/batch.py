@@ -10,8 +10,7 @@ import sys
 from pathlib import Path
 from typing import NoReturn
 
-from brdf_infer._outdir import check_output_dir
-from brdf_infer._processes import PEER_TIMEOUT, resolve_processes
+from brdf_infer._internal.processes import PEER_TIMEOUT, resolve_processes
 from brdf_infer.cli._common import (
     add_json_argument,
     add_nuts_arguments,
@@ -25,6 +24,7 @@ from brdf_infer.cli._common import (
     table,
 )
 from brdf_infer.cli._options import add_force_argument, add_model_argument
+from brdf_infer.cli._outdir import check_output_dir
 from brdf_infer.errors import BadInputError
 from brdf_infer.settings import BATCH_MODES, BatchSettings, check_family_name
 

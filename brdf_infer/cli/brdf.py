@@ -36,7 +36,7 @@ def add_parser(commands) -> argparse.ArgumentParser:
 def main(args: argparse.Namespace) -> int:
     """Print the BRDF at the given angles (broadcast against each other)."""
     from brdf_infer.model import brdf_hemisphere, brdf_inplane
-    from brdf_infer.params import resolve_params
+    from brdf_infer.model.params import resolve_params
 
     params = resolve_params(args.params)
     arrays = _angle_arrays(args)

@@ -6,8 +6,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from brdf_infer._outdir import check_output_dir
-from brdf_infer._outlock import writing
+from brdf_infer._internal.outlock import writing
 from brdf_infer.cli._common import (
     add_json_argument,
     command_parser,
@@ -16,6 +15,7 @@ from brdf_infer.cli._common import (
     progress,
     table,
 )
+from brdf_infer.cli._outdir import check_output_dir
 from brdf_infer.settings import DesignOptions
 
 

@@ -10,10 +10,10 @@ from pathlib import Path
 
 import numpy as np
 
-from brdf_infer._outdir import check_output_dir
-from brdf_infer._outlock import writing
+from brdf_infer._internal.outlock import writing
 from brdf_infer.cli._common import emit_json, progress, scene_command_parser, table
 from brdf_infer.cli._options import add_fold_arguments, angles, chosen_fold, folded_family
+from brdf_infer.cli._outdir import check_output_dir
 from brdf_infer.errors import BadInputError
 
 MAX_INTEGRAL_ERROR = 0.01  # a table whose own hemisphere integral misses its TIS by more
@@ -82,9 +82,9 @@ def _checked_options(args: argparse.Namespace) -> None:
 def _source(args: argparse.Namespace, scene_name: str):
     from brdf_infer.export import Source
     from brdf_infer.model import strumik_family
-    from brdf_infer.params import params_to_dict, resolve_params
+    from brdf_infer.model.params import params_to_dict, resolve_params
     from brdf_infer.posterior import load_run_family
-    from brdf_infer.run_folder import RunFolder
+    from brdf_infer.runs.folder import RunFolder
 
     if args.run is not None:
         run = Path(args.run)

@@ -59,7 +59,7 @@ def add_parser(commands) -> argparse.ArgumentParser:
 def main(args: argparse.Namespace) -> int:
     """Fit, check the fit's plausibility and print it."""
     from brdf_infer.model import family
-    from brdf_infer.plausibility import require_plausible
+    from brdf_infer.verdict.plausibility import require_plausible
     from brdf_infer.workflow import fit_checks
 
     check_family_name(args.model)
@@ -191,7 +191,7 @@ def _print_paper_fit(scene_name: str, payload: dict[str, Any]) -> None:
 
 def _grid_payload(scene, measurements, selection: str | None) -> dict[str, Any]:
     from brdf_infer.fit.paper import paper_grid_search
-    from brdf_infer.params import params_to_dict
+    from brdf_infer.model.params import params_to_dict
 
     alphas = np.arange(1.5, 8.01, 0.25)
     theta_s0s = np.arange(-40.0, 10.01, 2.0)

@@ -28,7 +28,7 @@ def add_parser(commands) -> argparse.ArgumentParser:
 
 def main(args: argparse.Namespace) -> int:
     """Print each row's measured and predicted value."""
-    from brdf_infer.params import resolve_params
+    from brdf_infer.model.params import resolve_params
     from brdf_infer.predict import predict_rows
 
     scene, measurements = scene_and_measurements(args.scene, args.instrument)

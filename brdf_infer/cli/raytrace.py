@@ -86,7 +86,7 @@ def _payload(args: argparse.Namespace, scene, measurements) -> dict:
     shown = None if args.json else progress
     if args.run is not None:
         from brdf_infer.posterior import draws_params, load_run_family
-        from brdf_infer.run_folder import RunFolder
+        from brdf_infer.runs.folder import RunFolder
 
         member, physical = load_run_family(Path(args.run))
         if not member.paper_parameters:
@@ -104,7 +104,7 @@ def _payload(args: argparse.Namespace, scene, measurements) -> dict:
             seed=args.seed,
             progress=shown,
         )
-    from brdf_infer.params import resolve_params
+    from brdf_infer.model.params import resolve_params
 
     name = args.params or scene.outputs.reference_params or "uv-paper"
     return raytrace_payload(
@@ -120,7 +120,7 @@ def _payload(args: argparse.Namespace, scene, measurements) -> dict:
 
 
 def _write_raytrace(out: Path, scene, measurements, payload: dict) -> None:
-    from brdf_infer._atomic import atomic_write_bytes
+    from brdf_infer._internal.atomic import atomic_write_bytes
     from brdf_infer.raytrace import write_traces
     from brdf_infer.report import figure_png, plot_detector_images, plot_raytrace
 

@@ -141,11 +141,11 @@ def _print_result(result, scene, measurements, out: Path) -> None:
 
 def requested_studies(args: argparse.Namespace, scene):
     """The studies the options ask for (None: none given, the scene's ``[studies]``)."""
-    from brdf_infer._design_target import parse_target
-    from brdf_infer.error_model import ERROR_MODELS
     from brdf_infer.instrument import INSTRUMENT_MODELS
     from brdf_infer.model import FAMILY_NAMES
+    from brdf_infer.model.error_model import ERROR_MODELS
     from brdf_infer.scene import Studies
+    from brdf_infer.scene.design_target import parse_target
     from brdf_infer.workflow import full_studies
 
     if args.full:

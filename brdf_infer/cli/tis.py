@@ -35,7 +35,7 @@ def add_parser(commands) -> argparse.ArgumentParser:
 def main(args: argparse.Namespace) -> int:
     """Print the TIS of ``--params`` (default uv-paper) or the band of ``--run``."""
     from brdf_infer.model import fold_statement, tis_with_error
-    from brdf_infer.params import resolve_params
+    from brdf_infer.model.params import resolve_params
 
     theta_i = angles(args.theta_i, "--theta-i", 0.0, 90.0, upper_open=True)
     if args.run is not None:

@@ -1,7 +1,6 @@
 """Where to measure next: Bayesian experimental design from a posterior run
 (``brdf-infer design``)."""
 
-from brdf_infer._design_target import DesignTarget, parse_target
 from brdf_infer.design._candidates import (
     Candidates,
     design_series,
@@ -32,6 +31,7 @@ from brdf_infer.design._table import (
     reach_line,
     target_scale,
 )
+from brdf_infer.scene.design_target import DesignTarget, parse_target
 
 __all__ = [
     "DESIGN_FIGURE",

@@ -1,6 +1,6 @@
 """Expected posterior spread after new rows, from the run's own draws (the numerical core).
 
-The predictive of a new row. Under the generative error model (:mod:`brdf_infer.error_model`)
+The predictive of a new row. Under the generative error model (:mod:`brdf_infer.model.error_model`)
 the measured rows are y = μ(θ) + W z + e with z ~ N(0, I) the shared effects (per sample,
 per calibration group, per rotation setting), e ~ N(0, D) and Cov(y) = D + W Wᵀ. Given the
 measured residual r = y − μ and a draw θ, the shared effects are z | y, θ ~ N(m_z, C⁻¹) with

@@ -29,8 +29,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from brdf_infer._design_target import DesignTarget, parse_target
-from brdf_infer._precision import ensure_float64
+from brdf_infer._internal.precision import ensure_float64
 from brdf_infer.design._candidates import (
     REACH_LIMITS,
     Candidates,
@@ -47,12 +46,6 @@ from brdf_infer.design._estimate import (
     candidate_outcomes,
     row_predictive,
 )
-from brdf_infer.error_model import (
-    angle_slopes,
-    calibration_groups,
-    group_members,
-    noise_layout,
-)
 from brdf_infer.errors import BadInputError
 from brdf_infer.model import (
     check_family_name,
@@ -61,15 +54,22 @@ from brdf_infer.model import (
     run_family_name,
     tis,
 )
-from brdf_infer.observations import (
+from brdf_infer.model.error_model import (
+    angle_slopes,
+    calibration_groups,
+    group_members,
+    noise_layout,
+)
+from brdf_infer.model.params import PARAM_NAMES, Params
+from brdf_infer.posterior import build_posterior_model, interval95, run_scene
+from brdf_infer.predict.observations import (
     build_observation_model,
     log_reflectance_at,
     predicted_log_reflectance,
 )
-from brdf_infer.params import PARAM_NAMES, Params
-from brdf_infer.posterior import build_posterior_model, interval95, run_scene
-from brdf_infer.run_folder import DESIGN_FIGURE, DESIGN_FILE, RunFolder
+from brdf_infer.runs.folder import DESIGN_FIGURE, DESIGN_FILE, RunFolder
 from brdf_infer.scene import Scene, load_scene
+from brdf_infer.scene.design_target import DesignTarget, parse_target
 from brdf_infer.settings import DesignOptions
 from brdf_infer.tables.measurements import Measurements
 
@@ -97,8 +97,8 @@ def load_design_run(run: str | Path, scene: Scene | str | None = None) -> Design
         BadInputError: no readable posterior.nc, a run of another scene or other rows, a run
             of a family other than ``strumik2024``.
     """
-    from brdf_infer import _arviz as az
-    from brdf_infer._outlock import require_complete
+    from brdf_infer._internal import arviz as az
+    from brdf_infer._internal.outlock import require_complete
 
     require_complete(run)  # not a folder a writer is writing or left unfinished
     path = RunFolder(run).posterior_file
@@ -343,7 +343,7 @@ def design(
 
     Args:
         run: the run folder's draws and scene (:func:`load_design_run`).
-        target: a target string (:mod:`brdf_infer._design_target`) or a parsed one.
+        target: a target string (:mod:`brdf_infer.scene.design_target`) or a parsed one.
         candidates: the settings to consider (default: the reachable settings of the scene's
             ``[design]`` grid in the design series).
         options: draws, simulations, budget and seed (default :class:`DesignOptions`).

@@ -21,7 +21,7 @@ from brdf_infer.export._grid import (
 )
 from brdf_infer.export._source import Source, draw_indices, planned_files
 from brdf_infer.export._zemax import export_zemax
-from brdf_infer.run_folder import EXPORTS_FILE
+from brdf_infer.runs.folder import EXPORTS_FILE
 from brdf_infer.tables.bsdf_file import (
     BsdfFile,
     format_bsdf,

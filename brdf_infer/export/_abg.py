@@ -37,7 +37,7 @@ from brdf_infer.model import (
     beta_distance,
     log_brdf_hemisphere,
 )
-from brdf_infer.params import HemisphereConstants, Params
+from brdf_infer.model.params import HemisphereConstants, Params
 
 LOG_KNEE_RANGE = (np.log(1e-4), np.log(100.0))  # ρ_k = B^(1/g), where the power law bends
 G_RANGE = (0.02, 6.0)

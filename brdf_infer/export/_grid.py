@@ -15,7 +15,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from brdf_infer.model import log_brdf_hemisphere
-from brdf_infer.params import HemisphereConstants, Params
+from brdf_infer.model.params import HemisphereConstants, Params
 from brdf_infer.tables.bsdf_file import scattered_direction, specular_frame_to_model
 
 DEFAULT_THETA_I_DEG = np.arange(0.0, 86.0, 5.0)  # 0°, 5°, …, 85°

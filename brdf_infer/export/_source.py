@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from brdf_infer.model import ModelFamily
-from brdf_infer.params import PARAM_NAMES, HemisphereConstants, Params
+from brdf_infer.model.params import PARAM_NAMES, HemisphereConstants, Params
 
 _BAND_QUANTILES = {"lower95": 0.025, "median": 0.5, "upper95": 0.975}
 # the posterior draw at each TIS quantile: a real BRDF, the envelope file of the same quantile

@@ -6,9 +6,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from brdf_infer.error_model import angle_slopes, theta_s_per_rotation
 from brdf_infer.model import ModelFamily, Physical
-from brdf_infer.observations import family_log_reflectance_at, log_reflectance
+from brdf_infer.model.error_model import angle_slopes, theta_s_per_rotation
+from brdf_infer.predict.observations import family_log_reflectance_at, log_reflectance
 from brdf_infer.scene import Scene
 
 REWEIGHT_TOLERANCE = 1e-6  # relative change of every σ_i that ends the reweighting

@@ -3,7 +3,7 @@
 A family's internal coordinates z are well conditioned (:class:`brdf_infer.model.ModelFamily`);
 the solver works on an unconstrained vector u of the free ones:
 
-* Eq. (7)'s family: z = (ln brdf0, b1, b2, b3, α, θs0/90°) (:mod:`brdf_infer.coordinates`),
+* Eq. (7)'s family: z = (ln brdf0, b1, b2, b3, α, θs0/90°) (:mod:`brdf_infer.model.coordinates`),
   the scene's fixed parameters held at their values, α and θs0 squashed into the bounds of the
   scene's ``[priors]`` by a logistic; starts drawn uniformly from the priors' start ranges.
 * The other families: their own coordinates (ln(A/B), ln ρ_k, g for ABg, …), a coordinate
@@ -21,10 +21,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from brdf_infer.coordinates import ANGLE_SCALE_DEG, INTERNAL_NAMES, from_internal, to_internal
 from brdf_infer.model import ModelFamily, Physical
-from brdf_infer.params import PARAM_NAMES, Params
-from brdf_infer.priors import DEFAULT_BOUNDS
+from brdf_infer.model.coordinates import ANGLE_SCALE_DEG, INTERNAL_NAMES, from_internal, to_internal
+from brdf_infer.model.params import PARAM_NAMES, Params
+from brdf_infer.model.priors import DEFAULT_BOUNDS
 from brdf_infer.scene import Scene
 
 UNBOUNDED, INTERVAL, ABOVE, BELOW = 0, 1, 2, 3  # a free coordinate's support: ℝ, [l, u], > l, < u

@@ -1,8 +1,8 @@
 """Least squares of any model family with optimistix: multi-start, batched, with covariance.
 
-The residuals are the ln R residuals of :func:`brdf_infer.observations.log_reflectance` (the
+The residuals are the ln R residuals of :func:`brdf_infer.predict.observations.log_reflectance` (the
 family, the instrument, Eq. 6), each divided by the row's σ under the scene's error model
-(:mod:`brdf_infer.error_model`) *without its random effects*: least squares treats the rows as
+(:mod:`brdf_infer.model.error_model`) *without its random effects*: least squares treats the rows as
 independent, so
 
     σ_i² = σ_value,i² + σ_rep² + (g_rot,i σ_rot)² + (g_cam,i σ_cam)²,
@@ -34,8 +34,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from brdf_infer._precision import ensure_float64
-from brdf_infer.error_model import noise_layout
+from brdf_infer._internal.precision import ensure_float64
 from brdf_infer.errors import BadInputError
 from brdf_infer.fit._reweighting import REWEIGHT_TOLERANCE as REWEIGHT_TOLERANCE
 from brdf_infer.fit._reweighting import Reweighting
@@ -52,8 +51,9 @@ from brdf_infer.fit.quality import (
     trend_regressors,
 )
 from brdf_infer.model import FAMILY_NAMES, ModelFamily, family
-from brdf_infer.observations import Observations, build_observation_model, log_reflectance
-from brdf_infer.params import Params
+from brdf_infer.model.error_model import noise_layout
+from brdf_infer.model.params import Params
+from brdf_infer.predict.observations import Observations, build_observation_model, log_reflectance
 from brdf_infer.scene import Scene
 from brdf_infer.settings import LSQ_STARTS
 from brdf_infer.tables.measurements import Measurements

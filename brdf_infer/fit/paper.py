@@ -14,10 +14,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from brdf_infer._precision import ensure_float64
+from brdf_infer._internal.precision import ensure_float64
 from brdf_infer.errors import BadInputError
 from brdf_infer.model import log_brdf_inplane
-from brdf_infer.params import Params
+from brdf_infer.model.params import Params
 from brdf_infer.scene import Scene
 from brdf_infer.tables.measurements import Measurements
 from brdf_infer.tables.selections import SELECTIONS

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.stats import qmc
 
-from brdf_infer._units import DEG
+from brdf_infer._internal.units import DEG
 
 NODE_DIMENSIONS = 6  # source disk (2), limiting beam aperture (2), detector aperture (2)
 SOBOL_SEED = 20240121  # fixed: the kernel is a deterministic cubature

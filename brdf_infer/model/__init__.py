@@ -4,6 +4,12 @@
 Every function is pure and float64, and goes through ``jit``, ``vmap`` and ``grad``. Eq. (10)'s
 folding (a measurement artefact, Sec. 5) is off unless ``fold=True`` is passed: the physical BRDF
 and its TIS are the defaults.
+
+Beside the forward models, the package holds the rest of the statistical model, one module each
+(none of them is imported here): ``params`` the parameters of Eq. (7) in paper units and the
+constants of Eqs. (8) and (10), ``coordinates`` their well-conditioned internal coordinates,
+``priors`` the priors on those coordinates, and ``error_model`` how a measured ln R scatters
+about the prediction. ``brdf_infer.predict`` puts them together into the prediction of each row.
 """
 
 from brdf_infer.model._aperture import (

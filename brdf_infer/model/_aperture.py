@@ -5,7 +5,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 from jax.typing import ArrayLike
 
-from brdf_infer._units import DEG
+from brdf_infer._internal.units import DEG
 
 
 def solid_angle(d_mm: ArrayLike, r_mm: ArrayLike) -> jnp.ndarray:

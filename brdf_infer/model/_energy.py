@@ -1,7 +1,7 @@
 """Energy conservation: the physical BRDF of Eqs. (7), (8) scatters at most what it receives.
 
 A coating with TIS(θi) > 1 (Eq. 9) at some incidence angle reflects more power than falls on
-it. The scene's priors are normals on well-conditioned coordinates (:mod:`brdf_infer.priors`)
+it. The scene's priors are normals on well-conditioned coordinates (:mod:`brdf_infer.model.priors`)
 that know nothing of this: on their own they put about a third of their mass on such
 coatings (TIS(70°) > 1 for 33 % of 20,000 draws of the bundled scene's priors). The posterior
 model therefore truncates them to
@@ -30,7 +30,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from brdf_infer.model._tis import log_tis
-from brdf_infer.params import PAPER_CONSTANTS, HemisphereConstants, Params
+from brdf_infer.model.params import PAPER_CONSTANTS, HemisphereConstants, Params
 
 ENERGY_THETA_I_DEG = np.arange(0.0, 85.0 + 1e-9, 5.0)  # [deg], the check angles
 ENERGY_NODES = 24  # Gauss–Legendre nodes per panel of the check's TIS

@@ -28,7 +28,7 @@ from pathlib import Path
 import jax
 import jax.numpy as jnp
 
-from brdf_infer._units import DEG
+from brdf_infer._internal.units import DEG
 from brdf_infer.errors import BadInputError
 from brdf_infer.model._hemisphere import log_brdf_hemisphere
 from brdf_infer.model._inplane import log_brdf_inplane
@@ -41,8 +41,8 @@ from brdf_infer.model._lobes import (
     harvey_shack_log_bsdf,
 )
 from brdf_infer.model._tis import log_tis
-from brdf_infer.params import PAPER_CONSTANTS, PARAM_NAMES, HemisphereConstants, Params
-from brdf_infer.priors import Prior
+from brdf_infer.model.params import PAPER_CONSTANTS, PARAM_NAMES, HemisphereConstants, Params
+from brdf_infer.model.priors import Prior
 
 Physical = dict[str, jnp.ndarray]
 

@@ -11,7 +11,7 @@ import jax.numpy as jnp
 from jax.typing import ArrayLike
 
 from brdf_infer.model._inplane import log_brdf_inplane
-from brdf_infer.params import PAPER_CONSTANTS, HemisphereConstants, Params
+from brdf_infer.model.params import PAPER_CONSTANTS, HemisphereConstants, Params
 
 
 def azimuthal_half_width(

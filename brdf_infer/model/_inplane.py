@@ -12,7 +12,7 @@ import jax.numpy as jnp
 from jax.scipy.special import log_ndtr
 from jax.typing import ArrayLike
 
-from brdf_infer.params import PAPER_CONSTANTS, HemisphereConstants, Params
+from brdf_infer.model.params import PAPER_CONSTANTS, HemisphereConstants, Params
 
 _SQRT2 = math.sqrt(2.0)
 

@@ -24,7 +24,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from brdf_infer._units import DEG
+from brdf_infer._internal.units import DEG
 
 _KNEE_OFFSETS = np.arange(-5.0, 5.5, 1.0)  # panel edges around the knee, in s = ln ρ
 _TAIL = 25.0  # below the knee − 25 the integrand is e^{2s} f(0) to 1e-10 or better

@@ -23,10 +23,10 @@ import jax.numpy as jnp
 import numpy as np
 from jax.typing import ArrayLike
 
-from brdf_infer._units import DEG
+from brdf_infer._internal.units import DEG
 from brdf_infer.model._hemisphere import azimuthal_weight_integral
 from brdf_infer.model._inplane import log_brdf_inplane
-from brdf_infer.params import PAPER_CONSTANTS, HemisphereConstants, Params
+from brdf_infer.model.params import PAPER_CONSTANTS, HemisphereConstants, Params
 
 TIS_NODES = 64  # Gauss–Legendre nodes per panel; see tests/test_tis.py for the error
 # Panels narrower than this are dropped: their contribution is below 1e-11 of the TIS, while

@@ -62,7 +62,7 @@ from brdf_infer.posterior._run import (
     run_scene,
 )
 from brdf_infer.posterior._samplers import Draws, nuts_draws, run_emcee, run_nuts
-from brdf_infer.run_records import (
+from brdf_infer.runs.records import (
     Band,
     Bands,
     Diagnostics,

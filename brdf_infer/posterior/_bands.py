@@ -13,8 +13,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from brdf_infer.model import ModelFamily
-from brdf_infer.params import Params
-from brdf_infer.run_records import Bands
+from brdf_infer.model.params import Params
+from brdf_infer.runs.records import Bands
 
 QUANTILES = {"lo95": 0.025, "lo68": 0.16, "median": 0.5, "hi68": 0.84, "hi95": 0.975}
 TIS_THETA_I_DEG = np.arange(0.0, 90.0, 1.0)  # 0°, 1°, …, 89°

@@ -24,7 +24,7 @@ def draw_blocks(count: int, rows: int, columns: int) -> int:
 
 def factor_columns(noise) -> int:
     """Columns of the likelihood's low-rank factor W (samples, calibration groups, rotation
-    settings with two or more rows) of a :class:`~brdf_infer.error_model.NoiseLayout`."""
+    settings with two or more rows) of a :class:`~brdf_infer.model.error_model.NoiseLayout`."""
     names = ("sample_members", "calibration_members", "rotation_members")
     return sum(int(np.shape(getattr(noise, name))[-1]) for name in names if hasattr(noise, name))
 

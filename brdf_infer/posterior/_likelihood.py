@@ -1,7 +1,7 @@
 """The likelihood of the rows' ln R: the model's data (:class:`ModelData`), the mean and
 covariance D + W Wᵀ of one draw (:class:`LikelihoodParts`), the ``obs`` site under them
 (:func:`observe`, :class:`LowRankNormal`) and the error model's noise scales, sampled or drawn
-(:mod:`brdf_infer.error_model`)."""
+(:mod:`brdf_infer.model.error_model`)."""
 
 from __future__ import annotations
 
@@ -12,9 +12,9 @@ import jax.numpy as jnp
 import numpyro
 import numpyro.distributions as dist
 
-from brdf_infer.error_model import ErrorSettings, NoiseLayout, NoiseScales, noise_layout
-from brdf_infer.observations import Observations, build_observation_model
+from brdf_infer.model.error_model import ErrorSettings, NoiseLayout, NoiseScales, noise_layout
 from brdf_infer.posterior._lowrank import low_rank_normal_log_density
+from brdf_infer.predict.observations import Observations, build_observation_model
 from brdf_infer.scene import Scene
 from brdf_infer.tables.measurements import Measurements
 

@@ -24,7 +24,7 @@ from jax.scipy.stats import norm
 from scipy import stats
 from scipy.special import logsumexp
 
-from brdf_infer import _arviz as az
+from brdf_infer._internal import arviz as az
 from brdf_infer.posterior._lowrank import leave_one_out_conditionals
 
 

@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.special import logsumexp
 
-from brdf_infer import _arviz as az
+from brdf_infer._internal import arviz as az
 from brdf_infer.posterior._likelihood import ModelData
 from brdf_infer.posterior._model import PosteriorModel
 from brdf_infer.posterior._nuts import NutsProgram, chain_keys

@@ -4,7 +4,7 @@ One model serves every sampler and the simulations: NUTS runs it, emcee samples 
 potential, SBC draws data sets from it. The data are an argument (:class:`ModelData`, a pytree
 of arrays), so one compilation serves every data set of the same shape.
 
-Likelihood. The scene's error model (:mod:`brdf_infer.error_model`): for ``generative`` one
+Likelihood. The scene's error model (:mod:`brdf_infer.model.error_model`): for ``generative`` one
 multivariate normal of the rows' ln R with covariance D + W Wᵀ, marginalised over the sample,
 calibration and (linearised) angle effects; with ``angle_method = "latent"`` the angle errors
 are sampled as latent variables instead. For ``spread`` independent normals.
@@ -43,8 +43,6 @@ import numpy as np
 import numpyro
 import numpyro.distributions as dist
 
-from brdf_infer.coordinates import ANGLE_SCALE_DEG, from_internal
-from brdf_infer.error_model import NoiseScales, angle_slopes, covariance_factors
 from brdf_infer.errors import BadInputError
 from brdf_infer.model import (
     ModelFamily,
@@ -53,8 +51,10 @@ from brdf_infer.model import (
     log_fold,
     strumik_family,
 )
-from brdf_infer.observations import family_log_reflectance_at, log_reflectance
-from brdf_infer.params import Params
+from brdf_infer.model.coordinates import ANGLE_SCALE_DEG, from_internal
+from brdf_infer.model.error_model import NoiseScales, angle_slopes, covariance_factors
+from brdf_infer.model.params import Params
+from brdf_infer.model.priors import Prior
 from brdf_infer.posterior._likelihood import (
     LikelihoodParts,
     ModelData,
@@ -70,7 +70,7 @@ from brdf_infer.posterior._whitening import (
     linear_design,
     whitened_coefficients,
 )
-from brdf_infer.priors import Prior
+from brdf_infer.predict.observations import family_log_reflectance_at, log_reflectance
 from brdf_infer.scene import Scene
 from brdf_infer.tables.measurements import Measurements
 
@@ -108,7 +108,7 @@ class PosteriorModel:
     :class:`ModelData` and its data.
 
     One model for every family: the same rows, instrument (Eq. 6) and generative error model,
-    one forward path (:func:`brdf_infer.observations.log_reflectance`), so that PSIS-LOO
+    one forward path (:func:`brdf_infer.predict.observations.log_reflectance`), so that PSIS-LOO
     compares the BRDF families and nothing else. A family with Eq. (7)'s parameters
     (:attr:`~brdf_infer.model.ModelFamily.paper_parameters`) is sampled under the scene's
     ``[priors]``, its linear coefficients whitened (module docstring); any other family in
@@ -268,7 +268,7 @@ class PosteriorModel:
 
     def _latent_angles(self, data: ModelData, scales: NoiseScales):
         """Perturbed angles (θi + ε, θs + s ε + η) with ε per rotation setting, η per row and
-        s the rotation coupling (:mod:`brdf_infer.error_model`).
+        s the rotation coupling (:mod:`brdf_infer.model.error_model`).
 
         A setting of two or more rows has its ε in ``rotation_error_std``; a row alone in its
         setting (``rotation_alone``) has its own in ``rotation_alone_error_std``, a variable per

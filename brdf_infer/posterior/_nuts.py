@@ -30,8 +30,8 @@ import jax.numpy as jnp
 import numpy as np
 from numpyro.infer.hmc import hmc
 
-from brdf_infer._compile_clock import compile_clock
-from brdf_infer._sharding import gather_batch, shard_batch
+from brdf_infer._internal.sharding import gather_batch, shard_batch
+from brdf_infer.posterior._compile_clock import compile_clock
 from brdf_infer.posterior._likelihood import ModelData
 from brdf_infer.posterior._model import PosteriorModel
 from brdf_infer.posterior._padding import pad_datasets

@@ -28,9 +28,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from brdf_infer.error_model import NoiseLayout
-from brdf_infer.observations import Observations
+from brdf_infer.model.error_model import NoiseLayout
 from brdf_infer.posterior._likelihood import ModelData
+from brdf_infer.predict.observations import Observations
 
 # how a padding row is filled, per field of Observations: the first row's value, or a constant
 _ROW_FILL: dict[str, Any] = {

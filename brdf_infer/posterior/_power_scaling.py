@@ -32,10 +32,10 @@ import jax.numpy as jnp
 import numpy as np
 import numpyro.distributions as dist
 
-from brdf_infer import _arviz as az
-from brdf_infer.coordinates import ANGLE_SCALE_DEG
+from brdf_infer._internal import arviz as az
 from brdf_infer.model import energy_log_factor
-from brdf_infer.params import PARAM_NAMES, Params
+from brdf_infer.model.coordinates import ANGLE_SCALE_DEG
+from brdf_infer.model.params import PARAM_NAMES, Params
 from brdf_infer.posterior._blocks import factor_columns, over_draw_blocks
 from brdf_infer.posterior._likelihood import disjoint_columns
 from brdf_infer.posterior._lowrank import low_rank_normal_log_density

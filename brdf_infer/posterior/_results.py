@@ -15,22 +15,22 @@ import numpy as np
 from numpyro.infer import Predictive
 
 import brdf_infer
-from brdf_infer import _arviz as az
-from brdf_infer._atomic import atomic_write_bytes
-from brdf_infer._outlock import require_complete
+from brdf_infer._internal import arviz as az
+from brdf_infer._internal.atomic import atomic_write_bytes
+from brdf_infer._internal.outlock import require_complete
 from brdf_infer.errors import BadInputError
 from brdf_infer.model import ModelFamily, family, run_family_name
-from brdf_infer.params import PARAM_NAMES
+from brdf_infer.model.params import PARAM_NAMES
 from brdf_infer.posterior._blocks import factor_columns, over_draw_blocks
 from brdf_infer.posterior._likelihood import disjoint_columns
 from brdf_infer.posterior._loo import pointwise_loo_terms
 from brdf_infer.posterior._model import NOISE_SITES, PosteriorModel
 from brdf_infer.posterior._samplers import Draws
-from brdf_infer.run_folder import BANDS_FILE as BANDS_FILE  # the old name, kept
-from brdf_infer.run_folder import POSTERIOR_FILE as POSTERIOR_FILE  # the old name, kept
-from brdf_infer.run_folder import SUMMARY_FILE as SUMMARY_FILE  # the old name, kept
-from brdf_infer.run_folder import RunFolder
-from brdf_infer.run_records import Bands, PosteriorSummary
+from brdf_infer.runs.folder import BANDS_FILE as BANDS_FILE  # the old name, kept
+from brdf_infer.runs.folder import POSTERIOR_FILE as POSTERIOR_FILE  # the old name, kept
+from brdf_infer.runs.folder import SUMMARY_FILE as SUMMARY_FILE  # the old name, kept
+from brdf_infer.runs.folder import RunFolder
+from brdf_infer.runs.records import Bands, PosteriorSummary
 
 THRESHOLDS = {"r_hat": 1.01, "ess": 400, "bfmi": 0.3, "tau_multiple": 50}
 
@@ -352,7 +352,7 @@ def family_draws(
     Raises:
         BadInputError: an unknown family, or a group without its parameters (naming ``path``).
     """
-    from brdf_infer.params import HemisphereConstants
+    from brdf_infer.model.params import HemisphereConstants
 
     name = run_family_name(posterior.attrs)
     fold = run_fold(posterior) if fold is None else fold

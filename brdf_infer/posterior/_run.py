@@ -15,12 +15,12 @@ from typing import Any
 
 import numpy as np
 
-from brdf_infer import _arviz as az
-from brdf_infer._outlock import writing
-from brdf_infer._precision import ensure_float64
-from brdf_infer.error_model import ERROR_MODELS
+from brdf_infer._internal import arviz as az
+from brdf_infer._internal.outlock import writing
+from brdf_infer._internal.precision import ensure_float64
 from brdf_infer.errors import BadInputError
 from brdf_infer.model import check_family_name, family
+from brdf_infer.model.error_model import ERROR_MODELS
 from brdf_infer.posterior._answer import answer_records
 from brdf_infer.posterior._bands import (
     draws_physical,
@@ -52,8 +52,8 @@ from brdf_infer.posterior._samplers import (
     run_emcee,
     run_nuts,
 )
-from brdf_infer.run_folder import CHECKPOINT_FILE
-from brdf_infer.run_records import Bands, PosteriorSummary
+from brdf_infer.runs.folder import CHECKPOINT_FILE
+from brdf_infer.runs.records import Bands, PosteriorSummary
 from brdf_infer.scene import Scene, check_instrument, load_scene, parse_scene
 from brdf_infer.settings import PosteriorSettings, resolved_sampler
 from brdf_infer.tables.measurements import Measurements
@@ -248,8 +248,8 @@ def run_posterior(
             bands; π·BRDF0 for ``strumik2024`` only).
         progress: progress bar on stderr (default: when stderr is a terminal).
         announce: called with the run in one line, its settings checked, before sampling.
-        forced: the plausibility checks (:mod:`brdf_infer.plausibility`) the caller went past
-            with ``--force``, one line each: they open the run's verdict.
+        forced: the plausibility checks (:mod:`brdf_infer.verdict.plausibility`) the caller
+            went past with ``--force``, one line each: they open the run's verdict.
         refit: sample an error-model variant anew where reweighting to it is unreliable
             (:mod:`brdf_infer.posterior._width`), and a row of Pareto k > 0.7 without it for
             its exact leave-one-out term (:mod:`brdf_infer.posterior._loo_refit`); False:

@@ -22,9 +22,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from brdf_infer._atomic import atomic_write_bytes
-from brdf_infer._compile_clock import compile_clock
+from brdf_infer._internal.atomic import atomic_write_bytes
 from brdf_infer.errors import BadInputError
+from brdf_infer.posterior._compile_clock import compile_clock
 from brdf_infer.posterior._model import PosteriorModel
 from brdf_infer.posterior._nuts import NutsProgram, chain_keys
 from brdf_infer.posterior._potential import FlatPotential

@@ -7,16 +7,16 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
-from brdf_infer.coordinates import ANGLE_SCALE_DEG
 from brdf_infer.model import positive_power
-from brdf_infer.observations import Observations
+from brdf_infer.model.coordinates import ANGLE_SCALE_DEG
+from brdf_infer.model.priors import Prior
 from brdf_infer.posterior._lowrank import (
     Whitened,
     cholesky,
     solve_lower,
     solve_upper_transposed,
 )
-from brdf_infer.priors import Prior
+from brdf_infer.predict.observations import Observations
 
 
 def linear_design(rows: Observations, alpha, t_s0) -> jnp.ndarray:

@@ -48,9 +48,9 @@ import numpy as np
 from scipy.special import erf, logsumexp
 from scipy.stats import norm
 
-from brdf_infer import _arviz as az
-from brdf_infer.error_model import ErrorSettings
+from brdf_infer._internal import arviz as az
 from brdf_infer.model import ModelFamily
+from brdf_infer.model.error_model import ErrorSettings
 from brdf_infer.posterior._model import PosteriorModel, build_posterior_model
 from brdf_infer.posterior._power_scaling import log_likelihood_draws
 from brdf_infer.tables.measurements import Measurements

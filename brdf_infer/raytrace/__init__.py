@@ -18,7 +18,7 @@ from brdf_infer.raytrace._setup import (
 )
 from brdf_infer.raytrace._tally import CHUNK_RAYS, Estimate, compile_tallies, trace_configuration
 from brdf_infer.raytrace._trace import ESTIMATORS, TALLIES, Setup
-from brdf_infer.run_folder import DETECTOR_IMAGES_FILE, RAYTRACE_FILE
+from brdf_infer.runs.folder import DETECTOR_IMAGES_FILE, RAYTRACE_FILE
 
 __all__ = [
     "CHUNK_RAYS",

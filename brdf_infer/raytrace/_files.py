@@ -11,9 +11,9 @@ from pathlib import Path
 import numpy as np
 
 from brdf_infer.errors import BadInputError
-from brdf_infer.params import Params
+from brdf_infer.model.params import Params
 from brdf_infer.raytrace._images import simulate_images
-from brdf_infer.run_folder import DETECTOR_IMAGES_FILE, RunFolder
+from brdf_infer.runs.folder import DETECTOR_IMAGES_FILE, RunFolder
 from brdf_infer.scene import Scene
 from brdf_infer.tables.measurements import Measurements
 

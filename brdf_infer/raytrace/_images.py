@@ -5,7 +5,7 @@ from __future__ import annotations
 import jax
 import numpy as np
 
-from brdf_infer.params import Params
+from brdf_infer.model.params import Params
 from brdf_infer.raytrace._setup import build_setup, configurations
 from brdf_infer.raytrace._trace import detector_images
 from brdf_infer.scene import Scene

@@ -26,7 +26,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from brdf_infer.model import brdf_hemisphere
-from brdf_infer.params import Params
+from brdf_infer.model.params import Params
 from brdf_infer.raytrace._setup import (
     Configuration,
     _aperture_factor,

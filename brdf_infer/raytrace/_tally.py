@@ -12,8 +12,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from brdf_infer._sharding import gather_batch, shard_batch
-from brdf_infer.params import Params
+from brdf_infer._internal.sharding import gather_batch, shard_batch
+from brdf_infer.model.params import Params
 from brdf_infer.raytrace._setup import Configuration
 from brdf_infer.raytrace._trace import ESTIMATORS, TALLIES, Setup, tally_moments
 

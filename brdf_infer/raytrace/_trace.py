@@ -31,9 +31,9 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
-from brdf_infer._units import DEG
+from brdf_infer._internal.units import DEG
 from brdf_infer.model import log_brdf_hemisphere
-from brdf_infer.params import HemisphereConstants, Params
+from brdf_infer.model.params import HemisphereConstants, Params
 
 ESTIMATORS: tuple[str, ...] = ("nee", "naive")
 

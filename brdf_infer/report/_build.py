@@ -6,8 +6,8 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from brdf_infer import _arviz as az
-from brdf_infer._outlock import require_complete, writing
+from brdf_infer._internal import arviz as az
+from brdf_infer._internal.outlock import require_complete, writing
 from brdf_infer.errors import BadInputError
 from brdf_infer.model import fold_statement
 from brdf_infer.posterior import THRESHOLDS, draws_params, family_draws, run_scene
@@ -29,7 +29,7 @@ from brdf_infer.report._run_tables import run_section, summary_table
 from brdf_infer.report._sensitivity import sensitivity_section
 from brdf_infer.report._table_views import residual_hemisphere, value_words
 from brdf_infer.report._traces import raytrace_table
-from brdf_infer.run_folder import (
+from brdf_infer.runs.folder import (
     FIGURE_DIR,
     POSTERIOR_FILE,
     REPORT_FILE,
@@ -71,7 +71,7 @@ def write_report(run: Path, progress=print) -> tuple[Path, Verdict]:
     verdict (the one the run recorded, rendered as it stands).
 
     Raises:
-        BadInputError: ``run`` is no complete run folder (:mod:`brdf_infer._outlock`: one
+        BadInputError: ``run`` is no complete run folder (:mod:`brdf_infer._internal.outlock`: one
             being written, or left incomplete by a writer that stopped), or another process
             writes its report.
     """

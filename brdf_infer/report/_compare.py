@@ -12,11 +12,11 @@ import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
 
-from brdf_infer import _arviz as az
+from brdf_infer._internal import arviz as az
 from brdf_infer.posterior import THRESHOLDS
 from brdf_infer.report._html import escape
 from brdf_infer.report._html import figure as html_figure
-from brdf_infer.run_folder import COMPARE_FIGURE, COMPARE_FILE, RunFolder
+from brdf_infer.runs.folder import COMPARE_FIGURE, COMPARE_FILE, RunFolder
 from brdf_infer.studies.compare import ComparisonResult
 
 UNTRUSTED = "sampler diagnostics fail"

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from brdf_infer.design import DESIGN_HEADERS, current_words, design_rows, reach_line
 from brdf_infer.report import _html
-from brdf_infer.run_folder import DESIGN_FIGURE, RunFolder
+from brdf_infer.runs.folder import DESIGN_FIGURE, RunFolder
 
 
 def design_section(run: RunFolder) -> list[str]:

@@ -3,10 +3,10 @@ this run and of its spread variant, PSIS-LOO and the comparison with the run's m
 
 from __future__ import annotations
 
-from brdf_infer import _arviz as az
+from brdf_infer._internal import arviz as az
 from brdf_infer.report import _html
-from brdf_infer.run_folder import SUMMARY_FILE, VARIANTS_DIR, RunFolder
-from brdf_infer.run_records import PosteriorSummary
+from brdf_infer.runs.folder import SUMMARY_FILE, VARIANTS_DIR, RunFolder
+from brdf_infer.runs.records import PosteriorSummary
 from brdf_infer.verdict import PARETO_K_LIMIT
 
 SPREAD_VARIANT = "spread"

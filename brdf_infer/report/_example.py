@@ -5,10 +5,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from brdf_infer._atomic import atomic_write_bytes
+from brdf_infer._internal.atomic import atomic_write_bytes
 from brdf_infer.model import fold_statement
 from brdf_infer.report._results import indices_of, tis_fold
-from brdf_infer.run_folder import RunFolder
+from brdf_infer.runs.folder import RunFolder
 from brdf_infer.verdict import Verdict
 
 EXAMPLE_FIGURES = ("brdf_bands", "tis_band", "hemisphere", "predictive", "raytrace", "instrument")

@@ -10,9 +10,9 @@ import numpy as np
 
 from brdf_infer.export import read_bsdf
 from brdf_infer.model import brdf_hemisphere, fold_statement
-from brdf_infer.params import HemisphereConstants, Params
+from brdf_infer.model.params import HemisphereConstants, Params
 from brdf_infer.report import _html
-from brdf_infer.run_folder import RunFolder
+from brdf_infer.runs.folder import RunFolder
 
 SHOWN_THETA_I_DEG = (0.0, 30.0, 60.0, 80.0)
 _KIND_STYLE = {"lower95": ":", "median": "-", "upper95": ":", "params": "-"}

@@ -9,17 +9,17 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.colors import BoundaryNorm, ListedColormap
 
-from brdf_infer import _arviz as az
+from brdf_infer._internal import arviz as az
 from brdf_infer.model import ModelFamily, brdf_inplane, family, run_family_name
-from brdf_infer.params import PARAM_NAMES, PARAMETER_SETS
+from brdf_infer.model.params import PARAM_NAMES, PARAMETER_SETS
 from brdf_infer.report._table_views import in_plane, panel_grid, value_label
-from brdf_infer.run_records import Bands
+from brdf_infer.runs.records import Bands
 from brdf_infer.scene import Scene
 
 MAP_THETA_I_DEG = (5.0, 30.0, 50.0, 70.0)
 
 
-# The sampler's well-conditioned coordinates (brdf_infer.coordinates) and noise scales, with
+# The sampler's well-conditioned coordinates (brdf_infer.model.coordinates) and noise scales, with
 # their units: what the trace and pair plots show (in paper units a2, a3 are spikes).
 SAMPLER_COORDINATES = {
     "log_brdf0": "ln BRDF0 [ln sr⁻¹]",

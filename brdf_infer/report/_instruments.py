@@ -9,7 +9,7 @@ import numpy as np
 
 from brdf_infer.report import _html
 from brdf_infer.report._raytrace import figure_png
-from brdf_infer.run_folder import RunFolder
+from brdf_infer.runs.folder import RunFolder
 
 MEANINGS = {
     "point": "Eq. (6) at the nominal angles (the article's conversion)",

@@ -7,7 +7,7 @@ import numpy as np
 
 from brdf_infer.model import ModelFamily, fold_statement
 from brdf_infer.report import _html
-from brdf_infer.run_records import Bands, PosteriorSummary
+from brdf_infer.runs.records import Bands, PosteriorSummary
 from brdf_infer.verdict import quantity_words, value_words
 
 

@@ -7,12 +7,12 @@ import json
 
 import numpy as np
 
-from brdf_infer import _arviz as az
+from brdf_infer._internal import arviz as az
 from brdf_infer.model import fold_statement
 from brdf_infer.report import _html
 from brdf_infer.report._instruments import MEANINGS
 from brdf_infer.report._table_views import table_section
-from brdf_infer.run_records import PosteriorSummary
+from brdf_infer.runs.records import PosteriorSummary
 
 PRIOR_COORDINATES = {
     "brdf0": "ln BRDF0 [ln sr⁻¹]",

@@ -11,7 +11,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from brdf_infer.report import _html
-from brdf_infer.run_folder import SENSITIVITY_FIGURE, SENSITIVITY_FILE, RunFolder
+from brdf_infer.runs.folder import SENSITIVITY_FIGURE, SENSITIVITY_FILE, RunFolder
 from brdf_infer.scene import TIS_ANGLE_DEG
 from brdf_infer.studies.sensitivity import SensitivityResult
 

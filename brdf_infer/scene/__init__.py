@@ -10,7 +10,7 @@ Schema (keys other than these are errors; defaults in brackets)::
     [series.NAME]                            # one table per series named in the CSV
     aperture_diameter_mm = 7.2               # required, > 0
     aperture_distance_mm = 103.8             # required, > 0
-    [errors]                                 # brdf_infer.error_model explains the model
+    [errors]                                 # brdf_infer.model.error_model explains the model
     model = "generative"                     # ["generative"] or "spread" (the earlier model)
     calibration = "per_series"               # ["per_series"], "per_sample" or "none": rows
                                              #   sharing one reference's calibration factor
@@ -51,7 +51,7 @@ Schema (keys other than these are errors; defaults in brackets)::
     tis_reference = "reference.csv"          # [none] theta_i_deg,tis,label points to compare
     reference_params = "uv-paper"            # [none] parameter set drawn beside the bands
     [priors.NAME]                            # NAME in brdf0, a1, a2, a3, alpha, theta_s0
-    kind = "normal"                          # [brdf_infer.priors.DEFAULT_PRIORS] see priors.py
+    kind = "normal"                          # [model.priors.DEFAULT_PRIORS] see priors.py
     loc = 0.0
     scale = 10.0
     [raytrace]                               # [absent: no ray tracing] setup of Sec. 6 [mm]

@@ -1,10 +1,11 @@
-"""The ``[errors]`` table of a scene (:class:`brdf_infer.error_model.ErrorSettings`)."""
+"""The ``[errors]`` table of a scene (:class:`brdf_infer.model.error_model.ErrorSettings`)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from brdf_infer.error_model import (
+from brdf_infer.errors import BadInputError
+from brdf_infer.model.error_model import (
     ANGLE_METHODS,
     CALIBRATIONS,
     ERROR_MODELS,
@@ -12,7 +13,6 @@ from brdf_infer.error_model import (
     ROTATION_COUPLINGS,
     ErrorSettings,
 )
-from brdf_infer.errors import BadInputError
 from brdf_infer.scene._fields import _boolean, _choice, _prefixed_number, _table
 
 _REPLACED_ERROR_KEYS = {
@@ -47,7 +47,7 @@ def _images_per_row(table: dict, path: Path, series: tuple[str, ...]) -> int | d
 
 
 def parse_errors(table: dict, path: Path, series: tuple[str, ...]) -> ErrorSettings:
-    """The ``[errors]`` table (schema: :class:`brdf_infer.error_model.ErrorSettings`) of a
+    """The ``[errors]`` table (schema: :class:`brdf_infer.model.error_model.ErrorSettings`) of a
     scene with these ``series``.
 
     Raises:

@@ -5,8 +5,8 @@ from __future__ import annotations
 import tomllib
 from pathlib import Path
 
-from brdf_infer._precision import ensure_float64
-from brdf_infer._resources import data_path
+from brdf_infer._internal.precision import ensure_float64
+from brdf_infer._internal.resources import data_path
 from brdf_infer.errors import BadInputError
 from brdf_infer.scene._parse import parse_scene
 from brdf_infer.scene._records import Scene

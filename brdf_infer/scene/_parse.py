@@ -5,8 +5,13 @@ from __future__ import annotations
 from pathlib import Path
 
 from brdf_infer.errors import BadInputError
-from brdf_infer.params import PAPER_CONSTANTS, PARAM_NAMES, PARAMETER_SETS, HemisphereConstants
-from brdf_infer.priors import DEFAULT_PRIORS, parse_prior
+from brdf_infer.model.params import (
+    PAPER_CONSTANTS,
+    PARAM_NAMES,
+    PARAMETER_SETS,
+    HemisphereConstants,
+)
+from brdf_infer.model.priors import DEFAULT_PRIORS, parse_prior
 from brdf_infer.scene._errors import parse_errors
 from brdf_infer.scene._fields import _boolean, _choice, _count, _number, _string, _table
 from brdf_infer.scene._records import (
@@ -152,7 +157,7 @@ def _parse_series(
 
 
 def _reference_params(outputs: dict, path: Path) -> str | None:
-    """``[outputs] reference_params``: a name of :data:`brdf_infer.params.PARAMETER_SETS`."""
+    """``[outputs] reference_params``: a name of :data:`brdf_infer.model.params.PARAMETER_SETS`."""
     reference_params = outputs.get("reference_params")
     if reference_params is not None and (
         not isinstance(reference_params, str) or reference_params not in PARAMETER_SETS

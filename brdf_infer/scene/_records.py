@@ -9,11 +9,11 @@ from pathlib import Path
 
 import numpy as np
 
-from brdf_infer._design_target import DESIGN_BUDGET
-from brdf_infer.error_model import ErrorSettings
 from brdf_infer.errors import BadInputError
-from brdf_infer.params import PAPER_CONSTANTS, PARAM_NAMES, HemisphereConstants
-from brdf_infer.priors import DEFAULT_PRIORS, Prior
+from brdf_infer.model.error_model import ErrorSettings
+from brdf_infer.model.params import PAPER_CONSTANTS, PARAM_NAMES, HemisphereConstants
+from brdf_infer.model.priors import DEFAULT_PRIORS, Prior
+from brdf_infer.scene.design_target import DESIGN_BUDGET
 from brdf_infer.tables.bsdf_measurements import is_bsdf_path, measurements_from_bsdf
 from brdf_infer.tables.measurements import Measurements, load_measurements
 

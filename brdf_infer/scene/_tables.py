@@ -40,8 +40,8 @@ def _compare_families(names, path: Path, field_name: str) -> tuple[str, ...]:
 
 def _parse_studies(document: dict, path: Path) -> Studies:
     """The ``[studies]`` table (and the older top-level ``compare = [...]``)."""
-    from brdf_infer.error_model import ERROR_MODELS
     from brdf_infer.instrument import INSTRUMENT_MODELS
+    from brdf_infer.model.error_model import ERROR_MODELS
 
     table = _table(document, "studies", path, set(Studies.__dataclass_fields__))
     if "compare" in document and "compare" in table:
@@ -75,7 +75,7 @@ def _parse_studies(document: dict, path: Path) -> Studies:
 
 
 def _design_target(table: dict, path: Path) -> str | None:
-    from brdf_infer._design_target import parse_target
+    from brdf_infer.scene.design_target import parse_target
 
     if "design" not in table:
         return None
@@ -150,7 +150,7 @@ def _selection(paper: dict, path: Path) -> str:
 def reference_quantity_ok(quantity: str) -> bool:
     """Whether a ``[reference]`` quantity names something a run reports: ``tis_<θi>deg``
     with 0 ≤ θi < 90, ``pi_brdf0`` or a parameter of Eq. (7)."""
-    from brdf_infer.params import PARAM_NAMES
+    from brdf_infer.model.params import PARAM_NAMES
 
     angle = tis_angle_deg(quantity)
     if angle is not None:

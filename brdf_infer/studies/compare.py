@@ -34,8 +34,8 @@ import jax.numpy as jnp
 import numpy as np
 from scipy.special import logsumexp
 
-from brdf_infer import _arviz as az
-from brdf_infer._precision import ensure_float64
+from brdf_infer._internal import arviz as az
+from brdf_infer._internal.precision import ensure_float64
 from brdf_infer.errors import BadInputError
 from brdf_infer.model import check_family_name, family
 from brdf_infer.posterior import (
@@ -48,7 +48,7 @@ from brdf_infer.posterior import (
     loo_terms,
     without_row,
 )
-from brdf_infer.run_folder import COMPARE_FILE as COMPARE_FILE  # the old name, kept
+from brdf_infer.runs.folder import COMPARE_FILE as COMPARE_FILE  # the old name, kept
 from brdf_infer.scene import Scene
 from brdf_infer.settings import CompareSettings
 from brdf_infer.tables.measurements import Measurements

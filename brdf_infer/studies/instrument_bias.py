@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from brdf_infer.params import Params, params_to_dict
+from brdf_infer.model.params import Params, params_to_dict
 from brdf_infer.scene import Scene, check_instrument
 from brdf_infer.tables.measurements import Measurements
 
@@ -59,7 +59,7 @@ def synthetic_data(
 ) -> Measurements:
     """Rows with reflectance = ``truth`` × the noise factors of the scene's generative error
     model (drawn at ``params`` with the given learned scales)."""
-    from brdf_infer.observations import build_observation_model
+    from brdf_infer.predict.observations import build_observation_model
     from brdf_infer.studies.synthetic import simulate_measurements
 
     point = check_instrument(scene, "point")

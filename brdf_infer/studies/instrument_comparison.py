@@ -16,13 +16,13 @@ from typing import Any
 
 import numpy as np
 
-from brdf_infer import _arviz as az
+from brdf_infer._internal import arviz as az
 from brdf_infer.errors import BadInputError
 from brdf_infer.instrument import INSTRUMENT_MODELS
 from brdf_infer.posterior import interval95
-from brdf_infer.run_folder import INSTRUMENT_FILE as INSTRUMENT_FILE  # the old name, kept
-from brdf_infer.run_folder import RunFolder
-from brdf_infer.run_records import PosteriorSummary
+from brdf_infer.runs.folder import INSTRUMENT_FILE as INSTRUMENT_FILE  # the old name, kept
+from brdf_infer.runs.folder import RunFolder
+from brdf_infer.runs.records import PosteriorSummary
 from brdf_infer.scene import Scene, check_instrument
 from brdf_infer.tables.measurements import Measurements
 

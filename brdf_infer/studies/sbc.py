@@ -47,7 +47,8 @@ from scipy import stats
 
 from brdf_infer.errors import BadInputError
 from brdf_infer.model import ModelFamily, check_family_name, family
-from brdf_infer.params import PARAM_NAMES
+from brdf_infer.model.params import PARAM_NAMES
+from brdf_infer.model.priors import Prior
 from brdf_infer.posterior import (
     LINEAR,
     NOISE_SITES,
@@ -58,8 +59,7 @@ from brdf_infer.posterior import (
     chain_keys,
     prior_draws,
 )
-from brdf_infer.priors import Prior
-from brdf_infer.run_folder import SBC_FILE as SBC_FILE  # the old name, kept
+from brdf_infer.runs.folder import SBC_FILE as SBC_FILE  # the old name, kept
 from brdf_infer.scene import Scene
 from brdf_infer.settings import SbcSettings, check_planted_fault_name
 from brdf_infer.tables.measurements import Measurements

@@ -1,6 +1,6 @@
 """Sensitivity of the answer to the error model's assumptions: ``brdf-infer sensitivity``.
 
-The error model (:mod:`brdf_infer.error_model`) rests on assumptions the data cannot settle
+The error model (:mod:`brdf_infer.model.error_model`) rests on assumptions the data cannot settle
 alone: which rows share a calibration, its size, what a sample-rotation error does to θs, how
 many images were averaged into a row. This study samples the scene's posterior under its own
 error model (the baseline) and under each *variant*, a set of ``[errors]`` keys changed
@@ -10,7 +10,7 @@ answer — and PSIS-LOO with its difference to the baseline, Δelpd ± se — wh
 about it (more is better; a difference is clear when it is several times its se).
 
 Every variant is sampled by the same NUTS settings from the same seed. The options that are
-data of the compiled likelihood (:data:`brdf_infer.error_model.DATA_OPTIONS`) leave the model
+data of the compiled likelihood (:data:`brdf_infer.model.error_model.DATA_OPTIONS`) leave the model
 structure as it is, so the variants of one structure share one compiled program, their data
 padded to one shape (:mod:`brdf_infer.posterior._padding`: zero calibration columns add
 nothing); another error model (``model=spread``) compiles its own.
@@ -39,17 +39,17 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from brdf_infer.error_model import CALIBRATIONS, ROTATION_COUPLINGS
 from brdf_infer.errors import BadInputError
 from brdf_infer.model import family
-from brdf_infer.run_folder import SENSITIVITY_FIGURE as SENSITIVITY_FIGURE  # the old name, kept
-from brdf_infer.run_folder import SENSITIVITY_FILE as SENSITIVITY_FILE  # the old name, kept
+from brdf_infer.model.error_model import CALIBRATIONS, ROTATION_COUPLINGS
+from brdf_infer.runs.folder import SENSITIVITY_FIGURE as SENSITIVITY_FIGURE  # the old name, kept
+from brdf_infer.runs.folder import SENSITIVITY_FILE as SENSITIVITY_FILE  # the old name, kept
 from brdf_infer.scene import TIS_ANGLE_DEG, Scene, parse_errors, tis_angles
 from brdf_infer.settings import SensitivitySettings
 from brdf_infer.tables.measurements import Measurements
 
 if TYPE_CHECKING:  # ArviZ is imported where it is used: the command line's parser stays light
-    from brdf_infer._arviz import InferenceData
+    from brdf_infer._internal.arviz import InferenceData
 
 BASELINE = "default"
 
@@ -277,7 +277,7 @@ def _summarise(
 ) -> VariantResult:
     """TIS, π·BRDF0, PSIS-LOO (``refit(pointwise, rows)``: exact terms where Pareto k > 0.7)
     and the sampler's health of one variant's draws."""
-    from brdf_infer import _arviz as az
+    from brdf_infer._internal import arviz as az
     from brdf_infer.posterior import (
         FAMILY_TIS_DRAWS,
         NOISE_SITES,

@@ -8,9 +8,9 @@ from pathlib import Path
 
 import numpy as np
 
-from brdf_infer._precision import ensure_float64
-from brdf_infer.observations import build_observation_model, predicted_log_reflectance
-from brdf_infer.params import Params
+from brdf_infer._internal.precision import ensure_float64
+from brdf_infer.model.params import Params
+from brdf_infer.predict.observations import build_observation_model, predicted_log_reflectance
 from brdf_infer.scene import Scene
 from brdf_infer.tables.measurements import Measurements
 
@@ -24,7 +24,7 @@ def synthetic_measurements(
     seed: int = 0,
 ) -> Measurements:
     """Rows of ``template`` with reflectance predicted by ``params`` along the one forward
-    path of the fits and the posterior (:func:`brdf_infer.observations.log_reflectance`:
+    path of the fits and the posterior (:func:`brdf_infer.predict.observations.log_reflectance`:
     Eqs. 6, 7, 10; Eq. 8 out of the plane; the scene's instrument kernel).
 
     Args:
@@ -68,7 +68,7 @@ def simulate_measurements(
     from numpyro import handlers
     from numpyro.infer import Predictive
 
-    from brdf_infer.coordinates import INTERNAL_NAMES, to_internal
+    from brdf_infer.model.coordinates import INTERNAL_NAMES, to_internal
     from brdf_infer.posterior import build_posterior_model
 
     model = build_posterior_model(scene, template)
@@ -176,7 +176,7 @@ class SyntheticLab:
         """Measured ln R of ``rows`` (their geometry, series, sample and σ column; the σ
         column and ``reflectance_rel`` are relative 1σ of one image)."""
         from brdf_infer.model import strumik_family
-        from brdf_infer.observations import family_log_reflectance_at
+        from brdf_infer.predict.observations import family_log_reflectance_at
 
         errors, scene = self.scene.errors, self.scene
         angles = errors.angles_on

@@ -57,7 +57,7 @@ from pathlib import Path
 import jax.numpy as jnp
 import numpy as np
 
-from brdf_infer._atomic import atomic_write_bytes
+from brdf_infer._internal.atomic import atomic_write_bytes
 from brdf_infer.errors import BadInputError
 
 _BSDF_FORMAT = "{:.6e}"  # 7 significant digits

@@ -38,7 +38,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from brdf_infer.run_records import Dropout, TableRecord
+from brdf_infer.runs.records import Dropout, TableRecord
 
 MIN_NEIGHBOURS = 3
 DROPOUT_SDS = 5.0

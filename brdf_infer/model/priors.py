@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from brdf_infer.errors import BadInputError
-from brdf_infer.params import PARAM_NAMES
+from brdf_infer.model.params import PARAM_NAMES
 
 KINDS = ("normal", "truncated_normal", "uniform", "fixed")
 _KEYS = {

@@ -12,9 +12,9 @@ import sys
 from pathlib import Path
 from typing import Any, NamedTuple
 
-from brdf_infer._resources import read_data_toml
+from brdf_infer._internal.resources import read_data_toml
 from brdf_infer.errors import BadInputError
-from brdf_infer.run_folder import read_json_file
+from brdf_infer.runs.folder import read_json_file
 
 PARAM_NAMES: tuple[str, ...] = ("brdf0", "a1", "a2", "a3", "alpha", "theta_s0")
 

@@ -13,11 +13,11 @@ from typing import NamedTuple
 import jax.numpy as jnp
 import numpy as np
 
-from brdf_infer._units import DEG
-from brdf_infer.error_model import noise_layout
+from brdf_infer._internal.units import DEG
 from brdf_infer.instrument import Kernel, build_kernel, kernel_log_reflectance
 from brdf_infer.model import ModelFamily, Physical, strumik_family
-from brdf_infer.params import HemisphereConstants, Params
+from brdf_infer.model.error_model import noise_layout
+from brdf_infer.model.params import HemisphereConstants, Params
 from brdf_infer.scene import Scene
 from brdf_infer.tables.measurements import Measurements
 

@@ -5,7 +5,7 @@ Written into the run's ``summary.json`` (``"verdict"``), printed by ``posterior`
 disagree. It lists, most serious first:
 
 1. the plausibility checks the run was forced past (``--force``,
-   :mod:`brdf_infer.plausibility`): an input or a fit that looked wrong before sampling;
+   :mod:`brdf_infer.verdict.plausibility`): an input or a fit that looked wrong before sampling;
 2. an implausible answer: a posterior median π·BRDF0 or TIS at the scene's incidence angles
    above 1;
 3. every sampler diagnostic that failed its threshold (R-hat, ESS, divergences, BFMI, emcee's
@@ -22,6 +22,9 @@ alone carries more than a third of a headline 95 % width (TIS(70°), π·BRDF0;
 its prior), a published reference value outside the 95 % interval, and, first, how many cells
 of a .BSDF table each reading rule left out (zero cells, dropouts, positive cells below the
 horizon; :mod:`brdf_infer.tables.screening`; nothing for a CSV or a table no rule touched).
+
+The package is how far to trust an answer: this verdict, and ``plausibility``, the checks of the
+inputs and the answers that it reads (and that stop a job before sampling).
 """
 
 from __future__ import annotations
@@ -32,9 +35,9 @@ from typing import Any
 
 import numpy as np
 
-from brdf_infer.plausibility import answer_checks
-from brdf_infer.run_records import Bands, PosteriorSummary
+from brdf_infer.runs.records import Bands, PosteriorSummary
 from brdf_infer.tables.screening import table_facts
+from brdf_infer.verdict.plausibility import answer_checks
 
 PARETO_K_LIMIT = 0.7
 ALL_PASS = "every diagnostic passes"

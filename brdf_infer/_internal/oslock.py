@@ -1,6 +1,6 @@
-"""The advisory lock under :mod:`brdf_infer._outlock`, on every platform.
+"""The advisory lock under :mod:`brdf_infer._internal.outlock`, on every platform.
 
-``_outlock`` keeps one lock file per results folder, holding the writer's record (JSON with
+``outlock`` keeps one lock file per results folder, holding the writer's record (JSON with
 its process id and host); this module says whether a process holds that file. Which way is
 chosen once, at import (``BACKEND``):
 

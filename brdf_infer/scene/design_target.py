@@ -16,7 +16,7 @@ import math
 from dataclasses import dataclass
 
 from brdf_infer.errors import BadInputError
-from brdf_infer.params import PARAM_NAMES
+from brdf_infer.model.params import PARAM_NAMES
 
 DESIGN_BUDGET = 3  # rows chosen together by default (the scene's [design] and --budget)
 

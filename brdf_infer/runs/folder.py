@@ -20,12 +20,12 @@ goes through :class:`RunFolder`, so the folder's layout is written down once, he
     exports.json            the exports made from the run, for the report
     report.html, figures/   the report
     variants/NAME/          a study's posterior (a run folder of its own)
-    .brdf-infer.lock        a writer at work (brdf_infer._outlock)
+    .brdf-infer.lock        a writer at work (brdf_infer._internal.outlock)
 
 A study folder of its own (``sbc --out``, ``batch --out``) uses the same writers with
 ``sbc.json`` and ``batch.json``. Readers of old run folders keep working: a study's file that
 is absent reads as None (or an empty list), never as an error. Units inside the files:
-:mod:`brdf_infer.run_records`.
+:mod:`brdf_infer.runs.records`.
 """
 
 from __future__ import annotations
@@ -35,10 +35,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from brdf_infer._atomic import atomic_write_bytes, atomic_write_json
-from brdf_infer._outlock import ADDING_LOCK_FILE, LOCK_FILE
+from brdf_infer._internal.atomic import atomic_write_bytes, atomic_write_json
+from brdf_infer._internal.outlock import ADDING_LOCK_FILE, LOCK_FILE
 from brdf_infer.errors import BadInputError
-from brdf_infer.run_records import Bands, PosteriorSummary
+from brdf_infer.runs.records import Bands, PosteriorSummary
 
 POSTERIOR_FILE = "posterior.nc"
 SUMMARY_FILE = "summary.json"
@@ -246,7 +246,7 @@ class RunFolder:
         except (BadInputError, KeyError, TypeError):
             return []
 
-    # writers: atomic (brdf_infer._atomic), the folder created where it is missing
+    # writers: atomic (brdf_infer._internal.atomic), the folder created where it is missing
 
     def write_json(self, name: str, content: Any) -> Path:
         """Write ``content`` as the folder's JSON file ``name``; returns its path.

@@ -1,5 +1,5 @@
 """The one module that imports ArviZ: every other module reaches it through this adapter,
-imported as ``from brdf_infer import _arviz as az``, so that moving to ArviZ 1.x (which
+imported as ``from brdf_infer._internal import arviz as az``, so that moving to ArviZ 1.x (which
 replaced ``InferenceData`` by xarray's ``DataTree`` and moved ``loo``, ``psens``, ``from_dict``
 and the plots into arviz-base, arviz-stats and arviz-plots) changes this file only.
 

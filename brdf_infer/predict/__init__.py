@@ -1,5 +1,10 @@
 """``brdf-infer predict``: the model's prediction of every measurement row under an
-instrument model (Eq. 6 ``point``, or the ``aperture`` / ``image`` kernels)."""
+instrument model (Eq. 6 ``point``, or the ``aperture`` / ``image`` kernels).
+
+The package is what a parameter set predicts for a scene's rows: :func:`predict_rows` here, and
+``observations``, the observation model (parameters → predicted ln R of each row), the one
+forward path of every fit, the posterior and the simulations.
+"""
 
 from __future__ import annotations
 
@@ -7,9 +12,9 @@ from typing import Any
 
 import numpy as np
 
-from brdf_infer._precision import ensure_float64
-from brdf_infer.observations import build_observation_model
-from brdf_infer.params import Params, params_to_dict
+from brdf_infer._internal.precision import ensure_float64
+from brdf_infer.model.params import Params, params_to_dict
+from brdf_infer.predict.observations import build_observation_model
 from brdf_infer.scene import Scene, check_instrument
 from brdf_infer.tables.measurements import Measurements
 

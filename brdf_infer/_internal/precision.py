@@ -5,7 +5,7 @@ log space, which float32 cannot carry. JAX's default float is float32 and ``jax_
 is process-wide, so importing ``brdf_infer`` leaves it alone. Instead:
 
 - :func:`use_float64` (``brdf_infer.use_float64()``) switches float64 on, with JAX's
-  persistent compilation cache (:mod:`brdf_infer._cache`); the command line calls it first.
+  persistent compilation cache (:mod:`brdf_infer._internal.cache`); the command line calls it first.
 - The library's entry points (``load_scene``, ``run_posterior``, ``fit_lsq``, ``paper_fit``,
   ``workflow.run``, ``compare_families``, ``predict_rows``, ``design``, ``run_batch``,
   ``simulate_measurements``) call :func:`ensure_float64`, which does the same while JAX holds
@@ -42,7 +42,7 @@ def use_float64(cache: bool = True) -> None:
         cache: also switch the compilation cache on (the command line's ``--no-cache`` not).
     """
     global _configured
-    from brdf_infer._cache import enable_compilation_cache
+    from brdf_infer._internal.cache import enable_compilation_cache
 
     with _SWITCH:
         jax.config.update("jax_enable_x64", True)

@@ -1,5 +1,5 @@
 """Output folders are checked before any work and held by one writer while it writes
-(:mod:`brdf_infer._outlock`); a folder created for a command that then writes nothing (bad
+(:mod:`brdf_infer._internal.outlock`); a folder created for a command that then writes nothing (bad
 input) is removed again."""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ import contextlib
 import os
 from pathlib import Path
 
-from brdf_infer._outlock import writing
+from brdf_infer._internal.outlock import writing
 from brdf_infer.errors import BadInputError
 
 
@@ -36,7 +36,8 @@ def claim_output_dir(
     path: str | Path, command: str, claims: contextlib.ExitStack, option: str = "out"
 ) -> Path:
     """:func:`check_output_dir`, then hold ``path`` for ``command`` until ``claims`` closes
-    (the folder is created for the lock; one writer per folder, :mod:`brdf_infer._outlock`).
+    (the folder is created for the lock; one writer per folder,
+    :mod:`brdf_infer._internal.outlock`).
 
     Raises:
         BadInputError: as :func:`check_output_dir`, or another process writes ``path``.

@@ -17,12 +17,13 @@ left out.
     result.verdict.text, result.posterior["tis_70deg"]
 
 Before anything is written or sampled, :func:`run` checks the rows and then the fits for
-plausibility (:mod:`brdf_infer.plausibility`: angles in radians, values in percent, a fit
+plausibility (:mod:`brdf_infer.verdict.plausibility`: angles in radians, values in percent, a fit
 whose π·BRDF0 or TIS exceeds 1) and stops on the first that fails, unless
 ``RunSettings(force=True)``; then the run goes on and its verdict names every failed check.
 
 The fit summaries (:func:`paper_fit_summary`, :func:`lsq_summary`) are the JSON objects of
-``brdf-infer fit --json``.
+``brdf-infer fit --json``. The job's numbered steps and the studies, one function each, are in
+``_studies`` (private to this package).
 """
 
 from __future__ import annotations
@@ -33,8 +34,16 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from brdf_infer._precision import ensure_float64
-from brdf_infer._run_studies import (
+from brdf_infer._internal.precision import ensure_float64
+from brdf_infer.runs.folder import FIT_LSQ_FILE, FIT_PAPER_FILE, RunFolder
+from brdf_infer.runs.folder import STUDIES_FILE as STUDIES_FILE  # the old name, kept
+from brdf_infer.runs.records import PosteriorSummary
+from brdf_infer.scene import Scene, Studies
+from brdf_infer.settings import LSQ_STARTS, RunSettings
+from brdf_infer.tables.measurements import Measurements
+from brdf_infer.verdict import Verdict
+from brdf_infer.verdict.plausibility import Implausible
+from brdf_infer.workflow._studies import (
     Job,
     compare_study,
     design_study,
@@ -42,14 +51,6 @@ from brdf_infer._run_studies import (
     instrument_study,
     sensitivity_study,
 )
-from brdf_infer.plausibility import Implausible
-from brdf_infer.run_folder import FIT_LSQ_FILE, FIT_PAPER_FILE, RunFolder
-from brdf_infer.run_folder import STUDIES_FILE as STUDIES_FILE  # the old name, kept
-from brdf_infer.run_records import PosteriorSummary
-from brdf_infer.scene import Scene, Studies
-from brdf_infer.settings import LSQ_STARTS, RunSettings
-from brdf_infer.tables.measurements import Measurements
-from brdf_infer.verdict import Verdict
 
 RUN_TRACE_RAYS = 2**18  # ~0.05 % MC error per configuration (NEE)
 RUN_TRACE_DRAWS = 64
@@ -67,7 +68,7 @@ def full_studies(scene: Scene) -> Studies:
     to the error-model assumptions where the scene has a TIS, and where to measure next (the
     scene's ``[studies] design`` target, else TIS(70°) where the scene has a TIS, else
     π·BRDF0)."""
-    from brdf_infer.error_model import ERROR_MODELS
+    from brdf_infer.model.error_model import ERROR_MODELS
     from brdf_infer.studies.instrument_comparison import supported_instruments
 
     return Studies(
@@ -129,12 +130,12 @@ class RunResult:
 
 
 def fit_checks(scene: Scene, measurements: Measurements, fit: dict[str, Any]) -> list[Implausible]:
-    """The plausibility checks (:mod:`brdf_infer.plausibility`) of a fit summary
+    """The plausibility checks (:mod:`brdf_infer.verdict.plausibility`) of a fit summary
     (:func:`paper_fit_summary` or :func:`lsq_summary`): π·BRDF0 and
     the TIS at the scene's incidence angles."""
-    from brdf_infer import plausibility
     from brdf_infer.model import family, run_family_name
-    from brdf_infer.params import Params
+    from brdf_infer.model.params import Params
+    from brdf_infer.verdict import plausibility
 
     member = family(run_family_name(fit), scene.model.fold, scene.model.constants)
     what = "the paper fit" if fit["method"] == "paper" else "the least-squares fit"
@@ -150,7 +151,7 @@ def paper_fit_summary(
 ) -> dict[str, Any]:
     """The paper's regression (Sec. 4.2) as the JSON of ``fit --method paper``."""
     from brdf_infer.fit.paper import paper_fit
-    from brdf_infer.params import params_to_dict
+    from brdf_infer.model.params import params_to_dict
 
     start = time.perf_counter()
     result = paper_fit(scene, measurements, selection=selection)
@@ -266,8 +267,8 @@ def _paper_fit_cost(scene: Scene, measurements: Measurements, result, paper) -> 
     """χ² of the paper fit's parameters (``paper``; None: fitted here) under the row weights
     least squares settled on."""
     from brdf_infer.fit.paper import paper_fit
-    from brdf_infer.observations import build_observation_model
-    from brdf_infer.params import Params
+    from brdf_infer.model.params import Params
+    from brdf_infer.predict.observations import build_observation_model
 
     model = build_observation_model(scene, measurements).with_sigma(result.row_sigma)
     paper_params = paper_fit(scene, measurements).params if paper is None else Params(**paper)
@@ -277,7 +278,7 @@ def _paper_fit_cost(scene: Scene, measurements: Measurements, result, paper) -> 
 def run_traces(scene: Scene, measurements: Measurements, posterior_run) -> list[dict]:
     """The main job's ray traces: the posterior (band over draws), and the scene's reference
     parameter set (e.g. ``uv-paper``) where it names one."""
-    from brdf_infer.params import PARAMETER_SETS
+    from brdf_infer.model.params import PARAMETER_SETS
     from brdf_infer.posterior import draws_params
     from brdf_infer.raytrace import raytrace_payload, raytrace_posterior_payload, thin_draws
 
@@ -320,7 +321,7 @@ def run(
             ``out``; nothing is written then.
     """
     ensure_float64()
-    from brdf_infer._outlock import writing
+    from brdf_infer._internal.outlock import writing
 
     with writing(out, "run"):  # one writer; an interrupted run leaves ``out`` incomplete
         return _run(scene, measurements, out, settings, example=example, progress=progress)
@@ -336,8 +337,8 @@ def _run(
     progress: Callable[[str], None],
 ) -> RunResult:
     """:func:`run` with ``out`` held."""
-    from brdf_infer.plausibility import measurement_checks, require_plausible
     from brdf_infer.posterior import build_model
+    from brdf_infer.verdict.plausibility import measurement_checks, require_plausible
 
     start = time.perf_counter()
     name = settings.model or scene.model.family
@@ -394,7 +395,7 @@ def _run(
 
 def _paper_fit(job: Job, implausible: list[Implausible]) -> dict[str, Any] | None:
     """Step 1: the paper fit (Eq. 7's regression; none for another family), checked."""
-    from brdf_infer.plausibility import require_plausible
+    from brdf_infer.verdict.plausibility import require_plausible
 
     scene, measurements = job.scene, job.measurements
     paper = None
@@ -435,7 +436,7 @@ def _write_fits(
 ) -> list[str]:
     """The plausibility checks passed (or forced: returned, one line each, each warned of),
     then the fits written."""
-    from brdf_infer.plausibility import require_plausible
+    from brdf_infer.verdict.plausibility import require_plausible
 
     out = job.out
     require_plausible(implausible, job.settings.force)  # before anything is written or sampled

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
-from brdf_infer.params import Params
+from brdf_infer.model.params import Params
 
 ANGLE_SCALE_DEG = 90.0
 INTERNAL_NAMES: tuple[str, ...] = ("log_brdf0", "b1", "b2", "b3", "alpha", "t_s0")

@@ -2,8 +2,8 @@
 
 A command writing a results folder holds the file ``.brdf-infer.lock`` in it from before its
 first write until its last: the file names the writer (process id, host, command, start) and
-carries an advisory lock (:mod:`brdf_infer._oslock`: ``flock``, Windows' ``msvcrt.locking``,
-or the record itself where neither exists) for as long as the writer lives.
+carries an advisory lock (:mod:`brdf_infer._internal.oslock`: ``flock``, Windows'
+``msvcrt.locking``, or the record itself where neither exists) for as long as the writer lives.
 
 - A second writer of the same folder is refused at once, while the first one runs
   (:class:`~brdf_infer.errors.BadInputError`, exit code 2 on the command line).
@@ -38,12 +38,12 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from brdf_infer import _oslock
+from brdf_infer._internal import oslock
 from brdf_infer.errors import BadInputError
 
 LOCK_FILE = ".brdf-infer.lock"
 ADDING_LOCK_FILE = ".brdf-infer.adding.lock"
-# the temporary files of brdf_infer._atomic (8 random characters)
+# the temporary files of brdf_infer._internal.atomic (8 random characters)
 _TEMPORARY = re.compile(r"^\..+\.[A-Za-z0-9_]{8}\.tmp$")
 _ATTEMPTS = 10  # a reader probing the lock holds it for microseconds: retry before refusing
 _RETRY_SECONDS = 0.02
@@ -163,8 +163,8 @@ def _is_locked(path: Path) -> bool:
     except OSError:
         return False
     try:
-        if _oslock.try_lock(fd, exclusive=False):
-            _oslock.unlock(fd)
+        if oslock.try_lock(fd, exclusive=False):
+            oslock.unlock(fd)
             return False
         return True
     except OSError:
@@ -215,7 +215,7 @@ def _open_locked(path: Path) -> tuple[int, bool] | None:
                 fd, new = os.open(path, os.O_RDWR | _CLOEXEC), False
             except FileNotFoundError:
                 continue  # its writer finished and removed it just now: again
-        if not _oslock.try_lock(fd, exclusive=True, created=new):
+        if not oslock.try_lock(fd, exclusive=True, created=new):
             os.close(fd)
             time.sleep(_RETRY_SECONDS)
             continue

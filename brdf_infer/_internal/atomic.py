@@ -20,7 +20,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from brdf_infer._outlock import note_written
+from brdf_infer._internal.outlock import note_written
 
 
 def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
@@ -60,7 +60,7 @@ def _failed_write(path: Path) -> Iterator[None]:
 
 def _create_temporary(path: Path) -> tuple[int, str]:
     """A new file ``.NAME.XXXXXXXX.tmp`` beside ``path``, open for writing, created with mode
-    ``0o666`` less the umask (8 random hexadecimal characters, as brdf_infer._outlock's
+    ``0o666`` less the umask (8 random hexadecimal characters, as brdf_infer._internal.outlock's
     clean-up of a dead writer's temporary files expects)."""
     flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0)
     while True:

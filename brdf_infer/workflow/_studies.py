@@ -42,7 +42,7 @@ def error_model_posterior(
 ) -> None:
     """Study: the posterior under another error model, into ``variants/<error model>``."""
     from brdf_infer.posterior import run_posterior
-    from brdf_infer.run_folder import RunFolder
+    from brdf_infer.runs.folder import RunFolder
 
     job.step(f"NUTS posterior with the {error_model} error model")
     run_posterior(
@@ -58,7 +58,7 @@ def error_model_posterior(
 
 def instrument_study(job: Job, instruments: list[str], options: dict[str, Any], posterior):
     """Study: the posteriors under other instrument models, side by side."""
-    from brdf_infer.run_folder import INSTRUMENT_FILE, RunFolder
+    from brdf_infer.runs.folder import INSTRUMENT_FILE, RunFolder
     from brdf_infer.studies.instrument_comparison import compare_instruments
 
     scene, out = job.scene, job.out
