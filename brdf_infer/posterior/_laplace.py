@@ -34,8 +34,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from brdf_infer import _arviz as az
-from brdf_infer._compile_clock import compile_clock
+from brdf_infer._internal import arviz as az
+from brdf_infer.posterior._compile_clock import compile_clock
 from brdf_infer.posterior._model import PosteriorModel
 from brdf_infer.posterior._nuts import same_structure
 from brdf_infer.posterior._potential import FlatPotential

@@ -13,8 +13,8 @@ sample p(θ | y₋ᵢ) and average the row's leave-one-out conditional over thos
 and its LOO-PIT likewise, mean_s P(ỹᵢ ≤ yᵢ | y₋ᵢ, θ_s). The row is left out by giving it σ =
 :data:`LEFT_OUT_SIGMA` in ln R: its information leaves the likelihood, the data keep their
 shape, and the run's compiled NUTS or Laplace program samples the refit (nothing is compiled
-again). A run refits at most :data:`MAX_REFIT_ROWS` rows: more rows above 0.7 point at the model rather
-than at single rows, and the verdict names them as before.
+again). A run refits at most :data:`MAX_REFIT_ROWS` rows: more rows above 0.7 point at the
+model rather than at single rows, and the verdict names them as before.
 """
 
 from __future__ import annotations
