@@ -102,7 +102,7 @@ class PosteriorSettings:
             importance sampling, NUTS where its diagnostics refuse it), ``emcee``, or ``auto``
             (the default: ``laplace`` from :data:`LAPLACE_MIN_ROWS` rows, ``nuts`` below).
         chains, draws: NUTS chains and draws per chain (Laplace: chains × draws proposals,
-            each chain's resampled from its own).
+            resampled into as many draws).
         warmup: NUTS warmup per chain, or emcee's burn-in in steps (None: :data:`NUTS_WARMUP`
             or :data:`EMCEE_BURN_IN`, by sampler).
         walkers, steps: emcee walkers (None: max(24, 2 × dimension)) and steps.

@@ -16,9 +16,10 @@ leapfrog step (about 60 ms at 6 × 10⁴ rows on 2 cores). This sampler instead
    smoothed importance sampling*, JMLR 25(72)) and refuses the result when the Pareto shape k̂
    exceeds :data:`PARETO_K_LIMIT` (the paper's threshold for a reliable estimate at any
    sample size ≥ 2000; :func:`laplace_draws` then says why and the caller samples with NUTS);
-5. resamples each chain's proposals by its smoothed weights (systematic resampling), so that
-   every reader of the run sees equally weighted draws as from any sampler, and the R-hat of
-   the chains compares independent importance estimates.
+5. resamples the proposals by their smoothed weights (systematic resampling), so that every
+   reader of the run sees equally weighted draws as from any sampler; the draws are dealt to
+   ``chains`` exchangeable chains, between which R-hat is not a diagnostic (it is recorded,
+   not checked: k̂ and the effective sample size below are the checks).
 
 The effective sample size of a weighted set is Kish's 1/Σw̃² (w̃ normalised); the diagnostics
 report it in place of ArviZ's ESS of the resampled chains, which would count repeated draws.
@@ -267,7 +268,7 @@ class LaplaceProgram:
 
     def sample(self, data, *, chains: int, draws: int, seed: int) -> Draws | str:
         """Draws of the posterior with ``data`` (module docstring): ``chains`` × ``draws``
-        proposals, each chain's resampled from its own; or, where the approximation is
+        proposals resampled into ``chains`` × ``draws`` draws; or, where the approximation is
         refused, why (one line, for the caller's fallback to NUTS)."""
         rng = np.random.default_rng(seed)
         started = time.perf_counter()
@@ -330,11 +331,7 @@ def laplace_draws(
 
 
 def _resampled(log_weights: np.ndarray, chains: int, draws: int, rng) -> np.ndarray:
-    """Each chain's ``draws`` indices, systematically resampled from its own proposals and
-    shuffled (so that repeated draws do not sit side by side as if autocorrelated)."""
-    chosen = []
-    for chain in range(chains):
-        own = slice(chain * draws, (chain + 1) * draws)
-        indices = chain * draws + systematic_resample(log_weights[own], draws, rng)
-        chosen.append(rng.permutation(indices))
-    return np.concatenate(chosen)
+    """``chains`` × ``draws`` indices systematically resampled from all the proposals and
+    shuffled (repeated draws do not sit side by side as if autocorrelated); the chains are
+    exchangeable slices of one weighted set, so R-hat between them says nothing."""
+    return rng.permutation(systematic_resample(log_weights, chains * draws, rng))
