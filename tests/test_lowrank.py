@@ -24,6 +24,7 @@ from brdf_infer.posterior._lowrank import (
     BlockCholesky,
     cholesky,
     leave_one_out_conditionals,
+    log_density_over_scales,
     low_rank_normal_log_density,
     solve_lower,
     solve_upper_transposed,
@@ -231,3 +232,23 @@ def test_masked_rows_leave_the_likelihood_exactly():
         jnp.asarray(keep),
     ).log_prob(jnp.asarray(value))
     np.testing.assert_allclose(float(padded), float(full), rtol=1e-12)
+
+
+def test_the_density_over_sample_scales_is_scipys_at_every_scale():
+    """:func:`log_density_over_scales` (the rows read once, a (q, q) factorisation per τ)
+    against scipy's dense normal with W's first columns multiplied by each τ."""
+    rng = np.random.default_rng(7)
+    rows, groups = 9, 3
+    factor = _grouped_factor(rng, rows, groups, 2)
+    diagonal = rng.uniform(0.05, 0.2, rows)
+    mean, value = rng.normal(size=rows), rng.normal(size=rows)
+    scales = np.array([1e-6, 0.1, 1.0, 3.0])
+    got = log_density_over_scales(
+        *(jnp.asarray(a) for a in (value, mean, factor, diagonal)), groups, jnp.asarray(scales)
+    )
+    for scale, ours in zip(scales, np.asarray(got), strict=True):
+        scaled = factor * np.where(np.arange(factor.shape[1]) < groups, scale, 1.0)
+        covariance = np.diag(diagonal) + scaled @ scaled.T
+        assert ours == pytest.approx(
+            stats.multivariate_normal(mean, covariance).logpdf(value), rel=1e-12
+        )

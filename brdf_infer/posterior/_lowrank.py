@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 
+import jax
 import jax.numpy as jnp
 
 LOG_2PI = math.log(2.0 * math.pi)
@@ -180,3 +181,39 @@ def leave_one_out_conditionals(
     precision_residual = (residual - projection.T @ (projection @ residual)) / whitened.root
     precision_diagonal = (1.0 - jnp.sum(projection**2, axis=0)) / diagonal
     return value - precision_residual / precision_diagonal, 1.0 / jnp.sqrt(precision_diagonal)
+
+
+def log_density_over_scales(
+    value: jnp.ndarray,
+    mean: jnp.ndarray,
+    factor: jnp.ndarray,
+    diagonal: jnp.ndarray,
+    scaled: int,
+    scales: jnp.ndarray,
+) -> jnp.ndarray:
+    """ln N(value; mean, D + W(τ) W(τ)ᵀ) at every τ of ``scales`` (k,), W(τ) being W with
+    its first ``scaled`` columns multiplied by τ: :func:`low_rank_normal_log_density` at k
+    scales for about the cost of one.
+
+    With A = D^(-1/2) W, r = D^(-1/2) (value − mean) and S = diag(τ on the scaled columns,
+    1 elsewhere), Woodbury gives rᵀ r − (S Aᵀ r)ᵀ C⁻¹ (S Aᵀ r) for the quadratic form and
+    ln|D| + ln|C| for the log-determinant, C = I + S Aᵀ A S: the rows enter once, through
+    Aᵀ A, Aᵀ r and rᵀ r, and each τ costs a (q, q) Cholesky factorisation.
+    """
+    from jax.scipy.linalg import solve_triangular
+
+    root = jnp.sqrt(diagonal)
+    whitened = factor / root[:, None]
+    residual = (value - mean) / root
+    gram, projected = whitened.T @ whitened, whitened.T @ residual
+    constant = value.shape[-1] * LOG_2PI + jnp.sum(jnp.log(diagonal)) + residual @ residual
+    columns = factor.shape[-1]
+
+    def one(scale):
+        s = jnp.where(jnp.arange(columns) < scaled, scale, 1.0)
+        lower = jnp.linalg.cholesky(jnp.eye(columns) + s[:, None] * gram * s[None, :])
+        solved = solve_triangular(lower, s * projected, lower=True)
+        log_determinant = 2.0 * jnp.sum(jnp.log(jnp.diagonal(lower)))
+        return -0.5 * (constant + log_determinant - solved @ solved)
+
+    return jax.vmap(one)(scales)

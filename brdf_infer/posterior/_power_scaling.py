@@ -38,7 +38,7 @@ from brdf_infer.model.coordinates import ANGLE_SCALE_DEG
 from brdf_infer.model.params import PARAM_NAMES, Params
 from brdf_infer.posterior._blocks import factor_columns, over_draw_blocks
 from brdf_infer.posterior._likelihood import disjoint_columns
-from brdf_infer.posterior._lowrank import low_rank_normal_log_density
+from brdf_infer.posterior._lowrank import log_density_over_scales, low_rank_normal_log_density
 from brdf_infer.posterior._model import (
     ENERGY_SITE,
     LINEAR,
@@ -107,6 +107,43 @@ def log_likelihood_draws(model: PosteriorModel, sites: dict[str, np.ndarray]) ->
     rows = int(np.shape(y)[-1])
     (values,) = over_draw_blocks(joint, flat, rows, factor_columns(model.data.noise))
     return values.reshape(shape)
+
+
+def sample_scale_likelihoods(
+    model: PosteriorModel, sites: dict[str, np.ndarray], scales: np.ndarray
+) -> np.ndarray | None:
+    """ln p(y | θ, τ) of every draw of ``sites`` (draws on the leading axis) at every τ of
+    ``scales`` (k,), τ the sample-to-sample scale ``sample_sd``: shape (draws, k), the rows
+    read once per draw (:func:`~._lowrank.log_density_over_scales`: τ multiplies W's sample
+    columns only). None where τ also enters D (a sample of one row) or the error model is
+    ``spread``: the caller evaluates :func:`log_likelihood_draws` at each τ instead."""
+    noise = model.data.noise
+    if model.errors.model == "spread" or np.any(np.asarray(noise.sample_alone) != 0):
+        return None
+    flat = {k: v for k, v in sites.items() if k != ENERGY_SITE}
+    flat["sample_sd"] = np.ones(len(next(iter(flat.values()))))
+    y = model.data.rows.log_reflectance
+    program = _scales_program(disjoint_columns(model.data))
+
+    def over_scales(block):
+        parts = model.draw_parts(block)
+        return (program(y, parts.mean, parts.factor, parts.diagonal, jnp.asarray(scales)),)
+
+    rows = int(np.shape(y)[-1])
+    (values,) = over_draw_blocks(over_scales, flat, rows, factor_columns(noise) + len(scales))
+    return values
+
+
+@functools.cache
+def _scales_program(scaled: int):
+    """:func:`~._lowrank.log_density_over_scales` vmapped over draws and jitted, once per
+    number of sample columns."""
+    return jax.jit(
+        jax.vmap(
+            lambda y, m, w, d, s: log_density_over_scales(y, m, w, d, scaled, s),
+            (None, 0, 0, 0, None),
+        )
+    )
 
 
 @functools.cache

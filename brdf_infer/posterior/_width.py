@@ -52,7 +52,7 @@ from brdf_infer._internal import arviz as az
 from brdf_infer.model import ModelFamily
 from brdf_infer.model.error_model import ErrorSettings
 from brdf_infer.posterior._model import PosteriorModel, build_posterior_model
-from brdf_infer.posterior._power_scaling import log_likelihood_draws
+from brdf_infer.posterior._power_scaling import log_likelihood_draws, sample_scale_likelihoods
 from brdf_infer.tables.measurements import Measurements
 
 PARETO_K_LIMIT = 0.7
@@ -178,14 +178,18 @@ def _scale_marginal(model: PosteriorModel, flat: dict[str, np.ndarray], site: st
     # p(τ) dτ = p(τ) τ d ln τ, half-normal p(τ)
     log_prior = np.log(2.0) + norm.logpdf(tau, 0.0, prior_scale) + log_tau
     log_step = np.log(0.5 * (high - low) * w)
-    terms = [
-        log_likelihood_draws(model, {**flat, site: np.full_like(draws, value)}) for value in tau
-    ]
-    inside = logsumexp(np.stack(terms) + (log_prior + log_step)[:, None], axis=0)
+    floor = np.exp(low)
+    scales = np.append(tau, floor)
+    terms = sample_scale_likelihoods(model, flat, scales) if site == "sample_sd" else None
+    if terms is None:
+        terms = np.stack(
+            [log_likelihood_draws(model, {**flat, site: np.full_like(draws, v)}) for v in scales],
+            axis=1,
+        )
+    inside = logsumexp(terms[:, :-1].T + (log_prior + log_step)[:, None], axis=0)
     # τ in (0, e^low): the likelihood there is its value at e^low to O(τ²) (τ enters the
     # covariance as τ²), times the prior's mass below, erf(e^low / (s √2))
-    floor = np.exp(low)
-    below = log_likelihood_draws(model, {**flat, site: np.full_like(draws, floor)})
+    below = terms[:, -1]
     return np.logaddexp(inside, below + np.log(erf(floor / (prior_scale * np.sqrt(2.0)))))
 
 
