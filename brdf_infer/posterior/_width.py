@@ -72,10 +72,10 @@ class Assumption:
 
 
 ASSUMPTIONS = (
-    Assumption(
+    Assumption(  # a zero scale, not calibration = "none": the run's programs serve it
         "calibration",
         "the calibration",
-        {"calibration": "none"},
+        {"calibration_rel": 0.0},
         lambda e: e.calibration_sd > 0,
     ),
     Assumption(
