@@ -61,7 +61,7 @@ def design_time(report: Path) -> list[str]:
 def cost_curve(report: Path) -> list[str]:
     from brdf_infer.bench._cost_curve import cost_rows, cost_section
 
-    return cost_section(*cost_rows(quick=False))
+    return cost_section(cost_rows(quick=False))
 
 
 SECTIONS = {

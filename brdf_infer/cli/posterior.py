@@ -1,5 +1,5 @@
-"""``brdf-infer posterior``: :func:`brdf_infer.posterior.run_posterior` (NUTS or emcee) with
-the defaults of :class:`~brdf_infer.settings.PosteriorSettings`."""
+"""``brdf-infer posterior``: :func:`brdf_infer.posterior.run_posterior` (NUTS, Laplace + PSIS
+or emcee) with the defaults of :class:`~brdf_infer.settings.PosteriorSettings`."""
 
 from __future__ import annotations
 

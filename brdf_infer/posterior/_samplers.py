@@ -37,7 +37,7 @@ class Draws:
     Attributes:
         sites: every sampled and deterministic site, shape (chain, draw, ...).
         stats: sampler statistics (``diverging``, ``energy``, ``lp``, ...), shape (chain, draw).
-        sampler: ``nuts`` or ``emcee``.
+        sampler: ``nuts``, ``laplace`` or ``emcee``.
         settings: the sampler's settings.
         seconds: wall time [s] of "sampling" (every iteration: NUTS warmup and draws, emcee
             burn-in and steps), of the emcee MAP search ("initialise"), and the JAX "compile"

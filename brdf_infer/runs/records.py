@@ -155,7 +155,7 @@ class PosteriorSummary(TypedDict):
     scene: str
     model: str  # the model family
     instrument: str
-    sampler: str  # "nuts" or "emcee"
+    sampler: str  # "nuts", "laplace" or "emcee"
     settings: dict[str, Any]  # the sampler's settings (chains, draws, seed, …)
     error_model: dict[str, Any]  # the scene's [errors], as used
     options: dict[str, Any]  # {"reparametrised": whitened coordinates used}
