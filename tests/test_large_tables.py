@@ -83,6 +83,39 @@ def test_leave_one_out_terms_by_blocks_of_draws_are_those_of_one_block(lya, monk
         np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-300)
 
 
+def test_repeated_draws_are_computed_once_and_their_terms_are_those_of_every_draw(lya):
+    """A Laplace run's resampled draws repeat: the leave-one-out terms and the joint
+    likelihood are computed on the distinct draws and spread back; the same values as draw by
+    draw (a planted fault, the inverse map shuffled, must differ)."""
+    scene, measurements = lya
+    model = build_model(scene, measurements)
+    draws = prior_draws(model, 6, seed=5)
+    repeat = np.array([0, 3, 3, 1, 0, 5, 5, 5, 2, 4, 1, 3])
+    sites = {k: v[repeat].reshape(2, 6, *v.shape[1:]) for k, v in draws.items() if k != "obs"}
+    flat = results.flatten_draws(sites)
+    distinct, inverse = blocks.distinct_draws(flat)
+    assert len(next(iter(distinct.values()))) == 6 and inverse is not None
+    calls = []
+
+    def terms(block):
+        calls.append(len(next(iter(block.values()))))
+        return (np.asarray(block["alpha"]) * 2.0,)
+
+    (doubled,) = blocks.over_draw_blocks(terms, flat, 42, 1)
+    assert calls == [6]
+    np.testing.assert_array_equal(doubled, 2.0 * flat["alpha"])
+    separate = {k: v[repeat] for k, v in draws.items() if k != "obs"}
+    one_by_one = np.stack(
+        [
+            log_likelihood_draws(model, {k: v[i : i + 1] for k, v in separate.items()})[0]
+            for i in range(repeat.size)
+        ]
+    )
+    joint = log_likelihood_draws(model, sites).reshape(-1)
+    np.testing.assert_allclose(joint, one_by_one, rtol=1e-12)
+    assert not np.allclose(joint[np.argsort(inverse)], one_by_one)
+
+
 def test_posterior_nc_keeps_every_draw_of_a_small_run_and_bounded_values_of_a_table():
     assert results.thinned_draws(1000, 42, 4).size == 1000  # the bundled run: all
     vendor = results.thinned_draws(1000, 2043, 4)

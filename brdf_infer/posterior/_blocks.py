@@ -14,6 +14,7 @@ from collections.abc import Callable
 import numpy as np
 
 CHUNK_VALUES = 2**24  # likelihood-part values of one block of draws (128 MiB of float64)
+KEY_VALUES = 4096  # largest site per draw that tells draws apart (distinct_draws)
 
 
 def draw_blocks(count: int, rows: int, columns: int) -> int:
@@ -29,6 +30,30 @@ def factor_columns(noise) -> int:
     return sum(int(np.shape(getattr(noise, name))[-1]) for name in names if hasattr(noise, name))
 
 
+def distinct_draws(
+    flat: dict[str, np.ndarray],
+) -> tuple[dict[str, np.ndarray], np.ndarray | None]:
+    """The distinct draws of ``flat`` and each draw's index among them (None, and ``flat``
+    itself, when no draw repeats). Draws are compared on every site of at most
+    :data:`KEY_VALUES` values a draw (the parameters and noise scales; a site of a value per
+    row is a function of them): a Laplace run's resampled draws repeat, as a NUTS draw
+    repeats the last where a trajectory is rejected."""
+    count = len(next(iter(flat.values())))
+    keys = [
+        np.asarray(values, np.float64).reshape(count, -1)
+        for values in flat.values()
+        if np.size(values) <= KEY_VALUES * count
+    ]
+    if count < 2 or not keys:
+        return flat, None
+    _, first, inverse = np.unique(
+        np.concatenate(keys, axis=1), axis=0, return_index=True, return_inverse=True
+    )
+    if first.size == count:
+        return flat, None
+    return {name: np.asarray(values)[first] for name, values in flat.items()}, inverse.reshape(-1)
+
+
 def over_draw_blocks(
     compute: Callable[[dict[str, np.ndarray]], tuple],
     flat: dict[str, np.ndarray],
@@ -38,8 +63,14 @@ def over_draw_blocks(
 ) -> list[np.ndarray]:
     """``compute`` of every draw of ``flat`` (sites with the draws on the leading axis), a
     block of :func:`draw_blocks` draws at a time; ``compute`` returns a tuple of arrays whose
-    leading axis is the block's draws. Returns those arrays for every draw, as ``dtype``."""
+    leading axis is the block's draws, and depends on nothing but them. A draw that repeats
+    another (:func:`distinct_draws`) is computed once. Returns those arrays for every draw, as
+    ``dtype``."""
     count = len(next(iter(flat.values())))
+    distinct, inverse = distinct_draws(flat)
+    if inverse is not None:  # repeated draws (resampled or rejected): each computed once
+        outputs = over_draw_blocks(compute, distinct, rows, columns, dtype)
+        return [output[inverse] for output in outputs]
     size = draw_blocks(count, rows, 4 + columns)
     results: list[np.ndarray] | None = None
     for start in range(0, count, size):
