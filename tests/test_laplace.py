@@ -8,6 +8,7 @@ from scipy import stats
 
 from brdf_infer.posterior import _laplace as laplace
 from brdf_infer.posterior import build_model, run_posterior
+from brdf_infer.report import write_report
 from brdf_infer.settings import LAPLACE_MIN_ROWS, PosteriorSettings, resolved_sampler
 
 
@@ -51,8 +52,9 @@ def test_auto_takes_laplace_from_its_row_count_and_is_the_default():
 
 
 @pytest.fixture(scope="module")
-def laplace_run(lya):
-    return run_posterior(*lya, sampler="laplace", progress=False, refit=False, seed=3)
+def laplace_run(lya, tmp_path_factory):
+    out = tmp_path_factory.mktemp("laplace")
+    return run_posterior(*lya, sampler="laplace", out=out, progress=False, refit=False, seed=3)
 
 
 def disagreements(summary: dict, reference: dict) -> list[str]:
@@ -143,3 +145,14 @@ def test_a_second_mode_as_low_as_the_first_is_refused(lya, monkeypatch):
     monkeypatch.setattr(program, "_search", two_modes)
     fit = program.fit(program.model.data, seed=0)
     assert fit.refusal is not None and "second mode" in fit.refusal
+
+
+def test_the_report_of_a_laplace_run_says_what_it_checked(laplace_run):
+    """The thresholds in words are Laplace's, the diagnostics give the importance record,
+    and no trace or rank plot follows chains that are slices of one weighted set."""
+    path, _ = write_report(laplace_run.out, progress=lambda message: None)
+    html = path.read_text()
+    importance = laplace_run.summary["diagnostics"]["importance"]
+    assert "Thresholds: Laplace + PSIS: the importance weights" in html
+    assert f"Pareto k {importance['pareto_k']:.2f}, effective sample size" in html
+    assert "Trace plots" not in html and "Rank plots" not in html

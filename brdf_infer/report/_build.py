@@ -147,13 +147,18 @@ def _fit_figures(add: AddFigure, run: RunFolder, idata, summary, bands, scene, r
         + ".",
         lambda: _figures.brdf_bands(bands, scene, rows),
     )
-    add(
-        "trace",
-        "Trace plots in the sampler's well-conditioned coordinates (ln BRDF0, b1–b3, α, θs0 "
-        "and the sampled noise scales).",
-        lambda: _figures.trace(idata),
-    )
-    add("rank", "Rank plots: chains that mix give flat histograms.", lambda: _figures.rank(idata))
+    if summary["sampler"] != "laplace":  # resampled importance draws: no chain to follow
+        add(
+            "trace",
+            "Trace plots in the sampler's well-conditioned coordinates (ln BRDF0, b1–b3, α, "
+            "θs0 and the sampled noise scales).",
+            lambda: _figures.trace(idata),
+        )
+        add(
+            "rank",
+            "Rank plots: chains that mix give flat histograms.",
+            lambda: _figures.rank(idata),
+        )
     add("pair", "Pair plot; divergent transitions marked.", lambda: _figures.pair(idata))
     if "energy" in idata.sample_stats:
         add("energy", "NUTS energy plot.", lambda: _figures.energy(idata))
@@ -261,17 +266,27 @@ def _shown(figures: list[Figure], *names: str) -> list[str]:
     return [_html.figure(png, caption) for name, caption, png in figures if name in names]
 
 
+def _thresholds(sampler: str) -> str:
+    """The thresholds the run's verdict applied, in words."""
+    if sampler == "laplace":
+        return (
+            f"Laplace + PSIS: the importance weights' Pareto k ≤ {PARETO_K_LIMIT} and their "
+            f"effective sample size ≥ {THRESHOLDS['ess']} (R-hat between its chains, slices "
+            f"of one weighted set, is recorded, not checked); Pareto k ≤ {PARETO_K_LIMIT} "
+            "for every row's leave-one-out term."
+        )
+    return (
+        f"R-hat ≤ {THRESHOLDS['r_hat']}, bulk and tail ESS ≥ {THRESHOLDS['ess']}, "
+        f"no divergences, BFMI ≥ {THRESHOLDS['bfmi']}, Pareto k ≤ {PARETO_K_LIMIT}, "
+        f"emcee ≥ {THRESHOLDS['tau_multiple']} autocorrelation times."
+    )
+
+
 def _answer(run: RunFolder, verdict, summary, bands, scene, rows, member, figures) -> list[str]:
     """The verdict and the answer first, with the BRDF bands and the studies left out."""
     return [
         _html.verdict_box(verdict),
-        "<p>Thresholds: "
-        + _html.escape(
-            f"R-hat ≤ {THRESHOLDS['r_hat']}, bulk and tail ESS ≥ {THRESHOLDS['ess']}, "
-            f"no divergences, BFMI ≥ {THRESHOLDS['bfmi']}, Pareto k ≤ {PARETO_K_LIMIT}, "
-            f"emcee ≥ {THRESHOLDS['tau_multiple']} autocorrelation times."
-        )
-        + "</p>",
+        "<p>Thresholds: " + _html.escape(_thresholds(summary["sampler"])) + "</p>",
         result_box(summary, bands, tis_angles(scene, rows), member),
         fold_note(bands, scene.outputs.reference_params is not None) if "tis" in bands else "",
         *_shown(figures, "brdf_bands"),
@@ -279,10 +294,38 @@ def _answer(run: RunFolder, verdict, summary, bands, scene, rows, member, figure
     ]
 
 
+def _sampler_line(summary) -> str:
+    """A Laplace run's importance weights, or why Laplace was refused (else nothing)."""
+    diagnostics = summary["diagnostics"]
+    if "laplace_refused" in diagnostics:
+        return (
+            "<p>"
+            + _html.escape(
+                f"Laplace + PSIS refused: {diagnostics['laplace_refused']}; sampled with NUTS."
+            )
+            + "</p>"
+        )
+    importance = diagnostics.get("importance")
+    if importance is None:
+        return ""
+    return (
+        "<p>"
+        + _html.escape(
+            f"Laplace + PSIS: {importance['proposals']} proposals after "
+            f"{importance['adaptations']} adaptation(s) of the Student-t proposal; the importance "
+            f"weights' Pareto k {importance['pareto_k']:.2f}, effective sample size "
+            f"{importance['ess']:.0f}; {importance['distinct_draws']} distinct draws among the "
+            "resampled. The pair plot shows the resampled draws."
+        )
+        + "</p>"
+    )
+
+
 def _diagnostics(run: RunFolder, idata, summary, loo, figures) -> list[str]:
     """The sampler's diagnostics, the fit against the data and the error model."""
     return [
         "<h2>Diagnostics</h2>",
+        _sampler_line(summary),
         *_shown(figures, "trace", "rank", "pair", "energy"),
         "<h2>Fit against the data</h2>",
         *_shown(figures, "predictive", "residual_map", "pareto_k"),
