@@ -91,6 +91,7 @@ def test_laplace_on_the_bundled_data_agrees_with_nuts(laplace_run, nuts_run):
     assert disagreements(summary, nuts_run.summary) == []
 
 
+@pytest.mark.slow  # a second Laplace run of the bundled scene (≈ 15 s)
 def test_the_proposal_without_its_weights_disagrees_with_nuts(lya, nuts_run, monkeypatch):
     """Planted fault: the resampling ignores the importance weights (the Student-t proposal's
     draws as they come); the comparison above must see it."""
@@ -103,6 +104,7 @@ def test_the_proposal_without_its_weights_disagrees_with_nuts(lya, nuts_run, mon
     assert found != []
 
 
+@pytest.mark.slow  # a NUTS run after the refusal (≈ 20 s)
 def test_a_proposal_too_narrow_is_refused_and_the_run_samples_with_nuts(lya, monkeypatch):
     """Planted fault: the Hessian 400 times too large (the proposal 20 times too narrow) and
     no adaptation; PSIS's k̂ must refuse it, and the run falls back to NUTS, saying why."""
