@@ -180,3 +180,29 @@ def test_every_option_the_docs_give_a_command_is_one_it_takes():
                 if option not in known:
                     wrong.append(f"{path.name}: brdf-infer {command} {option}")
     assert not wrong, wrong
+
+
+# The docs' quotes of the benchmark's cost curve (reports/benchmarks.md): (file, rows, posterior
+# wall [s] as the docs print them); each must be that row's "posterior wall [s]" cell
+COST_QUOTES = [
+    ("docs/scenes.md", "1986", "54.0"),
+    ("docs/scenes.md", "19637", "411.5"),
+    ("docs/scenes.md", "59585", "768.6"),
+]
+
+
+@pytest.mark.parametrize(("path", "rows", "seconds"), COST_QUOTES)
+def test_the_docs_quote_the_cost_curve_as_the_benchmark_measured_it(path, rows, seconds):
+    report = (REPO / "reports" / "benchmarks.md").read_text()
+    section = report[report.index("## Cost against the number of rows") :]
+    header = next(line for line in section.splitlines() if line.startswith("| table |"))
+    column = [cell.strip() for cell in header.strip("|").split("|")].index("posterior wall [s]")
+    row = next(
+        line for line in section.splitlines() if line.startswith("|") and f"| {rows} |" in line
+    )
+    assert [cell.strip() for cell in row.strip("|").split("|")][column] == seconds
+    quoted = re.sub(r"\s+", " ", (REPO / path).read_text())
+    assert (
+        f"{seconds} s for {rows} rows" in quoted
+        or f"{seconds} s for the full grid of {rows} rows" in quoted
+    )
