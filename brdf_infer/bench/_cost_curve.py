@@ -45,6 +45,8 @@ HEADERS = [
     "of it compiling [s]",
     "sampling [s]",
     "after sampling [s]",
+    "of it LOO [s]",
+    "of it answer records [s]",
     "report [s]",
     "peak memory [GiB]",
     "posterior.nc [MB]",
@@ -63,6 +65,8 @@ class CostRow:
     compile_s: float
     sampling_s: float
     after_sampling_s: float
+    loo_s: float  # PSIS-LOO with the exact refits of rows of Pareto k > 0.7
+    answer_s: float  # width (with its variants' refits), learned, reference
     report_s: float
     peak_gib: float
     netcdf_mb: float
@@ -78,6 +82,8 @@ class CostRow:
             f"{self.compile_s:.1f}",
             f"{self.sampling_s:.1f}",
             f"{self.after_sampling_s:.1f}",
+            f"{self.loo_s:.1f}",
+            f"{self.answer_s:.1f}",
             f"{self.report_s:.1f}",
             f"{self.peak_gib:.2f}",
             f"{self.netcdf_mb:.1f}",
@@ -164,6 +170,8 @@ def cost_row(label: str, scene: str, scratch: Path, cache: Path) -> CostRow:
         compile_s=float(seconds.get("compile", 0.0)),
         sampling_s=float(seconds["sampling"]),
         after_sampling_s=float(sum(seconds["after_sampling"].values())),
+        loo_s=float(seconds["after_sampling"]["loo"]),
+        answer_s=float(seconds["after_sampling"]["answer"]),
         report_s=report_wall,
         peak_gib=max(peak, report_peak),
         netcdf_mb=RunFolder(out).posterior_file.stat().st_size / 1e6,
