@@ -5,13 +5,16 @@ unconstrained space, and NUTS pays for its trajectories with one gradient over e
 leapfrog step (about 60 ms at 6 × 10⁴ rows on 2 cores). This sampler instead
 
 1. finds the mode of the potential U(z) = −log p(z | y) with BFGS from :data:`STARTS`
-   dispersed points, and refuses the approximation when they end at different points (a
-   second mode or an unfinished search: what R-hat would see between NUTS chains);
-2. takes the Hessian H of U at the mode by central differences of the gradient (2d
-   gradients; ``jax.hessian`` would compile for about half a minute);
+   dispersed points, and refuses the approximation when a search ends as low as the best
+   but far from it (a second mode: what R-hat would see between NUTS chains);
+2. takes the Hessian H of U at the mode by central differences of the gradient, then along
+   its eigenvectors with a step of one standard deviation (:meth:`LaplaceProgram.hessian`;
+   ``jax.hessian`` would compile for about half a minute);
 3. draws S = chains × draws proposals from a multivariate Student-t q centred at the mode
    with scale H⁻¹ and :data:`DEGREES_OF_FREEDOM` (its tails heavier than a normal target's, so
-   the importance weights have a finite variance), each U(z) evaluated in compiled blocks;
+   the importance weights have a finite variance), after adapting q to weighted trial draws
+   while their Pareto k̂ is high (:meth:`LaplaceProgram.importance_sample`), each U(z)
+   evaluated in compiled blocks;
 4. weights them by p/q, smooths the weights' tail with PSIS (Vehtari et al. 2024, *Pareto
    smoothed importance sampling*, JMLR 25(72)) and refuses the result when the Pareto shape k̂
    exceeds :data:`PARETO_K_LIMIT` (the paper's threshold for a reliable estimate at any
