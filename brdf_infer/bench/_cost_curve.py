@@ -147,14 +147,15 @@ def measured_process(argv: list[str], cache: Path) -> tuple[float, float, str]:
     return wall, usage.ru_maxrss * 1024 / 2**30, output
 
 
-def cost_row(label: str, scene: str, scratch: Path, cache: Path) -> CostRow:
+def cost_row(label: str, scene: str, scratch: Path, cache: Path, once: bool = False) -> CostRow:
     """One size: the gradient here, then ``posterior`` and ``report`` in fresh processes, each
     twice below :data:`ONE_RUN_ROWS` rows (the first fills the compilation cache; the second is
-    measured), once from there (its compile seconds are apart in the table)."""
+    measured), once from there or when ``once`` (its compile seconds are apart in the
+    table)."""
     import json
 
     rows, gradient = scene_gradient(scene)
-    for attempt in range(2 if rows < ONE_RUN_ROWS else 1):
+    for attempt in range(1 if once or rows >= ONE_RUN_ROWS else 2):
         out = scratch / f"run-{rows}-{attempt}"
         argv = ["posterior", scene, "--out", str(out), "--json"]
         wall, peak, output = measured_process(argv, cache)
@@ -194,7 +195,7 @@ def scene_gradient(scene: str, evaluations: int | None = None) -> tuple[int, flo
 
 
 def cost_rows(quick: bool, progress=print) -> list[CostRow]:
-    """The curve (module docstring); ``quick``: the two smallest sizes only."""
+    """The curve (module docstring); ``quick``: the two smallest sizes only, each run once."""
     rows = []
     with tempfile.TemporaryDirectory() as scratch_name:
         scratch = Path(scratch_name)
@@ -202,7 +203,7 @@ def cost_rows(quick: bool, progress=print) -> list[CostRow]:
         for label, radial, azimuth in SIZES[: 2 if quick else None]:
             scene = "lya" if radial is None else str(scene_file(scratch, table, radial, azimuth))
             progress(f"cost curve: {label} ...")
-            rows.append(cost_row(label, scene, scratch, scratch / "cache"))
+            rows.append(cost_row(label, scene, scratch, scratch / "cache", once=quick))
     return rows
 
 
