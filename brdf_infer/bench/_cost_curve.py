@@ -207,8 +207,14 @@ def cost_rows(quick: bool, progress=print) -> list[CostRow]:
     return rows
 
 
-def cost_section(rows: list[CostRow]) -> list[str]:
-    """The report's section of the curve."""
+def cost_section(rows: list[CostRow], quick: bool = False) -> list[str]:
+    """The report's section of the curve (``quick``: each size was run once)."""
+    runs = (
+        "each run once (the compilation cache cold; its compile time is its own column)"
+        if quick
+        else "below 10⁴ rows each run twice and the second measured (the compilation cache "
+        "filled by the first), from there once (its compile time is its own column either way)"
+    )
     return [
         "## Cost against the number of rows",
         "",
@@ -217,9 +223,8 @@ def cost_section(rows: list[CostRow]) -> list[str]:
         "scatter, thinned by `[bsdf]` for the smaller sizes (`brdf_infer.bench._cost_curve`). "
         "`posterior` at its defaults (4 × 1000 draws; `auto`: NUTS with 1000 warmup "
         "iterations on the bundled rows, Laplace + PSIS from 1000 rows) and `report`, each "
-        "in a fresh process, below 10⁴ rows each run twice and the second measured (the "
-        "compilation cache filled by the first), from there once (its compile time is its "
-        "own column either way); peak memory is the larger of the two processes' resident sets. "
+        f"in a fresh process, {runs}; peak memory is the larger of the two processes' "
+        "resident sets. "
         "Value and gradient: one evaluation of the whitened potential in a compiled loop "
         "(what a NUTS step costs per leapfrog step).",
         "",

@@ -109,7 +109,7 @@ def write_report(out: Path, quick: bool, progress=print) -> Path:
     design_lines = design_section(quick, out.with_name(out.stem + "_design.png"), progress)
     design_lines += command_section(quick, progress)
     progress("benchmark: cost against the number of rows ...")
-    cost_lines = cost_section(cost_rows(quick, progress))
+    cost_lines = cost_section(cost_rows(quick, progress), quick)
     progress("benchmark 8/12: exports ...")
     grids, abgs = grid_rows(quick), abg_rows(quick)
     progress("benchmark 9/12: model families ...")
