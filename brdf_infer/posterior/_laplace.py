@@ -46,6 +46,7 @@ from brdf_infer.posterior._potential import FlatPotential
 from brdf_infer.posterior._samplers import Draws
 
 STARTS = 4  # BFGS searches from dispersed points
+SEARCH_TOLERANCE, SEARCH_STEPS = 1e-10, 2000  # of each search
 DEGREES_OF_FREEDOM = 7.0  # of the Student-t proposal
 PARETO_K_LIMIT = 0.7  # above it the importance weights are unreliable (PSIS paper, Sec. 3)
 ADAPT_K = 0.5  # Pareto k below which the proposal is kept as it is
@@ -154,19 +155,11 @@ class LaplaceProgram:
     compilation cache keys them by shape, not by the rows' values)."""
 
     def __init__(self, model: PosteriorModel):
-        import optimistix as optx  # imported only by the runs that search a mode
-
         self.model = model
         flat = self.flat = FlatPotential(model)
-        solver = optx.BFGS(rtol=1e-10, atol=1e-10)
 
         def search(key, data):
-            x0 = flat.best_of_uniform(key, data, 4)
-            solution = optx.minimise(
-                lambda x, _: flat.potential(x, data), solver, x0, max_steps=2000, throw=False
-            )
-            converged = solution.result == optx.RESULTS.successful
-            return solution.value, flat.potential(solution.value, data), converged
+            return flat.search(key, data, SEARCH_TOLERANCE, SEARCH_STEPS)
 
         self._search = jax.jit(jax.vmap(search, in_axes=(0, None)))
         self._gradients = jax.jit(jax.vmap(jax.grad(flat.potential), in_axes=(0, None)))

@@ -66,3 +66,19 @@ class FlatPotential:
         energies = jax.vmap(lambda x: self.potential(x, data))(candidates)
         energies = jnp.where(jnp.isfinite(energies), energies, jnp.inf)
         return candidates[jnp.argmin(energies)]
+
+    def search(self, key, data: ModelData, tolerance: float, max_steps: int):
+        """BFGS (optimistix, relative and absolute ``tolerance``) on the potential from the best
+        of 4 uniform points (traceable): the end, its potential, and whether it converged."""
+        import optimistix as optx  # imported only by the runs that search a mode
+
+        start = self.best_of_uniform(key, data, 4)
+        solution = optx.minimise(
+            lambda x, _: self.potential(x, data),
+            optx.BFGS(rtol=tolerance, atol=tolerance),
+            start,
+            max_steps=max_steps,
+            throw=False,
+        )
+        converged = solution.result == optx.RESULTS.successful
+        return solution.value, self.potential(solution.value, data), converged

@@ -130,18 +130,12 @@ class _LogDensity:
 
     def maximum_a_posteriori(self, starts: int = 8) -> np.ndarray:
         """The MAP on the unconstrained space: BFGS from ``starts`` dispersed points, vmapped."""
-        import optimistix as optx  # only emcee's start needs it (≈ 0.2 s to import)
-
         keys = jax.random.split(self._init_key, starts)
-        potential, flat, data = self._potential, self.flat, self._data
-        solver = optx.BFGS(rtol=1e-9, atol=1e-9)
+        flat, data = self.flat, self._data
 
         def minimise(key):
-            x0 = flat.best_of_uniform(key, data, 4)
-            solution = optx.minimise(
-                lambda x, _: potential(x), solver, x0, max_steps=5000, throw=False
-            )
-            return solution.value, potential(solution.value)
+            value, potential, _ = flat.search(key, data, 1e-9, 5000)
+            return value, potential
 
         values, potentials = jax.jit(jax.vmap(minimise))(keys)
         potentials = jnp.where(jnp.isfinite(potentials), potentials, jnp.inf)
