@@ -46,19 +46,23 @@ def headline_angles(model: PosteriorModel, band_angles: Sequence[float]) -> list
 
 
 def _refit(draws: Draws, seed: int, tis_angles: Sequence[float]):
-    """A variant's headline draws from a NUTS run (:class:`Refitted`) of
-    :data:`REFIT_CHAINS` × (the run's warmup + :data:`REFIT_DRAWS`), at most the run's chains
-    and draws, through the run's own compiled program where it serves the variant (None: the
-    run was not NUTS; such a variant is reported unreliable)."""
+    """A variant's headline draws from a new posterior of it (:class:`Refitted`) by the run's
+    sampler: NUTS with :data:`REFIT_CHAINS` × (the run's warmup + :data:`REFIT_DRAWS`), or
+    Laplace + PSIS with as many proposals, at most the run's chains and draws, through the
+    run's own compiled program where it serves the variant. None: the run was emcee's (such
+    a variant is reported unreliable); a refit is None where Laplace refuses the variant."""
     if draws.sampler not in ("nuts", "laplace"):
         return None
     settings = draws.settings
     chains = min(REFIT_CHAINS, settings["chains"])
     count = min(REFIT_DRAWS, settings["draws"])
-    if draws.sampler == "laplace":
-        return _laplace_refit(chains, count, seed, tis_angles, draws.program)
 
-    def refit(variant: PosteriorModel) -> Refitted:
+    def sample(variant: PosteriorModel) -> tuple[Draws | str, dict[str, int | str]]:
+        if draws.sampler == "laplace":
+            sampled = laplace_draws(
+                variant, chains=chains, draws=count, seed=seed, program=draws.program
+            )
+            return sampled, {"chains": chains, "draws": count, "sampler": "laplace"}
         sampled = run_nuts(
             variant,
             chains=chains,
@@ -69,26 +73,16 @@ def _refit(draws: Draws, seed: int, tis_angles: Sequence[float]):
             progress=False,
             program=draws.program,
         )
-        physical = draws_physical(sampled.sites, variant.family)
-        flat = headline_draws(variant.family, physical, tis_angles)
-        headline = {name: values.reshape(chains, count) for name, values in flat.items()}
-        return Refitted(headline, {"chains": chains, "warmup": settings["warmup"], "draws": count})
-
-    return refit
-
-
-def _laplace_refit(chains: int, count: int, seed: int, tis_angles: Sequence[float], program):
-    """:func:`_refit` of a Laplace run: the variant by Laplace + PSIS (through the run's
-    ``program`` where it serves the variant), None where refused."""
+        return sampled, {"chains": chains, "warmup": settings["warmup"], "draws": count}
 
     def refit(variant: PosteriorModel) -> Refitted | None:
-        sampled = laplace_draws(variant, chains=chains, draws=count, seed=seed, program=program)
+        sampled, record = sample(variant)
         if isinstance(sampled, str):
             return None
         physical = draws_physical(sampled.sites, variant.family)
         flat = headline_draws(variant.family, physical, tis_angles)
         headline = {name: values.reshape(chains, count) for name, values in flat.items()}
-        return Refitted(headline, {"chains": chains, "draws": count, "sampler": "laplace"})
+        return Refitted(headline, record)
 
     return refit
 
