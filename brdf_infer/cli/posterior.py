@@ -52,6 +52,8 @@ def add_parser(commands) -> argparse.ArgumentParser:
         parser,
         defaults,
         helps={
+            "draws": "draws per chain (NUTS; Laplace: its chains x draws proposals are resampled "
+            "into as many draws)",
             "warmup": f"NUTS warmup per chain ({NUTS_WARMUP}) or emcee burn-in steps "
             f"({EMCEE_BURN_IN})",
             "target_accept": "NUTS target acceptance probability (raise towards 0.95 if a run "
