@@ -14,7 +14,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from brdf_infer.posterior._bands import draws_physical
-from brdf_infer.posterior._laplace import laplace_draws
+from brdf_infer.posterior._laplace import importance_refit, laplace_draws
 from brdf_infer.posterior._learned import learned_record
 from brdf_infer.posterior._model import PosteriorModel
 from brdf_infer.posterior._power_scaling import log_likelihood_draws
@@ -34,6 +34,9 @@ PRIOR_DRAWS = 4000  # the prior predictive's 2.5 % quantile from ~100 draws beyo
 # for the 95 % endpoints on lya, put the MC standard error of a width ratio near 0.03
 REFIT_CHAINS = 2
 REFIT_DRAWS = 500
+# an importance refit's proposals: a variant's posterior narrower than the run's leaves a
+# quarter of them effective (Kish's ESS 260 of 1000 without the calibration on lya)
+PROPOSALS_PER_DRAW = 4
 
 
 def headline_angles(model: PosteriorModel, band_angles: Sequence[float]) -> list[float]:
@@ -46,23 +49,38 @@ def headline_angles(model: PosteriorModel, band_angles: Sequence[float]) -> list
 
 
 def _refit(draws: Draws, seed: int, tis_angles: Sequence[float]):
-    """A variant's headline draws from a new posterior of it (:class:`Refitted`) by the run's
-    sampler: NUTS with :data:`REFIT_CHAINS` × (the run's warmup + :data:`REFIT_DRAWS`), or
-    Laplace + PSIS with as many proposals, at most the run's chains and draws, through the
-    run's own compiled program where it serves the variant. None: the run was emcee's (such
-    a variant is reported unreliable); a refit is None where Laplace refuses the variant."""
+    """A variant's headline draws from a new posterior of it (:class:`Refitted`):
+    importance sampling from the run's draws (:func:`importance_refit`, Pareto k̂ checked),
+    :data:`PROPOSALS_PER_DRAW` proposals a draw resampled into :data:`REFIT_CHAINS` ×
+    :data:`REFIT_DRAWS` draws (at most the run's chains and draws);
+    where that is refused, the run's sampler: NUTS with as many chains and draws after
+    the run's warmup, or Laplace + PSIS, through the run's own compiled program where it
+    serves the variant. None: the run was emcee's (such a variant is reported unreliable);
+    a refit is None where every way is refused."""
     if draws.sampler not in ("nuts", "laplace"):
         return None
     settings = draws.settings
     chains = min(REFIT_CHAINS, settings["chains"])
     count = min(REFIT_DRAWS, settings["draws"])
+    shape = {"chains": chains, "draws": count}
 
-    def sample(variant: PosteriorModel) -> tuple[Draws | str, dict[str, int | str]]:
+    def sample(variant: PosteriorModel) -> tuple[Draws | str, dict[str, int | str | float]]:
+        sampled = importance_refit(
+            draws,
+            variant,
+            variant.data,
+            chains=chains,
+            count=count,
+            seed=seed,
+            proposals=PROPOSALS_PER_DRAW * chains * count,
+        )
+        if not isinstance(sampled, str):
+            return sampled, {**shape, "sampler": "importance", **_importance(sampled)}
         if draws.sampler == "laplace":
             sampled = laplace_draws(
                 variant, chains=chains, draws=count, seed=seed, program=draws.program
             )
-            return sampled, {"chains": chains, "draws": count, "sampler": "laplace"}
+            return sampled, {**shape, "sampler": "laplace"}
         sampled = run_nuts(
             variant,
             chains=chains,
@@ -73,7 +91,7 @@ def _refit(draws: Draws, seed: int, tis_angles: Sequence[float]):
             progress=False,
             program=draws.program,
         )
-        return sampled, {"chains": chains, "warmup": settings["warmup"], "draws": count}
+        return sampled, {**shape, "warmup": settings["warmup"], "sampler": "nuts"}
 
     def refit(variant: PosteriorModel) -> Refitted | None:
         sampled, record = sample(variant)
@@ -85,6 +103,11 @@ def _refit(draws: Draws, seed: int, tis_angles: Sequence[float]):
         return Refitted(headline, record)
 
     return refit
+
+
+def _importance(sampled: Draws) -> dict[str, float]:
+    """An importance refit's Pareto k̂ and Kish effective sample size."""
+    return {"pareto_k": sampled.extra["pareto_k"], "ess": sampled.extra["ess"]}
 
 
 def answer_records(

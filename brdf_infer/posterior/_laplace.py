@@ -13,12 +13,12 @@ leapfrog step (about 60 ms at 6 × 10⁴ rows on 2 cores). This sampler instead
 3. draws S = chains × draws proposals from a multivariate Student-t q centred at the mode
    with scale H⁻¹ and :data:`DEGREES_OF_FREEDOM` (its tails heavier than a normal target's, so
    the importance weights have a finite variance), after adapting q to weighted trial draws
-   while their Pareto k̂ is high (:meth:`LaplaceProgram.importance_sample`), each U(z)
+   while their Pareto k̂ is high (:meth:`LaplaceProgram.adapted_sample`), each U(z)
    evaluated in compiled blocks;
 4. weights them by p/q, smooths the weights' tail with PSIS (Vehtari et al. 2024, *Pareto
    smoothed importance sampling*, JMLR 25(72)) and refuses the result when the Pareto shape k̂
-   exceeds :data:`PARETO_K_LIMIT` (the paper's threshold for a reliable estimate at any
-   sample size ≥ 2000; :func:`laplace_draws` then says why and the caller samples with NUTS);
+   exceeds :func:`pareto_k_limit` (the paper's threshold for a reliable estimate, 0.7 from
+   about 2200 draws; :func:`laplace_draws` then says why and the caller samples with NUTS);
 5. resamples the proposals by their smoothed weights (systematic resampling), so that every
    reader of the run sees equally weighted draws as from any sampler; the draws are dealt to
    ``chains`` exchangeable chains, between which R-hat is not a diagnostic (it is recorded,
@@ -49,7 +49,8 @@ STARTS = 4  # BFGS searches from dispersed points
 SEARCH_TOLERANCE, SEARCH_STEPS = 1e-10, 2000  # of each search
 DEGREES_OF_FREEDOM = 7.0  # of the Student-t proposal
 PARETO_K_LIMIT = 0.7  # above it the importance weights are unreliable (PSIS paper, Sec. 3)
-ADAPT_K = 0.5  # Pareto k below which the proposal is kept as it is
+ADAPT_K = 0.5  # Pareto k below which the proposal is kept as it is ...
+ADAPT_ESS = 0.25  # ... if Kish's ESS is at least this fraction of the trial proposals
 ADAPT_ROUNDS = 3  # adaptations of the proposal at most
 ADAPT_DRAWS = 1000  # trial proposals of one adaptation
 BLOCK_CELLS = 2**22  # rows × proposals of one compiled evaluation of U (memory)
@@ -246,43 +247,70 @@ class LaplaceProgram:
         smoothed, pareto_k = az.psislw(-potentials - proposal_density)
         return ImportanceSample(points, potentials, np.asarray(smoothed), float(pareto_k), 0)
 
-    def importance_sample(self, data, fit: LaplaceFit, count: int, rng) -> ImportanceSample:
-        """``count`` proposals from the Student-t at the mode with scale H⁻¹, weighted; while
-        their Pareto k exceeds :data:`ADAPT_K` (at most :data:`ADAPT_ROUNDS` times) the
-        proposal first takes the weighted mean and covariance of :data:`ADAPT_DRAWS` trial
-        proposals (adaptive importance sampling: the curvature at the mode can misjudge the
-        width where the potential has kinks or a long tail)."""
-        proposal = Proposal(fit.mode, np.linalg.inv(fit.hessian))
+    def adapted_sample(self, data, proposal: Proposal, count: int, rng) -> ImportanceSample:
+        """``count`` proposals from ``proposal``, weighted; while their Pareto k exceeds
+        :data:`ADAPT_K` or Kish's ESS is below :data:`ADAPT_ESS` of them (at most
+        :data:`ADAPT_ROUNDS` times) the proposal first takes the weighted mean and covariance
+        of :data:`ADAPT_DRAWS` trial proposals (adaptive importance sampling: the curvature at
+        the mode can misjudge the width where the potential has kinks or a long tail, and a
+        variant's posterior can be narrower than the run's it starts from)."""
         rounds = 0
         for rounds in range(ADAPT_ROUNDS + 1):
             trial = self.weighted(data, proposal, min(count, ADAPT_DRAWS), rng)
-            if trial.pareto_k <= ADAPT_K or rounds == ADAPT_ROUNDS:
+            efficient = kish_ess(trial.log_weights) >= ADAPT_ESS * len(trial.points)
+            if (trial.pareto_k <= ADAPT_K and efficient) or rounds == ADAPT_ROUNDS:
                 break
             proposal = Proposal.weighted(trial.points, trial.log_weights)
         final = trial if count <= ADAPT_DRAWS else self.weighted(data, proposal, count, rng)
         return dataclasses.replace(final, rounds=rounds)
 
-    def sample(self, data, *, chains: int, draws: int, seed: int) -> Draws | str:
-        """Draws of the posterior with ``data`` (module docstring): ``chains`` × ``draws``
-        proposals resampled into ``chains`` × ``draws`` draws; or, where the approximation is
-        refused, why (one line, for the caller's fallback to NUTS)."""
+    def sample(
+        self,
+        data,
+        *,
+        chains: int,
+        draws: int,
+        seed: int,
+        start: Proposal | None = None,
+        proposals: int | None = None,
+    ) -> Draws | str:
+        """Draws of the posterior with ``data`` (module docstring): ``proposals`` (default
+        ``chains`` × ``draws``) proposals resampled into ``chains`` × ``draws`` draws; or,
+        where the approximation is refused, why (one line, for the caller's fallback).
+        ``start``: the first proposal (:func:`importance_refit`) in place of the Student-t at
+        the mode with scale H⁻¹, whose searches are then skipped."""
         rng = np.random.default_rng(seed)
         started = time.perf_counter()
+        fit, count = None, proposals or chains * draws
         with compile_clock() as compiled:
-            fit = self.fit(data, seed)
-            if fit.refusal is not None:
-                return fit.refusal
-            sample = self.importance_sample(data, fit, chains * draws, rng)
-            if not sample.pareto_k <= PARETO_K_LIMIT:
+            if start is None:
+                fit = self.fit(data, seed)
+                if fit.refusal is not None:
+                    return fit.refusal
+                start = Proposal(fit.mode, np.linalg.inv(fit.hessian))
+            sample = self.adapted_sample(data, start, count, rng)
+            if not sample.pareto_k <= pareto_k_limit(count):
                 return (
-                    f"the importance weights of the Laplace approximation have Pareto k "
-                    f"{sample.pareto_k:.2f} > {PARETO_K_LIMIT} after {sample.rounds} adaptations"
+                    f"the importance weights have Pareto k {sample.pareto_k:.2f} > "
+                    f"{pareto_k_limit(count):.2f} after {sample.rounds} adaptations"
                 )
             chosen = _resampled(sample.log_weights, chains, draws, rng)
             unique, inverse = np.unique(chosen, return_inverse=True)
             sites = self.constrained(data, sample.points[unique])
         seconds = {"compile": compiled[0]}
         seconds["sampling"] = time.perf_counter() - started - compiled[0]
+        extra = {
+            "pareto_k": sample.pareto_k,
+            "adaptations": sample.rounds,
+            "ess": kish_ess(sample.log_weights),
+            "proposals": int(count),
+            "distinct_draws": int(unique.size),
+        }
+        if fit is not None:
+            extra["mode_searches"] = {
+                "potentials": (fit.potentials - fit.potentials.min()).tolist(),
+                "distances": fit.distances.tolist(),
+            }
         return Draws(
             sites={
                 name: values[inverse].reshape(chains, draws, *values.shape[1:])
@@ -292,19 +320,52 @@ class LaplaceProgram:
             sampler="laplace",
             settings={"chains": chains, "draws": draws, "seed": seed},
             seconds=seconds,
-            extra={
-                "pareto_k": sample.pareto_k,
-                "adaptations": sample.rounds,
-                "ess": kish_ess(sample.log_weights),
-                "proposals": int(chains * draws),
-                "distinct_draws": int(unique.size),
-                "mode_searches": {
-                    "potentials": (fit.potentials - fit.potentials.min()).tolist(),
-                    "distances": fit.distances.tolist(),
-                },
-            },
+            extra=extra,
             program=self,
+            unconstrained=sample.points[chosen].reshape(chains, draws, -1),
         )
+
+
+def pareto_k_limit(samples: int) -> float:
+    """The largest Pareto k̂ of a reliable importance-sampling estimate from ``samples``
+    draws: min(1 − 1/log₁₀ S, :data:`PARETO_K_LIMIT`) (the PSIS paper, Sec. 3: 0.67 at
+    S = 1000, 0.7 from S ≈ 2200)."""
+    return min(1.0 - 1.0 / np.log10(samples), PARETO_K_LIMIT)
+
+
+def importance_refit(
+    draws: Draws,
+    model: PosteriorModel,
+    data,
+    *,
+    chains: int,
+    count: int,
+    seed: int,
+    proposals: int | None = None,
+) -> Draws | str:
+    """Draws of a variant of a run's posterior — ``model`` (the run's structure) with
+    ``data`` (a row left out, an error scale set to zero) — by importance sampling from a
+    Student-t with the mean and covariance of the run's draws, adapted and checked by PSIS
+    as a Laplace run's own proposals (:meth:`LaplaceProgram.sample` with ``start``;
+    ``proposals`` of them, default ``chains`` × ``count``, resampled into as many draws): the
+    variant's posterior lies within a few of the run's standard deviations of it, so the
+    mode searches are not needed, and k̂ above :func:`pareto_k_limit` says where that
+    fails (then the caller samples the variant anew). One line saying why not where the
+    run kept no unconstrained draws or the variant's space is not the run's."""
+    if draws.unconstrained is None:
+        return "the run kept no unconstrained draws"
+    points = draws.unconstrained.reshape(-1, draws.unconstrained.shape[-1])
+    program = draws.program if isinstance(draws.program, LaplaceProgram) else draws.reweighter
+    if program is None or not program.serves(model):
+        program = LaplaceProgram(model)
+        if program.flat.dimension != points.shape[1]:
+            return "the variant's unconstrained space is not the run's"
+        if draws.sampler == "nuts":
+            draws.reweighter = program  # the next variant of the same structure reuses it
+    start = Proposal.weighted(points, np.zeros(len(points)))
+    return program.sample(
+        data, chains=chains, draws=count, seed=seed, start=start, proposals=proposals
+    )
 
 
 def laplace_draws(

@@ -57,11 +57,14 @@ class NutsOutput:
         stats: ``diverging``, ``potential_energy``, ``energy``, ``accept_prob``, ``num_steps``,
             shape (data sets, chains, draws).
         seconds: ``sampling`` (iterations, warmup included) and ``compile`` [s].
+        unconstrained: the draws on the flat unconstrained space, (chains, draws, dimension)
+            (one data set's run only; None for a batch).
     """
 
     sites: dict[str, np.ndarray]
     stats: dict[str, np.ndarray]
     seconds: dict[str, float]
+    unconstrained: np.ndarray | None = None
 
 
 class NutsProgram:
@@ -184,6 +187,7 @@ class NutsProgram:
             sites=self._constrained(flat_z, data),
             stats=dict(zip(_STATISTICS, statistics, strict=True)),
             seconds={},
+            unconstrained=flat_z,
         )
 
     def _constrained(self, flat_z: np.ndarray, data: ModelData) -> dict[str, np.ndarray]:

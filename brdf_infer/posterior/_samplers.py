@@ -45,6 +45,11 @@ class Draws:
         extra: sampler-specific results (emcee: autocorrelation times, acceptance).
         program: the NUTS or Laplace program that drew them (None for emcee): a variant of the
             model that differs in data only samples through it, its programs already compiled.
+        unconstrained: the draws on the flat unconstrained space, (chain, draw, dimension)
+            (NUTS and Laplace runs), from which a variant's refit starts
+            (:func:`brdf_infer.posterior._laplace.importance_refit`).
+        reweighter: the Laplace program that reweights a NUTS run's draws for its variants
+            (made on first use).
     """
 
     sites: dict[str, np.ndarray]
@@ -54,6 +59,8 @@ class Draws:
     seconds: dict[str, float]
     extra: dict = field(default_factory=dict)
     program: Any = field(default=None, repr=False, compare=False)  # NutsProgram, LaplaceProgram
+    unconstrained: np.ndarray | None = field(default=None, repr=False, compare=False)
+    reweighter: Any = field(default=None, repr=False, compare=False)  # LaplaceProgram
 
 
 def _progress_enabled(progress: bool | None) -> bool:
@@ -89,6 +96,7 @@ def run_nuts(
     }
     result = nuts_draws(output.sites, output.stats, settings, output.seconds)
     result.program = program
+    result.unconstrained = output.unconstrained
     return result
 
 
