@@ -34,8 +34,9 @@ PRIOR_DRAWS = 4000  # the prior predictive's 2.5 % quantile from ~100 draws beyo
 # for the 95 % endpoints on lya, put the MC standard error of a width ratio near 0.03
 REFIT_CHAINS = 2
 REFIT_DRAWS = 500
-# an importance refit's proposals: a variant's posterior narrower than the run's leaves a
-# quarter of them effective (Kish's ESS 260 of 1000 without the calibration on lya)
+# an importance refit's proposals at most, a draw: as many as make Kish's ESS the draws; a
+# variant's posterior narrower than the run's leaves a quarter of them effective (ESS 260 of
+# 1000 without the calibration on lya), a large table's about half
 PROPOSALS_PER_DRAW = 4
 
 
@@ -51,8 +52,9 @@ def headline_angles(model: PosteriorModel, band_angles: Sequence[float]) -> list
 def _refit(draws: Draws, seed: int, tis_angles: Sequence[float]):
     """A variant's headline draws from a new posterior of it (:class:`Refitted`):
     importance sampling from the run's draws (:func:`importance_refit`, Pareto k̂ checked),
-    :data:`PROPOSALS_PER_DRAW` proposals a draw resampled into :data:`REFIT_CHAINS` ×
-    :data:`REFIT_DRAWS` draws (at most the run's chains and draws);
+    as many proposals as make Kish's ESS the draws, at most :data:`PROPOSALS_PER_DRAW` a
+    draw, resampled into :data:`REFIT_CHAINS` × :data:`REFIT_DRAWS` draws (at most the
+    run's chains and draws);
     where that is refused, the run's sampler: NUTS with as many chains and draws after
     the run's warmup, or Laplace + PSIS, through the run's own compiled program where it
     serves the variant. None: the run was emcee's (such a variant is reported unreliable);
@@ -73,6 +75,7 @@ def _refit(draws: Draws, seed: int, tis_angles: Sequence[float]):
             count=count,
             seed=seed,
             proposals=PROPOSALS_PER_DRAW * chains * count,
+            target_ess=chains * count,
         )
         if not isinstance(sampled, str):
             return sampled, {**shape, "sampler": "importance", **_importance(sampled)}

@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import jax
@@ -61,6 +62,8 @@ SECANT_PASSES = 2  # of the Hessian at one standard deviation (hessian)
 # search that stopped on the slow slope of a noise scale's lower tail) are not
 RIVAL_POTENTIAL = 1.0
 RIVAL_DISTANCE = 5.0
+NEWTON_STEPS = 6  # towards a variant's mode from the run's mean (newton_proposal)
+NEWTON_DECREMENT = 1e-4  # gᵀ H⁻¹ g below which the mode is reached (U within 5e-5)
 
 
 @dataclass(frozen=True)
@@ -121,6 +124,10 @@ def _student_t_log_density(points, centre, lower) -> np.ndarray:
     constant = gammaln((nu + dimension) / 2) - gammaln(nu / 2)
     constant -= 0.5 * dimension * np.log(nu * np.pi) + np.sum(np.log(np.diag(lower)))
     return constant - 0.5 * (nu + dimension) * np.log1p(squared / nu)
+
+
+def _positive_definite(matrix: np.ndarray) -> bool:
+    return bool(np.all(np.isfinite(matrix)) and np.all(np.linalg.eigvalsh(matrix) > 0))
 
 
 def kish_ess(log_weights: np.ndarray) -> float:
@@ -192,6 +199,36 @@ class LaplaceProgram:
             steps = 1.0 / np.sqrt(values)
         return matrix
 
+    def newton_proposal(self, data, start: Proposal) -> Proposal | None:
+        """The Student-t at the mode of U reached by Newton steps from ``start``'s centre,
+        with scale H⁻¹ there (:meth:`hessian` at each point): a variant's posterior that lies
+        away from the run's draws (:func:`importance_refit`) without the mode searches. Each
+        step is the best of it and its halvings, evaluated in one compiled block (where H is
+        not positive definite, ``start``'s inverse scale takes its place); at most
+        :data:`NEWTON_STEPS`, until the Newton decrement gᵀ H⁻¹ g < :data:`NEWTON_DECREMENT`.
+        None where the Hessian at the end is not positive definite."""
+        point = start.centre
+        potential = self.potentials(data, point[None])[0]
+        halvings = 0.5 ** np.arange(self.block)
+        fallback = np.linalg.inv(start.scale)  # where U is not convex: the start's metric
+        for _ in range(NEWTON_STEPS):
+            matrix = self.hessian(data, point)
+            if not _positive_definite(matrix):
+                matrix = fallback
+            batch = jnp.asarray(np.repeat(point[None], 2 * point.size, axis=0))
+            gradient = np.asarray(self._gradients(batch, data))[0]
+            step = np.linalg.solve(matrix, gradient)
+            candidates = point - halvings[:, None] * step
+            values = self.potentials(data, candidates)
+            best = int(np.argmin(values))
+            if values[best] >= potential:
+                break
+            point, potential = candidates[best], values[best]
+            if gradient @ step < NEWTON_DECREMENT:
+                break
+        matrix = self.hessian(data, point)
+        return Proposal(point, np.linalg.inv(matrix)) if _positive_definite(matrix) else None
+
     def fit(self, data, seed: int) -> LaplaceFit:
         """The mode and Hessian of U (module docstring, steps 1–2), or why not to use them."""
         keys = jax.random.split(jax.random.PRNGKey(seed + 2), STARTS)
@@ -247,21 +284,49 @@ class LaplaceProgram:
         smoothed, pareto_k = az.psislw(-potentials - proposal_density)
         return ImportanceSample(points, potentials, np.asarray(smoothed), float(pareto_k), 0)
 
-    def adapted_sample(self, data, proposal: Proposal, count: int, rng) -> ImportanceSample:
+    def adapted_sample(
+        self,
+        data,
+        proposal: Proposal,
+        count: int,
+        rng,
+        target_ess: float | None = None,
+        rescue: Callable[[], Proposal | None] | None = None,
+    ) -> ImportanceSample:
         """``count`` proposals from ``proposal``, weighted; while their Pareto k exceeds
         :data:`ADAPT_K` or Kish's ESS is below :data:`ADAPT_ESS` of them (at most
         :data:`ADAPT_ROUNDS` times) the proposal first takes the weighted mean and covariance
         of :data:`ADAPT_DRAWS` trial proposals (adaptive importance sampling: the curvature at
         the mode can misjudge the width where the potential has kinks or a long tail, and a
-        variant's posterior can be narrower than the run's it starts from)."""
-        rounds = 0
+        variant's posterior can be narrower than the run's it starts from). The best trial's
+        q (the lowest k̂ where above :data:`ADAPT_K`, else the highest ESS: a noisy
+        adaptation can be worse than its start) draws the final proposals afresh (the trial
+        that stopped the adaptation is not among them: keeping it would favour weights that
+        looked good). ``target_ess``: only as
+        many proposals (at most ``count``) as the last trial's ESS per proposal says reach
+        it. ``rescue``: where the first trial's k̂ exceeds :data:`PARETO_K_LIMIT` (its
+        weighted moments then rest on a few proposals), the proposal it gives instead
+        (:meth:`newton_proposal`)."""
+        rounds, best = 0, None
         for rounds in range(ADAPT_ROUNDS + 1):
             trial = self.weighted(data, proposal, min(count, ADAPT_DRAWS), rng)
-            efficient = kish_ess(trial.log_weights) >= ADAPT_ESS * len(trial.points)
-            if (trial.pareto_k <= ADAPT_K and efficient) or rounds == ADAPT_ROUNDS:
+            ess = kish_ess(trial.log_weights)
+            score = (max(trial.pareto_k, ADAPT_K), -ess)  # k̂ first, then the ESS
+            if best is None or score < best[0]:
+                best = (score, trial, proposal)
+            if (trial.pareto_k <= ADAPT_K and ess >= ADAPT_ESS * len(trial.points)) or (
+                rounds == ADAPT_ROUNDS
+            ):
                 break
-            proposal = Proposal.weighted(trial.points, trial.log_weights)
-        final = trial if count <= ADAPT_DRAWS else self.weighted(data, proposal, count, rng)
+            far = rounds == 0 and rescue is not None and trial.pareto_k > PARETO_K_LIMIT
+            rescued = rescue() if far else None
+            proposal = rescued or Proposal.weighted(trial.points, trial.log_weights)
+        _, trial, proposal = best
+        drawn = len(trial.points)
+        if target_ess is not None:
+            needed = np.ceil(target_ess * drawn / kish_ess(trial.log_weights))
+            count = int(np.clip(needed, drawn, count))
+        final = trial if count <= drawn else self.weighted(data, proposal, count, rng)
         return dataclasses.replace(final, rounds=rounds)
 
     def sample(
@@ -273,12 +338,16 @@ class LaplaceProgram:
         seed: int,
         start: Proposal | None = None,
         proposals: int | None = None,
+        target_ess: float | None = None,
+        rescue: Callable[[], Proposal | None] | None = None,
     ) -> Draws | str:
         """Draws of the posterior with ``data`` (module docstring): ``proposals`` (default
-        ``chains`` × ``draws``) proposals resampled into ``chains`` × ``draws`` draws; or,
+        ``chains`` × ``draws``; with ``target_ess`` at most as many,
+        :meth:`adapted_sample`) proposals resampled into ``chains`` × ``draws`` draws; or,
         where the approximation is refused, why (one line, for the caller's fallback).
         ``start``: the first proposal (:func:`importance_refit`) in place of the Student-t at
-        the mode with scale H⁻¹, whose searches are then skipped."""
+        the mode with scale H⁻¹, whose searches are then skipped; ``rescue``: as in
+        :meth:`adapted_sample`."""
         rng = np.random.default_rng(seed)
         started = time.perf_counter()
         fit, count = None, proposals or chains * draws
@@ -288,7 +357,8 @@ class LaplaceProgram:
                 if fit.refusal is not None:
                     return fit.refusal
                 start = Proposal(fit.mode, np.linalg.inv(fit.hessian))
-            sample = self.adapted_sample(data, start, count, rng)
+            sample = self.adapted_sample(data, start, count, rng, target_ess, rescue)
+            count = len(sample.points)
             if not sample.pareto_k <= pareto_k_limit(count):
                 return (
                     f"the importance weights have Pareto k {sample.pareto_k:.2f} > "
@@ -342,16 +412,20 @@ def importance_refit(
     count: int,
     seed: int,
     proposals: int | None = None,
+    target_ess: float | None = None,
 ) -> Draws | str:
     """Draws of a variant of a run's posterior — ``model`` (the run's structure) with
     ``data`` (a row left out, an error scale set to zero) — by importance sampling from a
     Student-t with the mean and covariance of the run's draws, adapted and checked by PSIS
     as a Laplace run's own proposals (:meth:`LaplaceProgram.sample` with ``start``;
-    ``proposals`` of them, default ``chains`` × ``count``, resampled into as many draws): the
-    variant's posterior lies within a few of the run's standard deviations of it, so the
-    mode searches are not needed, and k̂ above :func:`pareto_k_limit` says where that
+    ``proposals`` of them at most, default ``chains`` × ``count``, fewer where
+    ``target_ess`` is reached sooner, resampled into ``chains`` × ``count`` draws): the
+    variant's posterior mostly lies within a few of the run's standard deviations of it, so
+    the mode searches are not needed, and k̂ above :func:`pareto_k_limit` says where that
     fails (then the caller samples the variant anew). One line saying why not where the
-    run kept no unconstrained draws or the variant's space is not the run's."""
+    run kept no unconstrained draws or the variant's space is not the run's. Where the
+    first trial's k̂ says the variant lies away from the run's draws, the proposal moves to
+    its mode by Newton steps from their mean (:meth:`LaplaceProgram.newton_proposal`)."""
     if draws.unconstrained is None:
         return "the run kept no unconstrained draws"
     points = draws.unconstrained.reshape(-1, draws.unconstrained.shape[-1])
@@ -364,7 +438,14 @@ def importance_refit(
             draws.reweighter = program  # the next variant of the same structure reuses it
     start = Proposal.weighted(points, np.zeros(len(points)))
     return program.sample(
-        data, chains=chains, draws=count, seed=seed, start=start, proposals=proposals
+        data,
+        chains=chains,
+        draws=count,
+        seed=seed,
+        start=start,
+        proposals=proposals,
+        target_ess=target_ess,
+        rescue=lambda: program.newton_proposal(data, start),
     )
 
 

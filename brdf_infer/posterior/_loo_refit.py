@@ -41,6 +41,7 @@ LEFT_OUT_SIGMA = 1e6  # σ of ln R that removes a row's information
 MAX_REFIT_ROWS = 5
 REFIT_DRAWS = 1000  # draws per chain of a refit, at most the run's
 REFIT_R_HAT = 1.01  # as the run's own threshold
+REFIT_ESS = 1000  # Kish's ESS an importance refit aims at (its proposals: the draws at most)
 
 
 def without_row(model: PosteriorModel, row: int) -> ModelData:
@@ -70,7 +71,13 @@ def _refit(draws: Draws, model: PosteriorModel, data: ModelData) -> dict[str, np
     count = min(REFIT_DRAWS, settings["draws"])
     if draws.sampler == "laplace":
         sampled = importance_refit(
-            draws, model, data, chains=settings["chains"], count=count, seed=settings["seed"]
+            draws,
+            model,
+            data,
+            chains=settings["chains"],
+            count=count,
+            seed=settings["seed"],
+            target_ess=REFIT_ESS,
         )
         if not isinstance(sampled, str):
             return sampled.sites
