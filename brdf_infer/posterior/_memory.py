@@ -3,8 +3,9 @@ clear refusal when the machine does not have it free (a whole instrument table w
 draw, say).
 
 The estimate adds the parts that grow with rows × draws or rows × chains (the run's other
-arrays are a few MiB): the leave-one-out terms of every draw and row (two arrays, float64 up
-to 256 MiB each, float32 above; :func:`brdf_infer.posterior._results.loo_terms`), one block
+arrays are a few MiB): the leave-one-out terms of every row and of the draws PSIS-LOO reads
+(two arrays, float64 up to 256 MiB each, float32 above;
+:func:`~brdf_infer.posterior._results.loo_terms`, ``LOO_VALUES``), one block
 of draws' likelihood parts (at most :data:`~brdf_infer.posterior._blocks.CHUNK_VALUES`
 values and their temporaries) and the sampler's per-chain gradient intermediates (rows ×
 (columns of the low-rank factor + 16) values, eight-fold for reverse mode). The process
@@ -19,7 +20,12 @@ import os
 
 from brdf_infer.errors import BadInputError
 from brdf_infer.posterior._blocks import CHUNK_VALUES
-from brdf_infer.posterior._results import FLOAT64_TERMS_BYTES
+from brdf_infer.posterior._results import (
+    FLOAT64_TERMS_BYTES,
+    LOO_MIN_DRAWS,
+    LOO_VALUES,
+    thinned_draws,
+)
 
 GIB = 2**30
 
@@ -27,8 +33,9 @@ GIB = 2**30
 def estimated_bytes(rows: int, draws: int, chains: int, columns: int) -> float:
     """What a posterior run adds to its process's memory at its peak [bytes] (module
     docstring)."""
-    width = 8 if draws * rows * 8 <= FLOAT64_TERMS_BYTES else 4
-    loo = 2 * draws * rows * width
+    kept = chains * thinned_draws(draws // chains, rows, chains, LOO_VALUES, LOO_MIN_DRAWS).size
+    width = 8 if kept * rows * 8 <= FLOAT64_TERMS_BYTES else 4
+    loo = 2 * kept * rows * width
     block = 4 * min(CHUNK_VALUES, draws * rows * (columns + 4)) * 8
     sampler = 8 * chains * rows * (columns + 16) * 8
     return loo + block + sampler

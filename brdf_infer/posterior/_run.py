@@ -39,10 +39,13 @@ from brdf_infer.posterior._memory import check_memory
 from brdf_infer.posterior._model import NOISE_SITES, PosteriorModel, build_posterior_model
 from brdf_infer.posterior._potential import FlatPotential
 from brdf_infer.posterior._results import (
+    LOO_MIN_DRAWS,
+    LOO_VALUES,
     diagnostics,
     factor_columns,
     inference_data,
     loo_terms,
+    thinned_draws,
     write_results,
 )
 from brdf_infer.posterior._samplers import (
@@ -425,9 +428,12 @@ def complete_run(
     ``started``: the ``time.perf_counter()`` at the start of the run (its total time)."""
     scene, name = model.scene, model.family.name
     clock = _StepClock()
-    log_lik, cdf = loo_terms(model, result.sites)  # once: for PSIS-LOO and the LOO-PIT
+    chains, n_draws = np.shape(result.sites[next(iter(result.sites))])[:2]
+    kept = thinned_draws(n_draws, len(measurements), chains, LOO_VALUES, LOO_MIN_DRAWS)
+    loo_sites = {name: values[:, kept] for name, values in result.sites.items()}
+    log_lik, cdf = loo_terms(model, loo_sites)  # once: for PSIS-LOO and the LOO-PIT
     clock.lap("loo_terms")
-    idata = inference_data(model, result, seed, log_lik)
+    idata = inference_data(model, result, seed, log_lik if kept.size == n_draws else None)
     clock.lap("inference_data")
     theta_i_band = scene.band_theta_i_deg(measurements)
     member = model.family
@@ -445,7 +451,9 @@ def complete_run(
     clock.lap("bands")
     checks = diagnostics(idata, result, parameters, fixed)
     clock.lap("diagnostics")
-    loo = psis_loo(log_lik, cdf, relative_efficiency(idata.posterior))
+    # thinning raises the draws' relative efficiency by up to its factor
+    reff = min(1.0, relative_efficiency(idata.posterior) * n_draws / kept.size)
+    loo = psis_loo(log_lik, cdf, reff)
     exact = exact_loo_rows(model, result, loo.pareto_k, PARETO_K_LIMIT) if refit else {}
     clock.lap("loo")
     answer = answer_records(model, measurements, result, theta_i_band, with_tis, seed, refit)
