@@ -82,3 +82,23 @@ def test_the_command_line_switches_float64_on(capsys):
         require_float64()
     finally:
         jax.config.update("jax_enable_x64", True)
+
+
+def test_the_report_reads_its_rows_in_float64_or_refuses(nuts_run):
+    """``write_report`` reads the scene's rows again: in float32 a table's rows at the horizon
+    select differently (1984 of 1986 on a 2 × 10³-row table, then an IndexError); it refuses."""
+    result = _python(
+        f"""
+        import jax.numpy as jnp
+        from pathlib import Path
+        from brdf_infer import Float32Error
+        from brdf_infer.report import write_report
+        kept = jnp.ones(3)  # float32
+        try:
+            write_report(Path({str(nuts_run.out)!r}))
+        except Float32Error as error:
+            print("refused:", error)
+        """
+    )
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.startswith("refused:") and "use_float64()" in result.stdout

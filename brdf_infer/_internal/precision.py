@@ -8,8 +8,9 @@ is process-wide, so importing ``brdf_infer`` leaves it alone. Instead:
   persistent compilation cache (:mod:`brdf_infer._internal.cache`); the command line calls it first.
 - The library's entry points (``load_scene``, ``run_posterior``, ``fit_lsq``, ``paper_fit``,
   ``workflow.run``, ``compare_families``, ``predict_rows``, ``design``, ``run_batch``,
-  ``simulate_measurements``) call :func:`ensure_float64`, which does the same while JAX holds
-  no array yet (switching later would mix float32 arrays into float64 work) and otherwise
+  ``simulate_measurements``, ``write_report``) call :func:`ensure_float64`, which does the
+  same while JAX holds no array yet (switching later would mix float32 arrays into float64
+  work) and otherwise
   refuses in one line (:class:`Float32Error`).
 - The pure model functions (``brdf_infer.model``) are not guarded: they run under ``jit`` and
   in whatever precision their caller chose; call ``brdf_infer.use_float64()`` first.

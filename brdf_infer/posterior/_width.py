@@ -11,10 +11,10 @@ reports its 95 % interval and
   likelihood by Pareto-smoothed importance sampling (Vehtari et al. 2024, "Pareto smoothed
   importance sampling", JMLR 25, 72): the weight of a draw θ is p_variant(y | θ) / p(y | θ), the
   priors being the same, and the Pareto k̂ of the weights says whether that is reliable. Where
-  k̂ > :data:`PARETO_K_LIMIT` the variant is sampled anew (``refit``) instead: NUTS through
-  the run's own compiled program where the variant differs from the run's model in data only
-  (the angle errors: their scales σ_rot = σ_cam = 0), with the run's warmup but fewer draws
-  (:data:`brdf_infer.posterior._answer.REFIT_CHAINS` × ``REFIT_DRAWS``, 2 × 500). Their size
+  k̂ > :data:`PARETO_K_LIMIT` the variant is sampled anew (``refit``) instead
+  (:func:`brdf_infer.posterior._answer.answer_records`): by importance sampling from a
+  Student-t fitted to the run's draws, else by the run's own sampler, into
+  :data:`brdf_infer.posterior._answer.REFIT_CHAINS` × ``REFIT_DRAWS`` (2 × 500) draws. Their size
   is set by the Monte Carlo error the interval needs: an endpoint q of a 95 % interval from an
   effective sample size n has standard error √(0.025 · 0.975 / n) / p(q) ≈ 2.7 σ / √n for a
   normal quantity, so the width 3.92 σ has a relative standard error ≈ 0.96 / √n, and the
@@ -96,11 +96,13 @@ ASSUMPTIONS = (
 
 @dataclass(frozen=True)
 class Refitted:
-    """A variant's headline quantities from a NUTS run of its own.
+    """A variant's headline quantities from a new posterior of its own (a refit).
 
     Attributes:
         headline: every draw of each headline quantity, (chains, draws) [fraction].
-        settings: the run's ``chains``, ``warmup`` and ``draws`` (per chain).
+        settings: the refit's ``chains``, ``draws`` (per chain) and ``sampler``
+            (``importance`` with its ``pareto_k`` and ``ess``, ``laplace``, or ``nuts`` with
+            its ``warmup``).
     """
 
     headline: dict[str, np.ndarray]

@@ -8,6 +8,7 @@ from pathlib import Path
 
 from brdf_infer._internal import arviz as az
 from brdf_infer._internal.outlock import require_complete, writing
+from brdf_infer._internal.precision import ensure_float64
 from brdf_infer.errors import BadInputError
 from brdf_infer.model import fold_statement
 from brdf_infer.posterior import THRESHOLDS, draws_params, family_draws, run_scene
@@ -76,6 +77,7 @@ def write_report(run: Path, progress=print) -> tuple[Path, Verdict]:
             writes its report.
     """
     started = time.perf_counter()
+    ensure_float64()  # the scene's rows are read again: float32 would select others
     require_complete(run)
     folder = RunFolder(run)
     loaded = _load(folder)
