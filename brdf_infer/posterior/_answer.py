@@ -5,13 +5,19 @@
 * ``"reference"``: where the scene's published values fall in the posterior (:mod:`._reference`).
 
 All three compare the posterior with the physical prior, drawn once here
-(:data:`PRIOR_DRAWS` draws, :func:`brdf_infer.posterior.prior_draws`).
+(:data:`PRIOR_DRAWS` draws, :func:`brdf_infer.posterior.prior_draws`). The width record's
+variants and the learned record read the draws PSIS-LOO reads
+(:data:`~brdf_infer.posterior._results.LOO_VALUES`: all on a small table, 250 a chain on a
+whole one, where each variant's joint likelihood is a pass over every row and draw); the
+run's own intervals and the reference record read every draw.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 from typing import Any
+
+import numpy as np
 
 from brdf_infer.posterior._bands import draws_physical
 from brdf_infer.posterior._laplace import importance_refit, laplace_draws
@@ -20,6 +26,7 @@ from brdf_infer.posterior._model import PosteriorModel
 from brdf_infer.posterior._power_scaling import log_likelihood_draws
 from brdf_infer.posterior._prior import prior_draws
 from brdf_infer.posterior._reference import reference_record
+from brdf_infer.posterior._results import LOO_MIN_DRAWS, LOO_VALUES, thinned_draws
 from brdf_infer.posterior._samplers import Draws, run_nuts
 from brdf_infer.posterior._width import (
     HEADLINE_TIS_DEG,
@@ -141,12 +148,18 @@ def answer_records(
     prior = prior_draws(model, PRIOR_DRAWS, seed + 11, frozenset(draws.sites))
     prior_headline = headline_draws(member, draws_physical(prior, member), angles)
     resample = _refit(draws, seed, angles) if refit else None
-    log_likelihood = log_likelihood_draws(model, draws.sites)  # once, for both records
+    chains, count = np.shape(next(iter(draws.sites.values())))[:2]
+    kept = thinned_draws(count, len(measurements), chains, LOO_VALUES, LOO_MIN_DRAWS)
+    sites, read = draws.sites, headline
+    if kept.size < count:
+        sites = {name: values[:, kept] for name, values in draws.sites.items()}
+        read = headline_draws(member, draws_physical(sites, member), angles)
+    log_likelihood = log_likelihood_draws(model, sites)  # once, for both records
     width = width_attribution(
-        model, measurements, draws.sites, headline, prior_headline, resample, log_likelihood
+        model, measurements, sites, read, prior_headline, resample, log_likelihood, headline
     )
     return {
         "width": width,
-        "learned": learned_record(model, draws.sites, prior, log_likelihood),
+        "learned": learned_record(model, sites, prior, log_likelihood),
         "reference": reference_record(model.scene.references, {**headline, **physical}),
     }

@@ -411,6 +411,15 @@ def _tis_70(bands: Bands) -> dict | None:
     return {key: bands["tis"][key][at] for key in ("median", "lo68", "hi68", "lo95", "hi95")}
 
 
+def _loo_terms(model: PosteriorModel, result: Draws, rows: int):
+    """The leave-one-out terms (log p, P) of the draws PSIS-LOO reads (every draw of a small
+    run; ``LOO_VALUES``) and the thinning factor, draws over the draws read."""
+    chains, count = np.shape(next(iter(result.sites.values())))[:2]
+    kept = thinned_draws(count, rows, chains, LOO_VALUES, LOO_MIN_DRAWS)
+    log_lik, cdf = loo_terms(model, {name: v[:, kept] for name, v in result.sites.items()})
+    return log_lik, cdf, count / kept.size
+
+
 def complete_run(
     model: PosteriorModel,
     measurements: Measurements,
@@ -428,12 +437,9 @@ def complete_run(
     ``started``: the ``time.perf_counter()`` at the start of the run (its total time)."""
     scene, name = model.scene, model.family.name
     clock = _StepClock()
-    chains, n_draws = np.shape(result.sites[next(iter(result.sites))])[:2]
-    kept = thinned_draws(n_draws, len(measurements), chains, LOO_VALUES, LOO_MIN_DRAWS)
-    loo_sites = {name: values[:, kept] for name, values in result.sites.items()}
-    log_lik, cdf = loo_terms(model, loo_sites)  # once: for PSIS-LOO and the LOO-PIT
+    log_lik, cdf, thinning = _loo_terms(model, result, len(measurements))
     clock.lap("loo_terms")
-    idata = inference_data(model, result, seed, log_lik if kept.size == n_draws else None)
+    idata = inference_data(model, result, seed, log_lik if thinning == 1 else None)
     clock.lap("inference_data")
     theta_i_band = scene.band_theta_i_deg(measurements)
     member = model.family
@@ -452,8 +458,7 @@ def complete_run(
     checks = diagnostics(idata, result, parameters, fixed)
     clock.lap("diagnostics")
     # thinning raises the draws' relative efficiency by up to its factor
-    reff = min(1.0, relative_efficiency(idata.posterior) * n_draws / kept.size)
-    loo = psis_loo(log_lik, cdf, reff)
+    loo = psis_loo(log_lik, cdf, min(1.0, relative_efficiency(idata.posterior) * thinning))
     exact = exact_loo_rows(model, result, loo.pareto_k, PARETO_K_LIMIT) if refit else {}
     clock.lap("loo")
     answer = answer_records(model, measurements, result, theta_i_band, with_tis, seed, refit)

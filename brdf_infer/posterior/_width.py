@@ -236,6 +236,7 @@ def width_attribution(
     prior_headline: dict[str, np.ndarray],
     refit: Callable[[PosteriorModel], Refitted] | None = None,
     log_likelihood: np.ndarray | None = None,
+    run_headline: dict[str, np.ndarray] | None = None,
 ) -> dict[str, Any]:
     """The ``"width"`` record of a run (module docstring).
 
@@ -248,17 +249,18 @@ def width_attribution(
         refit: a variant model's headline draws from a new posterior (:class:`Refitted`), for
             a variant whose weights have k̂ > :data:`PARETO_K_LIMIT` (None: reported with k̂,
             no interval).
-
         log_likelihood: the run's joint ln p(y | θ) of every draw (None: computed here).
+        run_headline: where ``sites`` are a thinned set of the draws (a large table), the
+            headline over all: the run's intervals; each ratio is over the thinned width.
 
     Returns:
         ``{QUANTITY: {"lo95", "hi95", "prior": {"lo95", "hi95", "p_above_1"}, "without":
         {ASSUMPTION: {"lo95", "hi95", "ratio", "pareto_k", "method", "words"}}}}`` (an
         unreliable variant's interval and ratio None; a refitted one's also ``"refit"``:
-        :meth:`Refitted.record`) and, where no variant could be computed,
-        ``"without_note"``.
+        :meth:`Refitted.record`) and, where no variant was computed, ``"without_note"``.
     """
-    result = _intervals(headline, prior_headline)
+    result = _intervals(headline if run_headline is None else run_headline, prior_headline)
+    widths = {name: np.ptp(_interval(values)) for name, values in headline.items()}
     errors = model.errors
     if errors.angles_on and errors.angle_method == "latent":
         for entry in result.values():
@@ -293,7 +295,7 @@ def width_attribution(
                 low, high = weighted_interval(values, log_weights)
             else:
                 method = "unreliable"
-            width = entry["hi95"] - entry["lo95"]
+            width = widths[name]
             if low is not None and width > 0:
                 ratio = (high - low) / width
             entry["without"][assumption.name] = {
