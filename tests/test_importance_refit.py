@@ -130,12 +130,12 @@ def test_the_answer_records_of_a_large_table_read_thinned_draws(lya_runs, lya, m
     reads (here forced to 250 a chain on the bundled rows): the run's own intervals stay
     those of every draw, and each variant's ratio moves by Monte Carlo error only (measured
     at most 0.05 from the records of every draw, typically 0.02)."""
-    from brdf_infer.posterior import _answer
+    from brdf_infer.posterior import _answer, _results
 
     model, run, _, _ = lya_runs
     angles = lya[0].band_theta_i_deg(lya[1])
     every = _answer.answer_records(model, lya[1], run, angles, True, 0, refit=False)
-    monkeypatch.setattr(_answer, "LOO_VALUES", 4 * 250 * len(lya[1]))
+    monkeypatch.setattr(_results, "LOO_VALUES", 4 * 250 * len(lya[1]))
     thinned = _answer.answer_records(model, lya[1], run, angles, True, 0, refit=False)
     for name, entry in every["width"].items():
         other = thinned["width"][name]

@@ -181,10 +181,7 @@ def test_psis_loo_of_a_large_table_reads_a_quarter_of_the_draws(nuts_run):
     on a whole table, not below 4000 draws on the 2 × 10³-row one; on the bundled run the
     elpd of every 4th draw is the elpd of all of them within its standard error's fifth
     (measured 0.30 apart, se 5.2), and posterior.nc keeps no terms of thinned draws."""
-    keep = {
-        rows: results.thinned_draws(1000, rows, 4, results.LOO_VALUES, results.LOO_MIN_DRAWS)
-        for rows in (42, 1986, 59_585)
-    }
+    keep = {rows: results.loo_draws(1000, rows, 4) for rows in (42, 1986, 59_585)}
     assert keep[42].size == keep[1986].size == 1000
     assert keep[59_585].size == results.LOO_MIN_DRAWS
     log_lik = nuts_run.idata.log_likelihood["obs"].values

@@ -17,8 +17,6 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-import numpy as np
-
 from brdf_infer.posterior._bands import draws_physical
 from brdf_infer.posterior._laplace import importance_refit, laplace_draws
 from brdf_infer.posterior._learned import learned_record
@@ -26,7 +24,7 @@ from brdf_infer.posterior._model import PosteriorModel
 from brdf_infer.posterior._power_scaling import log_likelihood_draws
 from brdf_infer.posterior._prior import prior_draws
 from brdf_infer.posterior._reference import reference_record
-from brdf_infer.posterior._results import LOO_MIN_DRAWS, LOO_VALUES, thinned_draws
+from brdf_infer.posterior._results import loo_sites
 from brdf_infer.posterior._samplers import Draws, run_nuts
 from brdf_infer.posterior._width import (
     HEADLINE_TIS_DEG,
@@ -148,11 +146,9 @@ def answer_records(
     prior = prior_draws(model, PRIOR_DRAWS, seed + 11, frozenset(draws.sites))
     prior_headline = headline_draws(member, draws_physical(prior, member), angles)
     resample = _refit(draws, seed, angles) if refit else None
-    chains, count = np.shape(next(iter(draws.sites.values())))[:2]
-    kept = thinned_draws(count, len(measurements), chains, LOO_VALUES, LOO_MIN_DRAWS)
-    sites, read = draws.sites, headline
-    if kept.size < count:
-        sites = {name: values[:, kept] for name, values in draws.sites.items()}
+    sites, thinning = loo_sites(draws.sites, len(measurements))
+    read = headline
+    if thinning > 1:
         read = headline_draws(member, draws_physical(sites, member), angles)
     log_likelihood = log_likelihood_draws(model, sites)  # once, for both records
     width = width_attribution(

@@ -34,7 +34,7 @@ from brdf_infer.posterior._laplace import importance_refit
 from brdf_infer.posterior._likelihood import ModelData
 from brdf_infer.posterior._model import PosteriorModel
 from brdf_infer.posterior._nuts import NutsProgram, chain_keys
-from brdf_infer.posterior._results import LOO_MIN_DRAWS, LOO_VALUES, loo_terms, thinned_draws
+from brdf_infer.posterior._results import loo_draws, loo_sites, loo_terms
 from brdf_infer.posterior._samplers import Draws
 
 LEFT_OUT_SIGMA = 1e6  # σ of ln R that removes a row's information
@@ -75,7 +75,7 @@ def _refit(draws: Draws, model: PosteriorModel, data: ModelData) -> dict[str, np
             model,
             data,
             chains=settings["chains"],
-            count=_loo_draws(count, data, settings["chains"]).size,
+            count=loo_draws(count, int(np.shape(data.mask)[0]), settings["chains"]).size,
             seed=settings["seed"],
             target_ess=REFIT_ESS,
         )
@@ -89,14 +89,6 @@ def _refit(draws: Draws, model: PosteriorModel, data: ModelData) -> dict[str, np
         data, chains=settings["chains"], draws=count, seed=settings["seed"]
     )
     return None if isinstance(sampled, str) else sampled.sites
-
-
-def _loo_draws(count: int, data: ModelData, chains: int) -> np.ndarray:
-    """The draws of each chain whose leave-one-out terms are read, as the run's PSIS-LOO
-    (:data:`~brdf_infer.posterior._results.LOO_VALUES`): all on a small table, 250 a chain
-    on a whole one (every row's terms are computed for the one row wanted)."""
-    rows = int(np.shape(data.mask)[0])
-    return thinned_draws(count, rows, chains, LOO_VALUES, LOO_MIN_DRAWS)
 
 
 def exact_loo_rows(
@@ -114,9 +106,8 @@ def exact_loo_rows(
         sites = _refit(draws, model, without_row(model, row))
         if sites is None:
             continue  # the row stays a failure of the verdict
-        chains, count = np.shape(next(iter(sites.values())))[:2]
-        kept = _loo_draws(count, model.data, chains)
-        log_lik, cdf = loo_terms(model, {name: value[:, kept] for name, value in sites.items()})
+        # every row's terms are computed for the one row wanted: as few draws as PSIS-LOO's
+        log_lik, cdf = loo_terms(model, loo_sites(sites, int(np.shape(model.data.mask)[0]))[0])
         terms = np.asarray(log_lik[..., row], float).reshape(-1)
         pit = float(np.mean(np.asarray(cdf[..., row], float)))
         exact[row] = (float(logsumexp(terms) - np.log(terms.size)), pit)

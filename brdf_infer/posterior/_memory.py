@@ -20,12 +20,7 @@ import os
 
 from brdf_infer.errors import BadInputError
 from brdf_infer.posterior._blocks import CHUNK_VALUES
-from brdf_infer.posterior._results import (
-    FLOAT64_TERMS_BYTES,
-    LOO_MIN_DRAWS,
-    LOO_VALUES,
-    thinned_draws,
-)
+from brdf_infer.posterior._results import FLOAT64_TERMS_BYTES, loo_draws
 
 GIB = 2**30
 
@@ -33,7 +28,7 @@ GIB = 2**30
 def estimated_bytes(rows: int, draws: int, chains: int, columns: int) -> float:
     """What a posterior run adds to its process's memory at its peak [bytes] (module
     docstring)."""
-    kept = chains * thinned_draws(draws // chains, rows, chains, LOO_VALUES, LOO_MIN_DRAWS).size
+    kept = chains * loo_draws(draws // chains, rows, chains).size
     width = 8 if kept * rows * 8 <= FLOAT64_TERMS_BYTES else 4
     loo = 2 * kept * rows * width
     block = 4 * min(CHUNK_VALUES, draws * rows * (columns + 4)) * 8

@@ -108,6 +108,23 @@ def thinned_draws(
     return np.unique(np.linspace(0, n_draws - 1, keep).round().astype(int))
 
 
+def loo_draws(n_draws: int, rows: int, chains: int) -> np.ndarray:
+    """Indices of the draws of each chain whose leave-one-out terms PSIS-LOO, the exact-LOO
+    refits and the answer records read (:func:`thinned_draws` with :data:`LOO_VALUES` and
+    :data:`LOO_MIN_DRAWS`: every draw of a small run)."""
+    return thinned_draws(n_draws, rows, chains, LOO_VALUES, LOO_MIN_DRAWS)
+
+
+def loo_sites(sites: dict[str, np.ndarray], rows: int) -> tuple[dict[str, np.ndarray], float]:
+    """``sites`` (chain, draw, ...) at :func:`loo_draws` and the thinning factor, draws over
+    draws kept (1: every draw, ``sites`` themselves)."""
+    chains, count = np.shape(next(iter(sites.values())))[:2]
+    kept = loo_draws(count, rows, chains)
+    if kept.size == count:
+        return sites, 1.0
+    return {name: values[:, kept] for name, values in sites.items()}, count / kept.size
+
+
 def replicated_data(model: PosteriorModel, sites: dict[str, np.ndarray], seed: int) -> np.ndarray:
     """One replicated data set (ln R of every row) per draw that posterior.nc keeps
     (:func:`thinned_draws`: every draw of a small run), shape (chain, kept draw, row)."""

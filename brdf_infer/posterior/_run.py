@@ -39,13 +39,11 @@ from brdf_infer.posterior._memory import check_memory
 from brdf_infer.posterior._model import NOISE_SITES, PosteriorModel, build_posterior_model
 from brdf_infer.posterior._potential import FlatPotential
 from brdf_infer.posterior._results import (
-    LOO_MIN_DRAWS,
-    LOO_VALUES,
     diagnostics,
     factor_columns,
     inference_data,
+    loo_sites,
     loo_terms,
-    thinned_draws,
     write_results,
 )
 from brdf_infer.posterior._samplers import (
@@ -414,10 +412,9 @@ def _tis_70(bands: Bands) -> dict | None:
 def _loo_terms(model: PosteriorModel, result: Draws, rows: int):
     """The leave-one-out terms (log p, P) of the draws PSIS-LOO reads (every draw of a small
     run; ``LOO_VALUES``) and the thinning factor, draws over the draws read."""
-    chains, count = np.shape(next(iter(result.sites.values())))[:2]
-    kept = thinned_draws(count, rows, chains, LOO_VALUES, LOO_MIN_DRAWS)
-    log_lik, cdf = loo_terms(model, {name: v[:, kept] for name, v in result.sites.items()})
-    return log_lik, cdf, count / kept.size
+    sites, thinning = loo_sites(result.sites, rows)
+    log_lik, cdf = loo_terms(model, sites)
+    return log_lik, cdf, thinning
 
 
 def complete_run(
