@@ -1,5 +1,6 @@
 """The old import paths of the modules that moved into the grouped packages (``fit/``,
-``studies/``, ``tables/``, ``model/``, ``runs/``, ``predict/``, ``verdict/``).
+``studies/``, ``tables/``, ``model/``, ``runs/``, ``predict/``, ``verdict/``, ``workflow/``,
+``report/``, ``scene/``).
 
 For one release each old path still imports (``import brdf_infer.lsq``,
 ``from brdf_infer.lsq import fit_lsq``, ``from brdf_infer import lsq``) and gives the same
@@ -41,6 +42,10 @@ MOVED: dict[str, str] = {
     "brdf_infer.run_records": "brdf_infer.runs.records",
     "brdf_infer.observations": "brdf_infer.predict.observations",
     "brdf_infer.plausibility": "brdf_infer.verdict.plausibility",
+    "brdf_infer.batch": "brdf_infer.workflow.batch",
+    "brdf_infer.export": "brdf_infer.report.export",
+    "brdf_infer.raytrace": "brdf_infer.studies.raytrace",
+    "brdf_infer.settings": "brdf_infer.scene.settings",
 }
 
 # the frames a warning skips to reach the importing line: the import system, this module, and

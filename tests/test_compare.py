@@ -18,6 +18,7 @@ from brdf_infer.model.params import UV_PAPER
 from brdf_infer.posterior import build_posterior_model
 from brdf_infer.report._compare import compare_frame
 from brdf_infer.studies.compare import PARETO_K_LIMIT, CompareSettings, compare_families
+from brdf_infer.verdict import pareto_k_limit
 from tests.helpers import SUITE_WARMUP, run_cli
 
 # the posterior's target acceptance (compare's default is 0.9) and the suite's warmup: the
@@ -276,9 +277,10 @@ def test_refitted_terms_replace_psis_in_elpd_and_p_loo():
 # the single-series structure is compiled by no other test of the default suite
 def test_a_row_with_pareto_k_above_0_7_is_refitted_on_a_single_series_scene(tmp_path):
     """A user scene of one series, θi 10-70° (synthetic.GEOMETRIES "single-series", data
-    seed 3): with 2 × 300 draws row 0 (θi = 10°, θs = 0°) has Pareto k ≈ 0.8, so its LOO
-    term is computed by refitting without it; elpd_loo and p_loo of the ranking carry the
-    exact term."""
+    seed 3): with 2 × 300 draws row 0 (θi = 10°, θs = 0°) has Pareto k ≈ 0.8, above the
+    limit of 600 draws (1 − 1/log₁₀ 600 = 0.64), so its LOO term is computed by refitting
+    without it, as is every row above that limit; elpd_loo and p_loo of the ranking carry the
+    exact terms."""
     from brdf_infer._internal import arviz as az
     from brdf_infer.scene import load_scene
     from brdf_infer.studies.compare import fit_family, rank_families
@@ -289,7 +291,9 @@ def test_a_row_with_pareto_k_above_0_7_is_refitted_on_a_single_series_scene(tmp_
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # ArviZ warns about the very row this test is about
         k = np.asarray(az.loo(fit.idata, pointwise=True).pareto_k)
-    high = [int(row) for row in np.flatnonzero(k > PARETO_K_LIMIT)]
+    sizes = fit.idata.posterior.sizes
+    limit = pareto_k_limit(sizes["chain"] * sizes["draw"])
+    high = [int(row) for row in np.flatnonzero(k > limit)]
     assert high, k  # the scene has such a row
     assert fit.refitted_rows == high and set(fit.exact_elpd) == set(high)
     assert all(np.isfinite(value) for value in fit.exact_elpd.values())
@@ -299,7 +303,8 @@ def test_a_row_with_pareto_k_above_0_7_is_refitted_on_a_single_series_scene(tmp_
     refitted, psis = rows["strumik2024"], rows["psis only"]
     assert refitted["elpd_loo"] == pytest.approx(psis["elpd_loo"] + shift, rel=1e-12)
     assert refitted["p_loo"] == pytest.approx(psis["p_loo"] - shift, rel=1e-12)
-    assert refitted["pareto_k_max"] > PARETO_K_LIMIT >= refitted["pareto_k_max_after_refit"]
+    assert refitted["pareto_k_limit"] == pytest.approx(limit)
+    assert refitted["pareto_k_max"] > limit >= refitted["pareto_k_max_after_refit"]
     assert any(f"rows {high}" in note and "LOO by refit" in note for note in notes), notes
 
 

@@ -11,14 +11,14 @@ from scipy import integrate
 
 from brdf_infer.cli import main
 from brdf_infer.errors import BadInputError
-from brdf_infer.export import (
+from brdf_infer.model.params import UV_PAPER
+from brdf_infer.posterior import draws_params
+from brdf_infer.report.export import (
     BsdfFile,
     read_bsdf,
     specular_frame_to_model,
     write_bsdf,
 )
-from brdf_infer.model.params import UV_PAPER
-from brdf_infer.posterior import draws_params
 from tests import independent_bsdf as oracle
 from tests.helpers import reference_brdf_hemisphere, run_cli
 
@@ -166,7 +166,7 @@ def test_other_tools_files_tabs_and_header_order_are_read(tmp_path):
     """Words separated by tabs only, and header lines in another order (as other tools write
     them), read as the tidy file (found by the generated inputs: a tab after a keyword was
     refused)."""
-    from brdf_infer.export import read_bsdf
+    from brdf_infer.report.export import read_bsdf
 
     tidy, untidy = tmp_path / "tidy.bsdf", tmp_path / "untidy.bsdf"
     tidy.write_text(GOOD)

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from brdf_infer._internal import arviz as az
-from brdf_infer.export import brdf_table
 from brdf_infer.model import tis
 from brdf_infer.model.params import PAPER_CONSTANTS, UV_PAPER, Params
 from brdf_infer.posterior import draws_params
+from brdf_infer.report.export import brdf_table
 from tests import independent_bsdf as oracle
 from tests.helpers import run_cli
 

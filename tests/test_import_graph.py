@@ -212,6 +212,18 @@ def test_the_top_level_rooms_import_without_a_cycle():
     assert cycle is None, "rooms importing each other: " + " → ".join(cycle)
 
 
+def test_the_top_level_holds_few_public_entries():
+    """A newcomer reads the top level as the table of contents: at most 16 public packages and
+    modules (15 packages and ``errors.py``); the private helpers are in ``_internal/``."""
+    public = sorted(
+        path.name
+        for path in (ROOT / PACKAGE).iterdir()
+        if not path.name.startswith("_")
+        and (path.suffix == ".py" or (path / "__init__.py").is_file())
+    )
+    assert len(public) <= 16, f"{len(public)} public top-level entries: {public}"
+
+
 def test_a_planted_back_arrow_between_rooms_is_found(tmp_path):
     # the run folder (low: the tables' screening writes its records) naming a table module that
     # imports nothing of it: no module cycle, but the rooms `runs` and `tables` import each other
@@ -260,7 +272,11 @@ def test_a_planted_back_import_is_found(tmp_path, module, source):
     ("module", "source", "found"),
     [
         # a private module of another package, by its dotted name
-        ("brdf_infer.batch", "\nfrom brdf_infer.posterior._nuts import x\n", "posterior._nuts"),
+        (
+            "brdf_infer.workflow.batch",
+            "\nfrom brdf_infer.posterior._nuts import x\n",
+            "posterior._nuts",
+        ),
         # a private name of a module in another directory
         ("brdf_infer.bench._fits", "\nfrom brdf_infer.fit.lsq import _x\n", "lsq import _x"),
         # a private module named through `from package import`, relative, in a function

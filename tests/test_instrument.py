@@ -26,8 +26,8 @@ from brdf_infer.model import log_aperture_factor, log_brdf_hemisphere, log_brdf_
 from brdf_infer.model.params import UV_PAPER, Params
 from brdf_infer.predict import predict_rows
 from brdf_infer.predict.observations import build_observation_model
-from brdf_infer.raytrace import raytrace_series
 from brdf_infer.scene import SeriesGeometry, check_instrument, load_scene
+from brdf_infer.studies.raytrace import raytrace_series
 from tests.helpers import run_cli
 
 OTHER = Params(0.006, 2e-4, -1e-9, 5e-12, 3.5, -20.0)

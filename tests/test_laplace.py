@@ -9,7 +9,7 @@ from scipy import stats
 from brdf_infer.posterior import _laplace as laplace
 from brdf_infer.posterior import build_model, run_posterior
 from brdf_infer.report import write_report
-from brdf_infer.settings import LAPLACE_MIN_ROWS, PosteriorSettings, resolved_sampler
+from brdf_infer.scene.settings import LAPLACE_MIN_ROWS, PosteriorSettings, resolved_sampler
 
 
 def test_student_t_proposal_density_is_scipys_and_its_draws_have_its_covariance():

@@ -4,6 +4,7 @@ numbers of the direct computation (ArviZ's ``loo``, one block of every draw)."""
 
 from __future__ import annotations
 
+import dataclasses
 import warnings
 
 import jax
@@ -18,7 +19,7 @@ from brdf_infer.posterior._loo import loo_pit, psis_loo, relative_efficiency
 from brdf_infer.posterior._lowrank import leave_one_out_conditionals
 from brdf_infer.posterior._power_scaling import log_likelihood_draws
 from brdf_infer.posterior._prior import prior_draws
-from brdf_infer.posterior._run import build_model
+from brdf_infer.posterior._run import build_model, predictive_checks
 
 
 def _posterior_like(rng, chains: int, draws: int, rows: int):
@@ -190,3 +191,23 @@ def test_psis_loo_of_a_large_table_reads_a_quarter_of_the_draws(nuts_run):
     quarter = psis_loo(log_lik[:, ::4], cdf[:, ::4], 1.0)
     assert abs(quarter.elpd_loo - everything.elpd_loo) < 0.2 * everything.se
     assert results.stored_log_likelihood(None) == {}
+
+
+def test_the_pareto_k_limit_follows_the_draws_psis_loo_read(lya, nuts_run):
+    """min(1 − 1/log₁₀ S, 0.7) (Vehtari et al. 2024, Sec. 3): 4000 draws of the bundled run are
+    judged at 0.7, the 1000 of a thinned table at 2/3; the count, the named rows and the
+    verdict's words follow it, and a refit keeps it."""
+    log_lik = nuts_run.idata.log_likelihood["obs"].values
+    cdf = np.full_like(log_lik, 0.5)
+    assert psis_loo(log_lik, cdf, 1.0).limit == 0.7
+    thinned = psis_loo(log_lik[:, ::4], cdf[:, ::4], 1.0)
+    assert thinned.limit == pytest.approx(2 / 3)
+    assert thinned.with_exact({}).limit == thinned.limit
+    # a row planted between the two limits counts for the thinned draws only
+    planted = dataclasses.replace(thinned, pareto_k=np.full(thinned.pareto_k.size, 0.1))
+    planted.pareto_k[5] = 0.68
+    checks = predictive_checks(planted, lya[1])
+    assert checks["pareto_k_limit"] == pytest.approx(2 / 3)
+    assert checks["pareto_k_high"] == 1 and [r["row"] for r in checks["pareto_k_rows"]] == [5]
+    as_if_all = predictive_checks(dataclasses.replace(planted, limit=0.7), lya[1])
+    assert as_if_all["pareto_k_high"] == 0

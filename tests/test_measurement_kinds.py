@@ -231,7 +231,7 @@ def test_bsdf_scene_keys_are_checked(tmp_path):
 def test_a_bsdf_table_of_another_family_is_fitted_and_sampled_back(tmp_path, name):
     """A .BSDF file tabulating a family's BRDF (a vendor's ABg table, say), read as a scene's
     measurements (thinned): lsq returns its parameters, NUTS covers them."""
-    from brdf_infer.export import BsdfFile, specular_frame_to_model, write_bsdf
+    from brdf_infer.report.export import BsdfFile, specular_frame_to_model, write_bsdf
 
     member = family(name)
     truth = FAMILY_TRUTHS[name]

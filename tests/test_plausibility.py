@@ -9,6 +9,7 @@ import dataclasses
 import html
 import json
 import math
+import re
 
 import numpy as np
 import pytest
@@ -128,7 +129,7 @@ def test_a_forced_percent_run_has_one_red_verdict_on_stdout_and_in_its_report(tm
     # for Eq. 7; test_the_verdict_passes_a_plausible_run_and_names_each_failure_in_order keeps the
     # check for other families)
     assert any(line.startswith("R-hat") for line in lines)
-    assert "Pareto k > 0.7" in lines[-1] and "more in summary.json" in lines[-1]
+    assert re.search(r"Pareto k > 0\.\d+ ", lines[-1]) and "more in summary.json" in lines[-1]
     # the report renders the recorded verdict as it stands (``report`` itself: tests/test_cli.py
     # and tests/test_report.py, whose runs write theirs)
     box = verdict_box(Verdict.from_json(json.loads((out / "summary.json").read_text())["verdict"]))
@@ -186,6 +187,12 @@ def test_the_verdict_passes_a_plausible_run_and_names_each_failure_in_order():
     assert sampler == "R-hat 1.040 > 1.01"
     assert pareto.startswith("2 measurement(s) with Pareto k > 0.7")
     assert verdict.text == "; ".join(verdict.lines)
+    # a thinned table's PSIS-LOO is judged at its own draws' limit, which the words name
+    thinned = _summary(0.1, [], pareto_k_high=1)
+    thinned["predictive"]["pareto_k_limit"] = 2 / 3
+    assert posterior_verdict(thinned, _tis_band(0.1), angles).lines == (
+        "1 measurement(s) with Pareto k > 0.67 (PSIS-LOO unreliable there)",
+    )
     # a family without BRDF0 is judged by its TIS alone
     family_run = {**_summary(0.0), "pi_brdf0": None}
     assert posterior_verdict(family_run, _tis_band(0.5), angles).ok

@@ -29,7 +29,7 @@ def test_importing_the_package_changes_no_jax_setting(tmp_path):
         """
         import jax
         import brdf_infer, brdf_infer.cli, brdf_infer.posterior, brdf_infer.workflow
-        import brdf_infer.report, brdf_infer.batch, brdf_infer.design, brdf_infer.fit.lsq
+        import brdf_infer.report, brdf_infer.workflow.batch, brdf_infer.design, brdf_infer.fit.lsq
         print(jax.config.jax_enable_x64, jax.config.jax_compilation_cache_dir)
         brdf_infer.use_float64()
         brdf_infer.use_float64()  # again: nothing more

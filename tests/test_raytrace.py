@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from brdf_infer.model.params import UV_PAPER
-from brdf_infer.raytrace import (
+from brdf_infer.studies.raytrace import (
     TALLIES,
     build_setup,
     configurations,
@@ -22,7 +22,7 @@ from brdf_infer.raytrace import (
     trace_configuration,
     with_aperture,
 )
-from brdf_infer.raytrace._trace import tally_moments
+from brdf_infer.studies.raytrace._trace import tally_moments
 from tests.helpers import run_cli, run_on_forced_cpu_devices
 
 
@@ -243,8 +243,8 @@ def test_cli_writes_figures_and_warns_when_no_ray_arrives(tmp_path, capsys):
         assert (tmp_path / name).stat().st_size > 10_000
     # the images the report draws are the ones simulated, read back from the folder
     from brdf_infer.model.params import UV_PAPER
-    from brdf_infer.raytrace import load_detector_images, simulate_images
     from brdf_infer.scene import load_scene
+    from brdf_infer.studies.raytrace import load_detector_images, simulate_images
 
     scene = load_scene("lya")
     expected = simulate_images(scene, scene.load_measurements(), UV_PAPER, seed=0)
@@ -326,7 +326,7 @@ _SHARDED_TRACE = textwrap.dedent(
     import jax
     import brdf_infer
     from brdf_infer.model.params import UV_PAPER
-    from brdf_infer.raytrace import raytrace_series
+    from brdf_infer.studies.raytrace import raytrace_series
     from brdf_infer.scene import load_scene
 
     scene = load_scene("lya")

@@ -47,7 +47,7 @@ def good_report(nuts_run, lya):
     """The report of the reduced run, with ray traces as ``brdf-infer run`` writes them."""
     from brdf_infer.model.params import UV_PAPER
     from brdf_infer.posterior import draws_params
-    from brdf_infer.raytrace import (
+    from brdf_infer.studies.raytrace import (
         raytrace_payload,
         raytrace_posterior_payload,
         thin_draws,

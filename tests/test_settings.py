@@ -13,7 +13,7 @@ import pytest
 from brdf_infer.cli import build_parser
 from brdf_infer.errors import BadInputError
 from brdf_infer.posterior import run_posterior
-from brdf_infer.settings import (
+from brdf_infer.scene.settings import (
     EMCEE_BURN_IN,
     BatchSettings,
     CompareSettings,

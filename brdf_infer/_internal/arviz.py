@@ -34,6 +34,7 @@ with warnings.catch_warnings():
         summary,
     )
     from arviz.labels import MapLabeller
+    from arviz.stats.ecdf_utils import ecdf_confidence_band
 
 VERSION: str = _arviz.__version__  # written into posterior.nc's provenance
 
@@ -43,6 +44,7 @@ __all__ = [
     "MapLabeller",
     "bfmi",
     "compare",
+    "ecdf_confidence_band",
     "ess",
     "from_dict",
     "from_netcdf",

@@ -11,8 +11,8 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from brdf_infer.batch import BatchSettings, run_batch
 from brdf_infer.scene import Scene
+from brdf_infer.workflow.batch import BatchSettings, run_batch
 
 HEADERS = [
     "scenes",

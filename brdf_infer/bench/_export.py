@@ -11,9 +11,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from brdf_infer.export import brdf_table, fit_abg, scatter_grid, table_integral
 from brdf_infer.model import CHECK_QUADRATURE, abg_integral, tis
 from brdf_infer.model.params import PAPER_CONSTANTS, UV_PAPER, VIS_PAPER
+from brdf_infer.report.export import brdf_table, fit_abg, scatter_grid, table_integral
 
 GRID_STEPS = ((10.0, 2.0), (5.0, 2.0), (5.0, 1.0), (2.0, 0.5))  # (azimuth, radial) [deg]
 THETA_I_DEG = np.arange(0.0, 86.0, 5.0)

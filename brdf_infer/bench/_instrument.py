@@ -111,7 +111,7 @@ def _full_cubature(scene: Scene, measurements, instrument: str, uniforms) -> lis
 
 def node_rows(scene: Scene, measurements, quick: bool, progress=print) -> list[NodeRow]:
     """Kernel accuracy and cost against the number of nodes per row."""
-    from brdf_infer.raytrace import raytrace_series
+    from brdf_infer.studies.raytrace import raytrace_series
 
     rays = 2**17 if quick else 2**21
     progress(f"  ray tracer reference, {rays} rays per configuration")

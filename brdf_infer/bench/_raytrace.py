@@ -8,14 +8,14 @@ from dataclasses import dataclass
 import jax
 
 from brdf_infer.model.params import UV_PAPER
-from brdf_infer.raytrace import (
+from brdf_infer.scene import Scene
+from brdf_infer.studies.raytrace import (
     CHUNK_RAYS,
     build_setup,
     compile_tallies,
     configurations,
     trace_configuration,
 )
-from brdf_infer.scene import Scene
 
 BENCH_CONFIGURATIONS = ((45.0, 0.0), (80.0, 5.0))  # a flat BRDF, and the steepest grazing case
 REFERENCE_RAYS = 2**22

@@ -18,7 +18,7 @@ from brdf_infer.bench._robustness import LOADER_HEADERS
 from brdf_infer.bench._sbc import HEADERS as SBC_HEADERS
 from brdf_infer.bench._tables import markdown_table
 from brdf_infer.bench._timing import machine_description
-from brdf_infer.raytrace import CHUNK_RAYS
+from brdf_infer.studies.raytrace import CHUNK_RAYS
 
 
 def header_section(quick: bool, started: float) -> list[str]:

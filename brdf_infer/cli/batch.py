@@ -1,5 +1,5 @@
-"""``brdf-infer batch``: posteriors of many scenes (:mod:`brdf_infer.batch`) with the defaults
-of :class:`~brdf_infer.settings.BatchSettings`."""
+"""``brdf-infer batch``: posteriors of many scenes (:mod:`brdf_infer.workflow.batch`) with the
+defaults of :class:`~brdf_infer.scene.settings.BatchSettings`."""
 
 from __future__ import annotations
 
@@ -26,7 +26,7 @@ from brdf_infer.cli._common import (
 from brdf_infer.cli._options import add_force_argument, add_model_argument
 from brdf_infer.cli._outdir import check_output_dir
 from brdf_infer.errors import BadInputError
-from brdf_infer.settings import BATCH_MODES, BatchSettings, check_family_name
+from brdf_infer.scene.settings import BATCH_MODES, BatchSettings, check_family_name
 
 
 def add_parser(commands) -> argparse.ArgumentParser:
@@ -101,7 +101,7 @@ def prepare(args: argparse.Namespace) -> None:
         args.coordinator, args.num_processes, args.process_id, args.peer_timeout
     )
     if args.processes.several:
-        from brdf_infer.batch import join_processes
+        from brdf_infer.workflow.batch import join_processes
 
         check_output_dir(args.out or Path("reports") / "batch")
         join_processes(args.processes)
@@ -110,7 +110,7 @@ def prepare(args: argparse.Namespace) -> None:
 def main(args: argparse.Namespace) -> int:
     """Run the batch (SIGINT and SIGTERM keep the complete run folders) and print a table."""
     headless()
-    from brdf_infer.batch import BatchInterrupted, run_batch_until_signalled
+    from brdf_infer.workflow.batch import BatchInterrupted, run_batch_until_signalled
 
     check_family_name(args.model)
     settings = record_from_args(BatchSettings, args)
@@ -134,10 +134,10 @@ def main(args: argparse.Namespace) -> int:
 
 
 def _main_together(args: argparse.Namespace, settings: BatchSettings) -> int:
-    """This process's share of a batch over several processes (:class:`brdf_infer.batch.Team`):
-    process 0 holds --out and writes batch.json; a process that fails tells the others, and
-    each ends with one line on stderr."""
-    from brdf_infer.batch import (
+    """This process's share of a batch over several processes
+    (:class:`brdf_infer.workflow.batch.Team`): process 0 holds --out and writes batch.json; a
+    process that fails tells the others, and each ends with one line on stderr."""
+    from brdf_infer.workflow.batch import (
         BatchInterrupted,
         PeerFailed,
         Team,

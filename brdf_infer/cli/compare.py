@@ -1,6 +1,6 @@
 """``brdf-infer compare``: model families ranked by PSIS-LOO
 (:mod:`brdf_infer.studies.compare`) with the defaults of
-:class:`~brdf_infer.settings.CompareSettings`."""
+:class:`~brdf_infer.scene.settings.CompareSettings`."""
 
 from __future__ import annotations
 
@@ -23,7 +23,7 @@ from brdf_infer.cli._options import (
     forced,
     scene_and_measurements,
 )
-from brdf_infer.settings import CompareSettings
+from brdf_infer.scene.settings import CompareSettings
 
 DEFAULT_MODELS = ("strumik2024", "abg", "harvey-shack", "lambertian", "lambertian+abg")
 

@@ -1,5 +1,5 @@
 """``brdf-infer design``: where to measure next (:mod:`brdf_infer.design`), with the defaults
-of :class:`~brdf_infer.settings.DesignOptions`; every option checked before any work."""
+of :class:`~brdf_infer.scene.settings.DesignOptions`; every option checked before any work."""
 
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ from brdf_infer.cli._common import (
     table,
 )
 from brdf_infer.cli._outdir import check_output_dir
-from brdf_infer.settings import DesignOptions
+from brdf_infer.scene.settings import DesignOptions
 
 
 def add_parser(commands) -> argparse.ArgumentParser:

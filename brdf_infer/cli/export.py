@@ -1,5 +1,5 @@
 """``brdf-infer export``: Zemax ``.BSDF`` tables or ABg rows of a parameter set or a posterior
-run (:mod:`brdf_infer.export`), every option checked before any work; ``--check`` reads a
+run (:mod:`brdf_infer.report.export`), every option checked before any work; ``--check`` reads a
 ``.BSDF`` file back."""
 
 from __future__ import annotations
@@ -80,10 +80,10 @@ def _checked_options(args: argparse.Namespace) -> None:
 
 
 def _source(args: argparse.Namespace, scene_name: str):
-    from brdf_infer.export import Source
     from brdf_infer.model import strumik_family
     from brdf_infer.model.params import params_to_dict, resolve_params
     from brdf_infer.posterior import load_run_family
+    from brdf_infer.report.export import Source
     from brdf_infer.runs.folder import RunFolder
 
     if args.run is not None:
@@ -109,7 +109,7 @@ def _source(args: argparse.Namespace, scene_name: str):
 
 def main(args: argparse.Namespace) -> int:
     """Export (nothing written on bad input) and print what was written."""
-    from brdf_infer.export import (
+    from brdf_infer.report.export import (
         DEFAULT_THETA_I_DEG,
         planned_files,
         record_export,
@@ -224,7 +224,7 @@ def _print_result(result: dict) -> None:
 
 def _check_file(path: Path, as_json: bool) -> None:
     """Read a .BSDF file; per angle of incidence its TIS line and the table's own integral."""
-    from brdf_infer.export import read_bsdf, table_integral
+    from brdf_infer.report.export import read_bsdf, table_integral
 
     contents = read_bsdf(path)
     if contents.symmetry != "PlaneSymmetrical":

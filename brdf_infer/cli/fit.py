@@ -19,7 +19,7 @@ from brdf_infer.cli._options import (
     scene_and_measurements,
 )
 from brdf_infer.errors import BadInputError
-from brdf_infer.settings import LSQ_STARTS, check_family_name
+from brdf_infer.scene.settings import LSQ_STARTS, check_family_name
 
 UNITS = {
     "brdf0": "sr^-1",

@@ -1,5 +1,5 @@
 """``brdf-infer posterior``: :func:`brdf_infer.posterior.run_posterior` (NUTS, Laplace + PSIS
-or emcee) with the defaults of :class:`~brdf_infer.settings.PosteriorSettings`."""
+or emcee) with the defaults of :class:`~brdf_infer.scene.settings.PosteriorSettings`."""
 
 from __future__ import annotations
 
@@ -23,7 +23,7 @@ from brdf_infer.cli._options import (
     forced,
     scene_and_measurements,
 )
-from brdf_infer.settings import (
+from brdf_infer.scene.settings import (
     EMCEE_BURN_IN,
     LAPLACE_MIN_ROWS,
     NUTS_WARMUP,

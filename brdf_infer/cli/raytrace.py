@@ -81,7 +81,7 @@ def main(args: argparse.Namespace) -> int:
 
 
 def _payload(args: argparse.Namespace, scene, measurements) -> dict:
-    from brdf_infer.raytrace import raytrace_payload, raytrace_posterior_payload, thin_draws
+    from brdf_infer.studies.raytrace import raytrace_payload, raytrace_posterior_payload, thin_draws
 
     shown = None if args.json else progress
     if args.run is not None:
@@ -121,8 +121,8 @@ def _payload(args: argparse.Namespace, scene, measurements) -> dict:
 
 def _write_raytrace(out: Path, scene, measurements, payload: dict) -> None:
     from brdf_infer._internal.atomic import atomic_write_bytes
-    from brdf_infer.raytrace import write_traces
     from brdf_infer.report import figure_png, plot_detector_images, plot_raytrace
+    from brdf_infer.studies.raytrace import write_traces
 
     out.mkdir(parents=True, exist_ok=True)
     images = write_traces(out, scene, measurements, [payload])

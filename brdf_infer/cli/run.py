@@ -1,5 +1,5 @@
 """``brdf-infer run``: the main job, :func:`brdf_infer.workflow.run`, with the defaults of
-:class:`~brdf_infer.settings.RunSettings`."""
+:class:`~brdf_infer.scene.settings.RunSettings`."""
 
 from __future__ import annotations
 
@@ -28,7 +28,7 @@ from brdf_infer.cli._options import (
     with_known_names,
 )
 from brdf_infer.errors import BadInputError
-from brdf_infer.settings import RunSettings, check_family_name
+from brdf_infer.scene.settings import RunSettings, check_family_name
 
 
 def add_parser(commands) -> argparse.ArgumentParser:

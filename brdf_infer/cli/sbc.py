@@ -1,6 +1,6 @@
 """``brdf-infer sbc``: simulation-based calibration of a scene's posterior
 (:func:`brdf_infer.studies.sbc.run_sbc`) with the defaults of
-:class:`~brdf_infer.settings.SbcSettings`."""
+:class:`~brdf_infer.scene.settings.SbcSettings`."""
 
 from __future__ import annotations
 
@@ -23,7 +23,7 @@ from brdf_infer.cli._options import (
     add_model_argument,
     scene_and_measurements,
 )
-from brdf_infer.settings import SbcSettings, check_family_name
+from brdf_infer.scene.settings import SbcSettings, check_family_name
 
 
 def add_parser(commands) -> argparse.ArgumentParser:

@@ -1,6 +1,6 @@
 """``brdf-infer sensitivity``: the posterior under the scene's error model and with each
 assumption changed (:mod:`brdf_infer.studies.sensitivity`), with the defaults of
-:class:`~brdf_infer.settings.SensitivitySettings`."""
+:class:`~brdf_infer.scene.settings.SensitivitySettings`."""
 
 from __future__ import annotations
 
@@ -18,7 +18,7 @@ from brdf_infer.cli._common import (
     table,
 )
 from brdf_infer.cli._options import scene_and_measurements
-from brdf_infer.settings import SensitivitySettings
+from brdf_infer.scene.settings import SensitivitySettings
 
 
 def add_parser(commands) -> argparse.ArgumentParser:

@@ -70,7 +70,7 @@ from brdf_infer.predict.observations import (
 from brdf_infer.runs.folder import DESIGN_FIGURE, DESIGN_FILE, RunFolder
 from brdf_infer.scene import Scene, load_scene
 from brdf_infer.scene.design_target import DesignTarget, parse_target
-from brdf_infer.settings import DesignOptions
+from brdf_infer.scene.settings import DesignOptions
 from brdf_infer.tables.measurements import Measurements
 
 

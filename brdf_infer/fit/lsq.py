@@ -55,7 +55,7 @@ from brdf_infer.model.error_model import noise_layout
 from brdf_infer.model.params import Params
 from brdf_infer.predict.observations import Observations, build_observation_model, log_reflectance
 from brdf_infer.scene import Scene
-from brdf_infer.settings import LSQ_STARTS
+from brdf_infer.scene.settings import LSQ_STARTS
 from brdf_infer.tables.measurements import Measurements
 
 SOLVERS = {

@@ -17,7 +17,7 @@ AD, along the straight continuation x → a) over the reference beam's power in 
 rectangle, the reference being the beam straight into AD and the detector at the same
 source distance (Sec. 3.1).
 
-Lab frame (that of ``brdf_infer.raytrace``, written separately from it in NumPy so each
+Lab frame (that of ``brdf_infer.studies.raytrace``, written separately from it in NumPy so each
 checks the other): sample in z = 0, normal +z, plane of incidence x–z, forward side +x
 (φ = 180° of Eq. 8), source towards (−sin θi, 0, cos θi), AD centre at r·(sin θs, 0, cos θs).
 Lengths in mm, angles in degrees.

@@ -45,11 +45,11 @@ from brdf_infer.posterior._model import PosteriorModel
 from brdf_infer.posterior._nuts import same_structure
 from brdf_infer.posterior._potential import FlatPotential
 from brdf_infer.posterior._samplers import Draws
+from brdf_infer.verdict import PARETO_K_LIMIT, pareto_k_limit
 
 STARTS = 4  # BFGS searches from dispersed points
 SEARCH_TOLERANCE, SEARCH_STEPS = 1e-10, 2000  # of each search
 DEGREES_OF_FREEDOM = 7.0  # of the Student-t proposal
-PARETO_K_LIMIT = 0.7  # above it the importance weights are unreliable (PSIS paper, Sec. 3)
 ADAPT_K = 0.5  # Pareto k below which the proposal is kept as it is ...
 ADAPT_ESS = 0.25  # ... if Kish's ESS is at least this fraction of the trial proposals
 ADAPT_ROUNDS = 3  # adaptations of the proposal at most
@@ -394,13 +394,6 @@ class LaplaceProgram:
             program=self,
             unconstrained=sample.points[chosen].reshape(chains, draws, -1),
         )
-
-
-def pareto_k_limit(samples: int) -> float:
-    """The largest Pareto k̂ of a reliable importance-sampling estimate from ``samples``
-    draws: min(1 − 1/log₁₀ S, :data:`PARETO_K_LIMIT`) (the PSIS paper, Sec. 3: 0.67 at
-    S = 1000, 0.7 from S ≈ 2200)."""
-    return min(1.0 - 1.0 / np.log10(samples), PARETO_K_LIMIT)
 
 
 def importance_refit(

@@ -26,6 +26,7 @@ from scipy.special import logsumexp
 
 from brdf_infer._internal import arviz as az
 from brdf_infer.posterior._lowrank import leave_one_out_conditionals
+from brdf_infer.verdict import PARETO_K_LIMIT, pareto_k_limit
 
 
 @partial(jax.jit, static_argnames="disjoint")
@@ -79,6 +80,8 @@ class LeaveOneOut:
         pit: the LOO-PIT of every row, (rows,) (:func:`loo_pit`).
         elpd_i: every row's term of ``elpd_loo``, (rows,).
         lppd_i: every row's ln mean_s p(yᵢ | y₋ᵢ, θ_s) over the draws, (rows,).
+        limit: the k̂ above which a row's estimate is unreliable with this many draws
+            (:func:`~brdf_infer.verdict.pareto_k_limit`: 0.7 from 2200 draws, 0.67 at 1000).
     """
 
     elpd_loo: float
@@ -88,6 +91,7 @@ class LeaveOneOut:
     pit: np.ndarray
     elpd_i: np.ndarray
     lppd_i: np.ndarray
+    limit: float = PARETO_K_LIMIT
 
     def with_exact(self, exact: dict[int, tuple[float, float]]) -> LeaveOneOut:
         """These estimates with the rows of ``exact`` (row → exact ln p(yᵢ | y₋ᵢ) and LOO-PIT,
@@ -104,6 +108,7 @@ class LeaveOneOut:
             pit=pit,
             elpd_i=elpd_i,
             lppd_i=self.lppd_i,
+            limit=self.limit,
         )
 
 
@@ -155,4 +160,5 @@ def psis_loo(
         pit=pit,
         elpd_i=elpd,
         lppd_i=lppd,
+        limit=pareto_k_limit(draws),
     )

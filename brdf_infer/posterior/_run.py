@@ -56,7 +56,7 @@ from brdf_infer.posterior._samplers import (
 from brdf_infer.runs.folder import CHECKPOINT_FILE
 from brdf_infer.runs.records import Bands, PosteriorSummary
 from brdf_infer.scene import Scene, check_instrument, load_scene, parse_scene
-from brdf_infer.settings import PosteriorSettings, resolved_sampler
+from brdf_infer.scene.settings import PosteriorSettings, resolved_sampler
 from brdf_infer.tables.measurements import Measurements
 from brdf_infer.verdict import PARETO_K_LIMIT, posterior_verdict
 
@@ -170,15 +170,15 @@ def predictive_checks(
     exact: dict[int, tuple[float, float]] | None = None,
 ) -> dict:
     """PSIS-LOO (elpd with its standard error, p_loo, every row's Pareto k, the largest, the
-    number of rows above :data:`~brdf_infer.verdict.PARETO_K_LIMIT` that were not refitted and,
-    given ``measurements``, those rows by name) and the LOO-PIT of every row with a
-    Kolmogorov–Smirnov test of its uniformity, from :func:`~brdf_infer.posterior._loo.psis_loo`;
+    number of rows above ``pareto_k_limit`` (:func:`~brdf_infer.verdict.pareto_k_limit` of the
+    draws read) not refitted and, given ``measurements``, those rows by name) and the LOO-PIT
+    of every row with a Kolmogorov–Smirnov test of its uniformity (:func:`psis_loo`);
     the rows of ``exact`` (:func:`~brdf_infer.posterior._loo_refit.exact_loo_rows`) by refit,
     listed under ``loo_refit_rows``."""
     exact = exact or {}
     loo = loo.with_exact(exact)
     pareto_k = loo.pareto_k
-    high = high_k_rows(measurements, pareto_k) if measurements is not None else None
+    high = high_k_rows(measurements, pareto_k, loo.limit) if measurements is not None else None
     named = {}
     if high is not None:
         named["pareto_k_rows"] = [row for row in high if row["row"] not in exact]
@@ -191,8 +191,9 @@ def predictive_checks(
         "se": loo.se,
         "p_loo": loo.p_loo,
         "pareto_k_max": float(np.max(pareto_k)),
+        "pareto_k_limit": loo.limit,
         "pareto_k_high": sum(
-            1 for row in np.flatnonzero(pareto_k > PARETO_K_LIMIT) if int(row) not in exact
+            1 for row in np.flatnonzero(pareto_k > loo.limit) if int(row) not in exact
         ),
         "pareto_k": pareto_k.tolist(),  # per row, for the report
         "loo_pit": loo.pit.tolist(),
@@ -200,11 +201,13 @@ def predictive_checks(
     }
 
 
-def high_k_rows(measurements: Measurements, pareto_k: np.ndarray) -> list[dict]:
-    """The rows whose Pareto k exceeds :data:`~brdf_infer.verdict.PARETO_K_LIMIT`, each with
-    its index, series, sample, angles [deg] and k."""
+def high_k_rows(
+    measurements: Measurements, pareto_k: np.ndarray, limit: float = PARETO_K_LIMIT
+) -> list[dict]:
+    """The rows whose Pareto k exceeds ``limit``, each with its index, series, sample, angles
+    [deg] and k."""
     rows = []
-    for index in np.flatnonzero(pareto_k > PARETO_K_LIMIT):
+    for index in np.flatnonzero(pareto_k > limit):
         phi = None if measurements.phi_s_deg is None else float(measurements.phi_s_deg[index])
         rows.append(
             {
@@ -238,7 +241,7 @@ def run_posterior(
     """Sample the scene's posterior and write posterior.nc, summary.json, bands.json.
 
     Args:
-        settings: how to sample (:class:`~brdf_infer.settings.PosteriorSettings`: sampler,
+        settings: how to sample (:class:`~brdf_infer.scene.settings.PosteriorSettings`: sampler,
             chains, draws, warmup, walkers, steps, seed, target_accept; its defaults are
             ``brdf-infer posterior``'s).
         out: output directory (nothing written when None; emcee then keeps no checkpoint).
@@ -256,7 +259,7 @@ def run_posterior(
             its exact leave-one-out term (:mod:`brdf_infer.posterior._loo_refit`); False:
             neither (studies, batch): such a variant is reported unreliable, such a row stays
             a failure of the verdict.
-        **sampler_settings: fields of :class:`~brdf_infer.settings.PosteriorSettings` in
+        **sampler_settings: fields of :class:`~brdf_infer.scene.settings.PosteriorSettings` in
             place of ``settings``' (``run_posterior(scene, rows, draws=500)``).
 
     Raises:
@@ -456,7 +459,7 @@ def complete_run(
     clock.lap("diagnostics")
     # thinning raises the draws' relative efficiency by up to its factor
     loo = psis_loo(log_lik, cdf, min(1.0, relative_efficiency(idata.posterior) * thinning))
-    exact = exact_loo_rows(model, result, loo.pareto_k, PARETO_K_LIMIT) if refit else {}
+    exact = exact_loo_rows(model, result, loo.pareto_k, loo.limit) if refit else {}
     clock.lap("loo")
     answer = answer_records(model, measurements, result, theta_i_band, with_tis, seed, refit)
     clock.lap("answer")

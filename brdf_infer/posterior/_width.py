@@ -54,8 +54,8 @@ from brdf_infer.model.error_model import ErrorSettings
 from brdf_infer.posterior._model import PosteriorModel, build_posterior_model
 from brdf_infer.posterior._power_scaling import log_likelihood_draws, sample_scale_likelihoods
 from brdf_infer.tables.measurements import Measurements
+from brdf_infer.verdict import PARETO_K_LIMIT
 
-PARETO_K_LIMIT = 0.7
 HEADLINE_TIS_DEG = 70.0  # the article's TIS angle (Sec. 7)
 TAU_NODES = 24  # Gauss–Legendre nodes in ln τ (module docstring)
 

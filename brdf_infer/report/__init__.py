@@ -1,5 +1,7 @@
-"""The HTML diagnostic report of a posterior run, and its figures (imports matplotlib); the
-figures and pages of the studies (SBC, comparison, sensitivity), written beside their results."""
+"""What a run hands over: the HTML diagnostic report of a posterior run and its figures (imports
+matplotlib); the figures and pages of the studies (SBC, comparison, sensitivity), written beside
+their results; and, in :mod:`brdf_infer.report.export`, the posterior's BRDF as files for
+optical software (Zemax tabular .BSDF, ABg)."""
 
 from brdf_infer.report._build import FIGURE_DIR, REPORT_FILE, write_report
 from brdf_infer.report._compare import compare_figure, compare_table_html, write_comparison

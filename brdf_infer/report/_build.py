@@ -12,7 +12,6 @@ from brdf_infer._internal.precision import ensure_float64
 from brdf_infer.errors import BadInputError
 from brdf_infer.model import fold_statement
 from brdf_infer.posterior import THRESHOLDS, draws_params, family_draws, run_scene
-from brdf_infer.raytrace import load_detector_images
 from brdf_infer.report import _figures, _html, _noise
 from brdf_infer.report._compare import compare_section
 from brdf_infer.report._design import design_section
@@ -38,6 +37,7 @@ from brdf_infer.runs.folder import (
     RunFolder,
 )
 from brdf_infer.scene import tis_angles
+from brdf_infer.studies.raytrace import load_detector_images
 from brdf_infer.verdict import PARETO_K_LIMIT, Verdict
 
 __all__ = ["FIGURE_DIR", "REPORT_FILE", "write_report"]

@@ -18,6 +18,7 @@ from brdf_infer.report._html import escape
 from brdf_infer.report._html import figure as html_figure
 from brdf_infer.runs.folder import COMPARE_FIGURE, COMPARE_FILE, RunFolder
 from brdf_infer.studies.compare import ComparisonResult
+from brdf_infer.verdict import PARETO_K_LIMIT
 
 UNTRUSTED = "sampler diagnostics fail"
 
@@ -40,7 +41,10 @@ def compare_frame(payload: dict[str, Any]) -> pd.DataFrame:
             "weight": [row["weight"] for row in rows],
             "se": [row["se"] for row in rows],
             "dse": [row["dse"] for row in rows],
-            "warning": [row["pareto_k_max_after_refit"] > 0.7 for row in rows],
+            "warning": [
+                row["pareto_k_max_after_refit"] > row.get("pareto_k_limit", PARETO_K_LIMIT)
+                for row in rows
+            ],
             "scale": ["log"] * len(rows),
         },
         index=[label(row) for row in rows],

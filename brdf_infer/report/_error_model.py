@@ -140,7 +140,10 @@ def loo_table(loo: dict) -> str:
         [
             ["elpd_loo", f"{loo['elpd_loo']:.2f} ± {loo['se']:.2f}"],
             ["p_loo", f"{loo['p_loo']:.2f}"],
-            [f"points with k > {PARETO_K_LIMIT}, not refitted", int(loo["pareto_k_high"])],
+            [
+                f"points with k > {loo.get('pareto_k_limit', PARETO_K_LIMIT):.2g}, not refitted",
+                int(loo["pareto_k_high"]),
+            ],
             ["points refitted without them (exact LOO)", len(loo.get("loo_refit_rows", []))],
         ],
     )

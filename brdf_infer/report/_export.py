@@ -8,10 +8,10 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 
-from brdf_infer.export import read_bsdf
 from brdf_infer.model import brdf_hemisphere, fold_statement
 from brdf_infer.model.params import HemisphereConstants, Params
 from brdf_infer.report import _html
+from brdf_infer.report.export import read_bsdf
 from brdf_infer.runs.folder import RunFolder
 
 SHOWN_THETA_I_DEG = (0.0, 30.0, 60.0, 80.0)

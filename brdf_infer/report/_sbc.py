@@ -12,7 +12,7 @@ from matplotlib.figure import Figure
 from brdf_infer.model import FAMILIES
 from brdf_infer.report import _html
 from brdf_infer.runs.folder import SBC_FILE, RunFolder
-from brdf_infer.settings import PLANTED_FAULTS
+from brdf_infer.scene.settings import PLANTED_FAULTS
 from brdf_infer.studies.sbc import COVERAGE_LEVELS, HISTOGRAM_BINS, SbcResult
 from brdf_infer.studies.uniformity import ecdf_band, uniform_rank_band
 from brdf_infer.verdict import ALL_PASS, Verdict

@@ -1,5 +1,5 @@
 """The report's table of the ray traces a run wrote (Sec. 6; read by
-:func:`brdf_infer.raytrace.load_traces`)."""
+:func:`brdf_infer.studies.raytrace.load_traces`)."""
 
 from __future__ import annotations
 

@@ -57,11 +57,13 @@ class Predictive(TypedDict):
     se: float
     p_loo: float
     pareto_k_max: float
-    pareto_k_high: int  # rows above 0.7, those refitted aside
+    pareto_k_high: int  # rows above pareto_k_limit, those refitted aside
+    # min(1 − 1/log₁₀ S, 0.7) of the S draws PSIS-LOO read (runs before it: 0.7 implied)
+    pareto_k_limit: NotRequired[float]
     pareto_k: NotRequired[list[float]]  # every row's (runs written before it lack it)
-    # the rows above 0.7: row, series, sample, theta_i_deg, theta_s_deg, [phi_s_deg], k
+    # the rows above pareto_k_limit: row, series, sample, theta_i_deg, theta_s_deg, [phi_s_deg], k
     pareto_k_rows: NotRequired[list[dict[str, Any]]]
-    # rows above 0.7 whose terms a refit without them computed exactly (the fields of
+    # rows above pareto_k_limit whose terms a refit without them computed exactly (the fields of
     # pareto_k_rows and elpd_exact); pareto_k_high and pareto_k_rows leave them out
     loo_refit_rows: NotRequired[list[dict[str, Any]]]
     loo_pit: list[float]

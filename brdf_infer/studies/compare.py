@@ -50,10 +50,11 @@ from brdf_infer.posterior import (
 )
 from brdf_infer.runs.folder import COMPARE_FILE as COMPARE_FILE  # the old name, kept
 from brdf_infer.scene import Scene
-from brdf_infer.settings import CompareSettings
+from brdf_infer.scene.settings import CompareSettings
 from brdf_infer.tables.measurements import Measurements
+from brdf_infer.verdict import PARETO_K_LIMIT as PARETO_K_LIMIT  # the old name, kept
+from brdf_infer.verdict import pareto_k_limit
 
-PARETO_K_LIMIT = 0.7
 TIS_DRAWS = 400  # posterior draws the TIS band is computed from
 TIS_ANGLE_DEG = 70.0
 
@@ -173,7 +174,8 @@ def fit_family(
         loo = az.loo(idata, pointwise=True)
     refitted, exact = [], {}
     if settings.refit:
-        for row in np.flatnonzero(np.asarray(loo.pareto_k) > PARETO_K_LIMIT):
+        limit = pareto_k_limit(int(loo.n_samples))
+        for row in np.flatnonzero(np.asarray(loo.pareto_k) > limit):
             refit = program.run(without_row(model, int(row)), keys, settings.draws)
             terms = loo_terms(model, refit.sites)[0][..., row].reshape(-1)
             exact[int(row)] = float(logsumexp(terms) - np.log(terms.size))
@@ -217,7 +219,7 @@ def _elpd(fit: FamilyResult):
         pareto_k = np.asarray(loo.pareto_k).copy()
         pareto_k[list(fit.exact_elpd)] = 0.0  # exact now
         loo.pareto_k.values[:] = pareto_k
-        loo["warning"] = bool(np.any(pareto_k > PARETO_K_LIMIT))
+        loo["warning"] = bool(np.any(pareto_k > pareto_k_limit(int(loo.n_samples))))
     return loo, raw_k_max
 
 
@@ -233,10 +235,10 @@ def rank_families(fits: dict[str, FamilyResult]) -> tuple[list[dict[str, Any]], 
     for name, row in frame.iterrows():
         fit = fits[name]
         k_max = float(np.max(np.asarray(loos[name].pareto_k)))
+        limit = pareto_k_limit(int(loos[name].n_samples))
         if fit.refitted_rows:
             notes.append(
-                f"{name}: Pareto k > {PARETO_K_LIMIT} for rows {fit.refitted_rows} "
-                "(LOO by refit there)"
+                f"{name}: Pareto k > {limit:.2g} for rows {fit.refitted_rows} (LOO by refit there)"
             )
         if fit.sampler_failures:
             notes.append(
@@ -254,6 +256,7 @@ def rank_families(fits: dict[str, FamilyResult]) -> tuple[list[dict[str, Any]], 
                 "p_loo": float(row["p_loo"]),
                 "pareto_k_max": elpds[name][1],
                 "pareto_k_max_after_refit": k_max,
+                "pareto_k_limit": limit,
             }
         )
     return table, notes

@@ -1,6 +1,6 @@
 """Does the instrument model matter? A synthetic experiment with known parameters.
 
-The ray tracer (:mod:`brdf_infer.raytrace`, an implementation separate from the kernel)
+The ray tracer (:mod:`brdf_infer.studies.raytrace`, an implementation separate from the kernel)
 simulates what the setup measures at known parameters — dPs/Pi through AD (``aperture``) or
 the Eq. (2) image ratio (``image``) — for every row of a scene; the scene's own generative
 error model adds its noise (value noise, repeatability, sample and calibration effects,
@@ -31,7 +31,7 @@ def traced_values(
 ) -> np.ndarray:
     """The ray tracer's value of ``instrument``'s quantity at every row (series by series,
     each with its own beam geometry)."""
-    from brdf_infer.raytrace import raytrace_series
+    from brdf_infer.studies.raytrace import raytrace_series
 
     values = np.full(len(measurements), np.nan)
     for series in dict.fromkeys(measurements.series):

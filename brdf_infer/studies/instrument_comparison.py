@@ -102,7 +102,7 @@ def compare_instruments(
         :func:`instrument_entry` with ``"raytrace"``: :func:`traced_agreement` and the rows).
     """
     from brdf_infer.posterior import draws_params, run_posterior
-    from brdf_infer.raytrace import raytrace_posterior_payload, thin_draws
+    from brdf_infer.studies.raytrace import raytrace_posterior_payload, thin_draws
 
     done = dict(done or {})
     models = []

@@ -28,7 +28,7 @@ or images per row, or the linearisation of the angle slopes): data and inference
 the error. The benchmark's misspecification study (:mod:`brdf_infer.bench._misspec`) measures
 what such errors cost the intervals. Planted faults in the inference only show that the check
 has power against what it checks: ``planted_fault``
-(:data:`brdf_infer.settings.PLANTED_FAULTS`: the whitening's log-Jacobian dropped, or every
+(:data:`brdf_infer.scene.settings.PLANTED_FAULTS`: the whitening's log-Jacobian dropped, or every
 free prior moved by one prior sd) and ``sigma_scale`` (the likelihood's σ scaled; the learned
 noise scales absorb most of it, so it fails through them).
 """
@@ -61,7 +61,7 @@ from brdf_infer.posterior import (
 )
 from brdf_infer.runs.folder import SBC_FILE as SBC_FILE  # the old name, kept
 from brdf_infer.scene import Scene
-from brdf_infer.settings import SbcSettings, check_planted_fault_name
+from brdf_infer.scene.settings import SbcSettings, check_planted_fault_name
 from brdf_infer.tables.measurements import Measurements
 
 QUANTITIES: tuple[str, ...] = (*PARAM_NAMES, "tis70")  # ranked for strumik2024
@@ -246,7 +246,7 @@ def run_sbc(
 
 
 def check_planted_fault(fault: str | None, scene: Scene, model: str | None = None) -> None:
-    """Check that ``fault`` is None or a key of :data:`~brdf_infer.settings.PLANTED_FAULTS`
+    """Check that ``fault`` is None or a key of :data:`~brdf_infer.scene.settings.PLANTED_FAULTS`
     that applies to the scene's posterior under the family ``model`` (default: the scene's).
 
     Raises:
@@ -287,7 +287,7 @@ def moved_prior(prior: Prior) -> Prior:
 
 def planted_inference(model: PosteriorModel, fault: str | None) -> PosteriorModel:
     """The model the inference runs with ``fault`` (a key of
-    :data:`~brdf_infer.settings.PLANTED_FAULTS`, checked by :func:`check_planted_fault`)
+    :data:`~brdf_infer.scene.settings.PLANTED_FAULTS`, checked by :func:`check_planted_fault`)
     planted; the simulations keep ``model``."""
     if fault == "jacobian":
         return dataclasses.replace(model, drop_log_jacobian=True)

@@ -45,7 +45,7 @@ from brdf_infer.model.error_model import CALIBRATIONS, ROTATION_COUPLINGS
 from brdf_infer.runs.folder import SENSITIVITY_FIGURE as SENSITIVITY_FIGURE  # the old name, kept
 from brdf_infer.runs.folder import SENSITIVITY_FILE as SENSITIVITY_FILE  # the old name, kept
 from brdf_infer.scene import TIS_ANGLE_DEG, Scene, parse_errors, tis_angles
-from brdf_infer.settings import SensitivitySettings
+from brdf_infer.scene.settings import SensitivitySettings
 from brdf_infer.tables.measurements import Measurements
 
 if TYPE_CHECKING:  # ArviZ is imported where it is used: the command line's parser stays light
@@ -286,7 +286,7 @@ def _summarise(
         loo_terms,
         tis_band,
     )
-    from brdf_infer.studies.compare import PARETO_K_LIMIT
+    from brdf_infer.verdict import PARETO_K_LIMIT
 
     sites = output.sites
     log_lik = loo_terms(model, sites)[0]

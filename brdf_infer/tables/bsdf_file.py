@@ -1,6 +1,6 @@
 """Zemax / Radiant "BSDF Data Interchange" tabular files (.BSDF): their reader and writer, and
 their specular frame. Read as measurements (:mod:`brdf_infer.tables.bsdf_measurements`) and written
-as exports (:mod:`brdf_infer.export`).
+as exports (:mod:`brdf_infer.report.export`).
 
 Layout (one keyword per line; ``#`` starts a comment line)::
 

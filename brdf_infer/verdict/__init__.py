@@ -39,8 +39,17 @@ from brdf_infer.runs.records import Bands, PosteriorSummary
 from brdf_infer.tables.screening import table_facts
 from brdf_infer.verdict.plausibility import answer_checks
 
-PARETO_K_LIMIT = 0.7
+PARETO_K_LIMIT = 0.7  # above it importance weights are unreliable whatever S (PSIS paper, Sec. 3)
 ALL_PASS = "every diagnostic passes"
+
+
+def pareto_k_limit(samples: int) -> float:
+    """The largest Pareto k̂ of a reliable importance-sampling estimate from ``samples``
+    draws: min(1 − 1/log₁₀ S, :data:`PARETO_K_LIMIT`) (Vehtari et al. 2024, JMLR 25(72),
+    Sec. 3; ArviZ's ``loo`` warns at the same value): 0.67 at S = 1000, 0.7 from S ≈ 2200."""
+    return min(1.0 - 1.0 / np.log10(samples), PARETO_K_LIMIT)
+
+
 FORCED = "forced past a plausibility check: "
 IMPLAUSIBLE = "implausible answer: "
 FACT = "Of note: "
@@ -123,7 +132,7 @@ def posterior_verdict(
             words.append(f"{len(named) - NAMED_ROWS} more in summary.json")
         where = ": " + "; ".join(words) if words else ""
         lines.append(
-            f"{bad} measurement(s) with Pareto k > {PARETO_K_LIMIT} (PSIS-LOO unreliable "
+            f"{bad} measurement(s) with Pareto k > {_loo_limit(summary):.2g} (PSIS-LOO unreliable "
             f"there){where}"
         )
     return Verdict(tuple(lines), tuple(answer_facts(summary)))
@@ -210,11 +219,16 @@ def answer_facts(summary: PosteriorSummary) -> list[str]:
     refitted = summary.get("predictive", {}).get("loo_refit_rows") or []
     if refitted:
         facts.append(
-            f"{len(refitted)} influential measurement(s), Pareto k > {PARETO_K_LIMIT}, their "
-            "leave-one-out terms from a refit without them: "
+            f"{len(refitted)} influential measurement(s), Pareto k > {_loo_limit(summary):.2g}, "
+            "their leave-one-out terms from a refit without them: "
             + "; ".join(row_words(row) for row in refitted)
         )
     return facts
+
+
+def _loo_limit(summary: PosteriorSummary) -> float:
+    """The Pareto k̂ limit the run's PSIS-LOO was judged by (runs before it: 0.7)."""
+    return summary.get("predictive", {}).get("pareto_k_limit", PARETO_K_LIMIT)
 
 
 NOISE_WORDS = {"sample_sd": "sample-to-sample scale", "repeatability": "repeatability"}

@@ -23,7 +23,8 @@ whose π·BRDF0 or TIS exceeds 1) and stops on the first that fails, unless
 
 The fit summaries (:func:`paper_fit_summary`, :func:`lsq_summary`) are the JSON objects of
 ``brdf-infer fit --json``. The job's numbered steps and the studies, one function each, are in
-``_studies`` (private to this package).
+``_studies`` (private to this package). Posteriors of many scenes in one compiled program, over
+one or several processes, are :mod:`brdf_infer.workflow.batch`.
 """
 
 from __future__ import annotations
@@ -39,7 +40,7 @@ from brdf_infer.runs.folder import FIT_LSQ_FILE, FIT_PAPER_FILE, RunFolder
 from brdf_infer.runs.folder import STUDIES_FILE as STUDIES_FILE  # the old name, kept
 from brdf_infer.runs.records import PosteriorSummary
 from brdf_infer.scene import Scene, Studies
-from brdf_infer.settings import LSQ_STARTS, RunSettings
+from brdf_infer.scene.settings import LSQ_STARTS, RunSettings
 from brdf_infer.tables.measurements import Measurements
 from brdf_infer.verdict import Verdict
 from brdf_infer.verdict.plausibility import Implausible
@@ -280,7 +281,7 @@ def run_traces(scene: Scene, measurements: Measurements, posterior_run) -> list[
     parameter set (e.g. ``uv-paper``) where it names one."""
     from brdf_infer.model.params import PARAMETER_SETS
     from brdf_infer.posterior import draws_params
-    from brdf_infer.raytrace import raytrace_payload, raytrace_posterior_payload, thin_draws
+    from brdf_infer.studies.raytrace import raytrace_payload, raytrace_posterior_payload, thin_draws
 
     draws = thin_draws(draws_params(posterior_run.idata.posterior), RUN_TRACE_DRAWS)
     traces = [
@@ -462,7 +463,7 @@ def _posterior(job: Job, options: dict[str, Any], forced: list[str]):
 
 def _raytrace_study(job: Job, posterior) -> None:
     """Study: ray traces of the posterior (Sec. 6)."""
-    from brdf_infer.raytrace import write_traces
+    from brdf_infer.studies.raytrace import write_traces
 
     scene = job.scene
     job.step(f"ray tracing series {scene.raytrace.series} (Sec. 6)")

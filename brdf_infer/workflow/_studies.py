@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from brdf_infer.scene import Scene, Studies
-from brdf_infer.settings import RunSettings
+from brdf_infer.scene.settings import RunSettings
 from brdf_infer.tables.measurements import Measurements
 
 

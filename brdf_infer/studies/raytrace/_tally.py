@@ -14,8 +14,8 @@ import numpy as np
 
 from brdf_infer._internal.sharding import gather_batch, shard_batch
 from brdf_infer.model.params import Params
-from brdf_infer.raytrace._setup import Configuration
-from brdf_infer.raytrace._trace import ESTIMATORS, TALLIES, Setup, tally_moments
+from brdf_infer.studies.raytrace._setup import Configuration
+from brdf_infer.studies.raytrace._trace import ESTIMATORS, TALLIES, Setup, tally_moments
 
 CHUNK_RAYS = 2**17  # rays per compiled call (memory ~ 100 MB)
 

@@ -49,13 +49,13 @@ import numpy as np
 from brdf_infer._internal.atomic import atomic_write_bytes, atomic_write_json
 from brdf_infer._internal.outlock import writing
 from brdf_infer.errors import BadInputError
-from brdf_infer.export._abg import AbgFit, fit_abg
-from brdf_infer.export._grid import ScatterGrid
-from brdf_infer.export._source import Source, draw_indices
-from brdf_infer.export._zemax import export_zemax
 from brdf_infer.model import fold_statement, tis
 from brdf_infer.model.params import Params, params_to_dict
 from brdf_infer.posterior import FAMILY_TIS_DRAWS, tis_band
+from brdf_infer.report.export._abg import AbgFit, fit_abg
+from brdf_infer.report.export._grid import ScatterGrid
+from brdf_infer.report.export._source import Source, draw_indices
+from brdf_infer.report.export._zemax import export_zemax
 from brdf_infer.runs.folder import RunFolder
 
 ABG_COLUMNS = ("theta_i_deg", "A", "B", "g", "tis_model", "tis_abg", "rms_log_error")

@@ -10,8 +10,8 @@ import numpy as np
 
 from brdf_infer.model import brdf_hemisphere, solid_angle
 from brdf_infer.model.params import Params
-from brdf_infer.raytrace._trace import Setup
 from brdf_infer.scene import RaytraceSettings, Scene
+from brdf_infer.studies.raytrace._trace import Setup
 from brdf_infer.tables.measurements import Measurements
 
 

@@ -45,19 +45,21 @@ percent, angles that look like radians; :mod:`brdf_infer.verdict.plausibility`),
 ``BatchSettings(force=True)``: then it runs and its verdict names the check.
 """
 
-from brdf_infer.batch._batch import Batch, run_batch
-from brdf_infer.batch._entries import (
+from brdf_infer.scene.settings import (
+    BatchSettings as BatchSettings,
+)  # as before: bench imports it here
+from brdf_infer.workflow.batch._batch import Batch, run_batch
+from brdf_infer.workflow.batch._entries import (
     BATCH_FILE,
     INTERRUPTED,
     BatchInterrupted,
     BatchResult,
     SceneEntry,
 )
-from brdf_infer.batch._folders import OLD_MARK, PARTIAL_MARK, remove_stale_partials
-from brdf_infer.batch._groups import expand_sources, structure_key
-from brdf_infer.batch._signals import GRACE_SECONDS, run_batch_until_signalled
-from brdf_infer.batch._team import PeerFailed, Team, join_processes
-from brdf_infer.settings import BatchSettings as BatchSettings  # as before: bench imports it here
+from brdf_infer.workflow.batch._folders import OLD_MARK, PARTIAL_MARK, remove_stale_partials
+from brdf_infer.workflow.batch._groups import expand_sources, structure_key
+from brdf_infer.workflow.batch._signals import GRACE_SECONDS, run_batch_until_signalled
+from brdf_infer.workflow.batch._team import PeerFailed, Team, join_processes
 
 __all__ = [
     "BATCH_FILE",

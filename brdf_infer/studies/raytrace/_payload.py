@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 
 from brdf_infer.model.params import Params, params_to_dict
-from brdf_infer.raytrace._series import RaytraceResult, raytrace_posterior, raytrace_series
 from brdf_infer.scene import Scene
+from brdf_infer.studies.raytrace._series import RaytraceResult, raytrace_posterior, raytrace_series
 from brdf_infer.tables.measurements import Measurements
 
 

@@ -18,21 +18,6 @@ import numpy as np
 from brdf_infer._internal.outlock import note_written, require_complete, writing
 from brdf_infer._internal.precision import ensure_float64
 from brdf_infer._internal.processes import Processes
-from brdf_infer.batch._entries import (
-    BatchInterrupted,
-    BatchResult,
-    SceneEntry,
-    _tis_entry,
-)
-from brdf_infer.batch._folders import (
-    OLD_MARK,
-    PARTIAL_MARK,
-    _folder_names,
-    _remove,
-    remove_stale_partials,
-)
-from brdf_infer.batch._groups import _site_shapes, expand_sources, structure_key
-from brdf_infer.batch._team import Team
 from brdf_infer.errors import BadInputError
 from brdf_infer.posterior import (
     Cancelled,
@@ -56,8 +41,23 @@ from brdf_infer.runs.folder import (
     RunFolder,
 )
 from brdf_infer.scene import load_scene
-from brdf_infer.settings import BatchSettings
+from brdf_infer.scene.settings import BatchSettings
 from brdf_infer.verdict.plausibility import measurement_checks, require_plausible
+from brdf_infer.workflow.batch._entries import (
+    BatchInterrupted,
+    BatchResult,
+    SceneEntry,
+    _tis_entry,
+)
+from brdf_infer.workflow.batch._folders import (
+    OLD_MARK,
+    PARTIAL_MARK,
+    _folder_names,
+    _remove,
+    remove_stale_partials,
+)
+from brdf_infer.workflow.batch._groups import _site_shapes, expand_sources, structure_key
+from brdf_infer.workflow.batch._team import Team
 
 
 def _silent(message: str) -> None:

@@ -3,14 +3,14 @@ parameter set or of a posterior (median, 95 % bounds and single draws). The .BSD
 itself, its reader and writer and its specular frame, is :mod:`brdf_infer.tables.bsdf_file`
 (re-exported here)."""
 
-from brdf_infer.export._abg import AbgFit, fit_abg
-from brdf_infer.export._files import (
+from brdf_infer.report.export._abg import AbgFit, fit_abg
+from brdf_infer.report.export._files import (
     ABG_COLUMNS,
     export_abg,
     record_export,
     run_export,
 )
-from brdf_infer.export._grid import (
+from brdf_infer.report.export._grid import (
     DEFAULT_AZIMUTH_STEP_DEG,
     DEFAULT_RADIAL_STEP_DEG,
     DEFAULT_THETA_I_DEG,
@@ -19,8 +19,8 @@ from brdf_infer.export._grid import (
     scatter_grid,
     table_integral,
 )
-from brdf_infer.export._source import Source, draw_indices, planned_files
-from brdf_infer.export._zemax import export_zemax
+from brdf_infer.report.export._source import Source, draw_indices, planned_files
+from brdf_infer.report.export._zemax import export_zemax
 from brdf_infer.runs.folder import EXPORTS_FILE
 from brdf_infer.tables.bsdf_file import (
     BsdfFile,

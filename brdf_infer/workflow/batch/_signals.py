@@ -9,10 +9,10 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from brdf_infer.batch._batch import Batch, _silent
-from brdf_infer.batch._entries import BatchInterrupted, BatchResult
-from brdf_infer.batch._team import PeerFailed, Team
-from brdf_infer.settings import BatchSettings
+from brdf_infer.scene.settings import BatchSettings
+from brdf_infer.workflow.batch._batch import Batch, _silent
+from brdf_infer.workflow.batch._entries import BatchInterrupted, BatchResult
+from brdf_infer.workflow.batch._team import PeerFailed, Team
 
 GRACE_SECONDS = 3.0  # after a signal, how long the batch may take to stop on its own
 

@@ -12,9 +12,9 @@ import numpy as np
 
 from brdf_infer.errors import BadInputError
 from brdf_infer.model.params import Params
-from brdf_infer.raytrace._images import simulate_images
 from brdf_infer.runs.folder import DETECTOR_IMAGES_FILE, RunFolder
 from brdf_infer.scene import Scene
+from brdf_infer.studies.raytrace._images import simulate_images
 from brdf_infer.tables.measurements import Measurements
 
 _ARRAYS = ("scattered", "reference", "x_edges_mm", "y_edges_mm", "signal_half_size_mm")
@@ -22,7 +22,7 @@ _ARRAYS = ("scattered", "reference", "x_edges_mm", "y_edges_mm", "signal_half_si
 
 def write_traces(out: Path, scene: Scene, measurements: Measurements, traces: list[dict]) -> dict:
     """Write ``traces`` and the detector images of the first one into ``out``; returns the
-    images (:func:`~brdf_infer.raytrace.simulate_images`)."""
+    images (:func:`~brdf_infer.studies.raytrace.simulate_images`)."""
     images = simulate_images(
         scene, measurements, Params(**traces[0]["params"]), seed=traces[0]["seed"]
     )

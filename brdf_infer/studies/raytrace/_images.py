@@ -6,9 +6,9 @@ import jax
 import numpy as np
 
 from brdf_infer.model.params import Params
-from brdf_infer.raytrace._setup import build_setup, configurations
-from brdf_infer.raytrace._trace import detector_images
 from brdf_infer.scene import Scene
+from brdf_infer.studies.raytrace._setup import build_setup, configurations
+from brdf_infer.studies.raytrace._trace import detector_images
 from brdf_infer.tables.measurements import Measurements
 
 

@@ -13,10 +13,15 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from brdf_infer.export._grid import ScatterGrid, table_integral
-from brdf_infer.export._source import _BAND_QUANTILES, _TIS_QUANTILE_FILES, Source, draw_indices
 from brdf_infer.model import ModelFamily, Physical, family, fold_statement
 from brdf_infer.posterior import FAMILY_TIS_DRAWS, QUANTILES
+from brdf_infer.report.export._grid import ScatterGrid, table_integral
+from brdf_infer.report.export._source import (
+    _BAND_QUANTILES,
+    _TIS_QUANTILE_FILES,
+    Source,
+    draw_indices,
+)
 from brdf_infer.tables.bsdf_file import BSDF_SOURCE, BsdfFile, specular_frame_to_model, write_bsdf
 
 _ENVELOPE = (

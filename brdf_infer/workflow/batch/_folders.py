@@ -6,7 +6,7 @@ import os
 import shutil
 from pathlib import Path
 
-from brdf_infer.batch._entries import SceneEntry
+from brdf_infer.workflow.batch._entries import SceneEntry
 
 PARTIAL_MARK = ".partial-"  # out/.<scene>.partial-<pid>: a run folder being written
 OLD_MARK = ".old-"  # out/.<scene>.old-<pid>: the folder a complete one is replacing

@@ -27,14 +27,15 @@ import numpy as np
 
 from brdf_infer.model import brdf_hemisphere
 from brdf_infer.model.params import Params
-from brdf_infer.raytrace._setup import (
+from brdf_infer.scene import Scene
+from brdf_infer.studies.raytrace._setup import (
     Configuration,
     _aperture_factor,
     build_setup,
     configurations,
     point_estimate,
 )
-from brdf_infer.raytrace._tally import (
+from brdf_infer.studies.raytrace._tally import (
     Estimate,
     _chunks,
     _estimate,
@@ -43,8 +44,7 @@ from brdf_infer.raytrace._tally import (
     _trace_group,
     compile_tallies,
 )
-from brdf_infer.raytrace._trace import ESTIMATORS, Setup
-from brdf_infer.scene import Scene
+from brdf_infer.studies.raytrace._trace import ESTIMATORS, Setup
 from brdf_infer.tables.measurements import Measurements
 
 BAND_QUANTILES = {"lo95": 0.025, "median": 0.5, "hi95": 0.975}
