@@ -126,6 +126,11 @@ def _student_t_log_density(points, centre, lower) -> np.ndarray:
     return constant - 0.5 * (nu + dimension) * np.log1p(squared / nu)
 
 
+def _mapped(function: Callable) -> Callable:
+    """``function(point, data)`` over a leading axis of points, compiled: ``lax.map``."""
+    return jax.jit(lambda points, data: jax.lax.map(lambda point: function(point, data), points))
+
+
 def _positive_definite(matrix: np.ndarray) -> bool:
     return bool(np.all(np.isfinite(matrix)) and np.all(np.linalg.eigvalsh(matrix) > 0))
 
@@ -169,10 +174,13 @@ class LaplaceProgram:
         def search(key, data):
             return flat.search(key, data, SEARCH_TOLERANCE, SEARCH_STEPS)
 
-        self._search = jax.jit(jax.vmap(search, in_axes=(0, None)))
-        self._gradients = jax.jit(jax.vmap(jax.grad(flat.potential), in_axes=(0, None)))
-        self._potentials = jax.jit(jax.vmap(flat.potential, in_axes=(0, None)))
-        self._constrain = jax.jit(jax.vmap(flat.constrain, in_axes=(0, None)))
+        # one point at a time (lax.map), not vmapped: the same numbers to rounding, but on a
+        # CPU (1986 rows, warm cache) the vmapped BFGS loop traced 2.4× and ran 2.7× longer,
+        # the vmapped gradient ran 1.5× longer
+        self._search = _mapped(search)
+        self._gradients = _mapped(jax.grad(flat.potential))
+        self._potentials = _mapped(flat.potential)
+        self._constrain = _mapped(flat.constrain)
         rows = int(np.shape(model.data.mask)[0])
         self.block = int(np.clip(2 ** int(np.log2(max(1, BLOCK_CELLS // rows))), 8, 256))
 

@@ -46,17 +46,23 @@ def pointwise_loo_terms(
     return jax.vmap(one)(means, factors, diagonals)
 
 
-def loo_pit(log_likelihood: np.ndarray, cdf: np.ndarray) -> np.ndarray:
+def loo_pit(log_likelihood: np.ndarray, cdf: np.ndarray, reff: float = 1.0) -> np.ndarray:
     """LOO-PIT of each row: Σ_s w_si P(ỹᵢ ≤ yᵢ | θ_s) with PSIS weights from log p(yᵢ|y₋ᵢ,θ_s).
 
     Args:
         log_likelihood: (draws, rows) pointwise leave-one-out log likelihood.
         cdf: (draws, rows) conditional predictive CDF at the observation.
+        reff: the draws' relative efficiency, as for PSIS-LOO.
     """
-    log_weights, _ = az.psislw(-np.asarray(log_likelihood).T)  # (rows, draws): draws last
+    log_weights, _ = az.psislw(-np.asarray(log_likelihood).T, reff)  # (rows, draws)
+    return weighted_pit(log_weights, np.asarray(cdf).T)
+
+
+def weighted_pit(log_weights: np.ndarray, cdf: np.ndarray) -> np.ndarray:
+    """Σ_s w_si P(ỹᵢ ≤ yᵢ | θ_s) from (rows, draws) log weights and conditional CDFs."""
     weights = np.exp(log_weights - np.max(log_weights, axis=1, keepdims=True))
     weights /= weights.sum(axis=1, keepdims=True)
-    return np.clip(np.sum(weights * np.asarray(cdf).T, axis=1), 0.0, 1.0)
+    return np.clip(np.sum(weights * cdf, axis=1), 0.0, 1.0)
 
 
 def uniformity_p_value(values: np.ndarray) -> float:
@@ -131,8 +137,9 @@ def psis_loo(
     so that no more than ``rows_per_chunk`` × draws weights are held at once (the terms
     themselves may be float32: the sums are in float64).
 
-    The same estimator as ArviZ's ``loo`` (weights smoothed with ``reff``) and :func:`loo_pit`
-    (weights smoothed without it), to rounding.
+    The same estimator as ArviZ's ``loo`` and ``loo_pit``, to rounding: one set of weights,
+    smoothed with ``reff`` as both of them smooth theirs, serves the elpd and the LOO-PIT (the
+    conditional CDF in place of ArviZ's predictive draws ỹ ≤ y).
 
     Args:
         log_likelihood: (chains, draws, rows) log p(yᵢ | y₋ᵢ, θ_s).
@@ -151,7 +158,7 @@ def psis_loo(
         log_weights, pareto_k[block] = az.psislw(-values, reff)
         elpd[block] = logsumexp(log_weights + values, axis=1)
         lppd[block] = logsumexp(values, axis=1) - np.log(draws)
-        pit[block] = loo_pit(values.T, cdf[:, block])
+        pit[block] = weighted_pit(log_weights, np.asarray(cdf[:, block], float).T)
     return LeaveOneOut(
         elpd_loo=float(elpd.sum()),
         se=float(np.sqrt(rows * np.var(elpd))),
