@@ -90,11 +90,21 @@ class _Loader(importlib.abc.Loader):
         module.__spec__ = self.spec
 
 
+def new_name(old: str) -> str | None:
+    """The new dotted name of an old one: a moved module, or a module inside a moved package
+    (``brdf_infer.batch._team`` → ``brdf_infer.workflow.batch._team``, which would otherwise
+    load a second copy of the file under the old name); None for a name that did not move."""
+    if old in MOVED:
+        return MOVED[old]
+    package = next((name for name in MOVED if old.startswith(name + ".")), None)
+    return None if package is None else MOVED[package] + old[len(package) :]
+
+
 class _Finder(importlib.abc.MetaPathFinder):
-    """Finds the old names of :data:`MOVED`, and nothing else."""
+    """Finds the old names of :data:`MOVED` and of the modules inside them, nothing else."""
 
     def find_spec(self, fullname, path=None, target=None):
-        new = MOVED.get(fullname)
+        new = new_name(fullname)
         if new is None:
             return None
         return importlib.machinery.ModuleSpec(fullname, _Loader(new))

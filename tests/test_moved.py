@@ -102,3 +102,30 @@ def test_an_unknown_name_is_still_an_attribute_error():
         brdf_infer.not_a_module  # noqa: B018
     with pytest.raises(ModuleNotFoundError):
         importlib.import_module("brdf_infer.not_a_module")
+
+
+def test_a_module_inside_a_moved_package_is_the_new_module_not_a_second_copy():
+    """`brdf_infer.raytrace` moved as a package: its modules' old names give the new modules
+    (one class object, so isinstance holds across the names), each warning once."""
+    script = textwrap.dedent(
+        """
+        import warnings
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            import brdf_infer.raytrace._trace as old
+        import brdf_infer.studies.raytrace._trace as new
+        assert old is new, (old, new)
+        import brdf_infer.workflow.batch._team as team
+        with warnings.catch_warnings(record=True) as more:
+            warnings.simplefilter("always")
+            from brdf_infer.batch import _team
+        assert _team is team
+        moved = [str(w.message) for w in caught + more if w.category is FutureWarning]
+        assert any("brdf_infer.raytrace._trace moved to" in m for m in moved), moved
+        from brdf_infer._moved import new_name
+        assert new_name("brdf_infer.exportx") is None  # a prefix that is not a package's
+        print("ok")
+        """
+    )
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True)
+    assert done.returncode == 0 and done.stdout.strip() == "ok", done.stderr

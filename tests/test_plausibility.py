@@ -191,7 +191,7 @@ def test_the_verdict_passes_a_plausible_run_and_names_each_failure_in_order():
     thinned = _summary(0.1, [], pareto_k_high=1)
     thinned["predictive"]["pareto_k_limit"] = 2 / 3
     assert posterior_verdict(thinned, _tis_band(0.1), angles).lines == (
-        "1 measurement(s) with Pareto k > 0.67 (PSIS-LOO unreliable there)",
+        "1 measurement(s) with Pareto k > 0.667 (PSIS-LOO unreliable there)",
     )
     # a family without BRDF0 is judged by its TIS alone
     family_run = {**_summary(0.0), "pi_brdf0": None}

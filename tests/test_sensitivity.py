@@ -116,8 +116,11 @@ def test_library_json_follows_the_contract(calibration_study, lya):
             "ess_bulk_min",
             "divergences",
             "pareto_k_max",
+            "pareto_k_limit",
             "refitted_rows",
         }
+        limit = entry["diagnostics"]["pareto_k_limit"]
+        assert 0.0 < limit <= 0.7  # that of the draws read (verdict.pareto_k_limit)
     baseline = payload["baseline"]
     assert baseline["name"] == "default" and baseline["changes"] == {}
     assert baseline["d_elpd"] == 0.0 and baseline["dse"] == 0.0

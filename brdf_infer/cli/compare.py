@@ -49,7 +49,9 @@ def add_parser(commands) -> argparse.ArgumentParser:
         },
     )
     parser.add_argument(
-        "--no-refit", action="store_true", help="no exact refits where Pareto k > 0.7"
+        "--no-refit",
+        action="store_true",
+        help="no exact refits where Pareto k exceeds its limit (0.7 from 2200 draws)",
     )
     parser.add_argument("--out", help="also write compare.json and compare.png here")
     add_force_argument(parser)

@@ -40,7 +40,9 @@ def add_parser(commands) -> argparse.ArgumentParser:
     )
     add_nuts_arguments(parser, defaults, helps={"seed": "random seed (all)"})
     parser.add_argument(
-        "--no-refit", action="store_true", help="no exact refits where Pareto k > 0.7"
+        "--no-refit",
+        action="store_true",
+        help="no exact refits where Pareto k exceeds its limit (0.7 from 2200 draws)",
     )
     parser.add_argument(
         "--out",

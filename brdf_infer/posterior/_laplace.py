@@ -326,6 +326,8 @@ class LaplaceProgram:
                 rounds == ADAPT_ROUNDS
             ):
                 break
+            # a heuristic, not a reliability test: above 0.7 whatever the trial's size, the
+            # weighted moments rest on a few proposals and the variant lies away from them
             far = rounds == 0 and rescue is not None and trial.pareto_k > PARETO_K_LIMIT
             rescued = rescue() if far else None
             proposal = rescued or Proposal.weighted(trial.points, trial.log_weights)

@@ -1,7 +1,8 @@
 """Exact leave-one-out by refit where Pareto-smoothed importance sampling cannot be trusted.
 
 PSIS-LOO estimates each row's ln p(yᵢ | y₋ᵢ) by reweighting the full posterior's draws; a
-Pareto k̂ above 0.7 says the weights' tail is too heavy for that estimate (Vehtari, Simpson,
+Pareto k̂ above its limit (:func:`brdf_infer.verdict.pareto_k_limit`: 0.7 from 2200 draws) says
+the weights' tail is too heavy for that estimate (Vehtari, Simpson,
 Gelman, Yao and Gabry 2024, "Pareto smoothed importance sampling", JMLR 25(72)). Such a row is
 influential, not necessarily wrong, and its k̂ is itself a Monte Carlo estimate: on the bundled
 data one row (series II, θi 45°, θs 60°) gives k̂ between 0.7 and 1 from run to run, which
@@ -20,7 +21,7 @@ widened by one row), which spares the mode searches. A NUTS run's is sampled ane
 bundled rows, whose posterior is far from normal, the Student-t's Kish ESS is ≈ 25 % of its
 proposals and the influential row's exact term varied by ±0.08 between seeds against NUTS's
 ±0.01. A run refits at
-most :data:`MAX_REFIT_ROWS` rows: more rows above 0.7 point at the model rather than at
+most :data:`MAX_REFIT_ROWS` rows: more rows above the limit point at the model rather than at
 single rows, and the verdict names them as before.
 """
 

@@ -247,9 +247,8 @@ def width_attribution(
         sites: its draws, (chains, draws, ...).
         headline: every draw (flattened) of each headline quantity (:func:`headline_draws`).
         prior_headline: the same quantities over draws of the physical prior.
-        refit: a variant model's headline draws from a new posterior (:class:`Refitted`), for
-            a variant whose weights have k̂ above the limit of their number (None: reported
-            with k̂, no interval).
+        refit: a variant model's headline draws from a new posterior (:class:`Refitted`) where
+            the weights' k̂ exceeds their limit (None: reported with k̂, no interval).
         log_likelihood: the run's joint ln p(y | θ) of every draw (None: computed here).
         run_headline: where ``sites`` are a thinned set of the draws (a large table), the
             headline over all: the run's intervals; each ratio is over the thinned width.

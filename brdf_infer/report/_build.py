@@ -38,7 +38,7 @@ from brdf_infer.runs.folder import (
 )
 from brdf_infer.scene import tis_angles
 from brdf_infer.studies.raytrace import load_detector_images
-from brdf_infer.verdict import PARETO_K_LIMIT, Verdict
+from brdf_infer.verdict import PARETO_K_LIMIT, Verdict, limit_text
 
 __all__ = ["FIGURE_DIR", "REPORT_FILE", "write_report"]
 
@@ -268,18 +268,20 @@ def _shown(figures: list[Figure], *names: str) -> list[str]:
     return [_html.figure(png, caption) for name, caption, png in figures if name in names]
 
 
-def _thresholds(sampler: str) -> str:
-    """The thresholds the run's verdict applied, in words."""
-    if sampler == "laplace":
+def _thresholds(summary) -> str:
+    """The thresholds the run's verdict applied, in words (the leave-one-out terms' k̂ limit
+    that of the draws PSIS-LOO read: ``pareto_k_limit``)."""
+    loo = limit_text(summary["predictive"].get("pareto_k_limit", PARETO_K_LIMIT))
+    if summary["sampler"] == "laplace":
         return (
-            f"Laplace + PSIS: the importance weights' Pareto k ≤ {PARETO_K_LIMIT} and their "
-            f"effective sample size ≥ {THRESHOLDS['ess']} (R-hat between its chains, slices "
-            f"of one weighted set, is recorded, not checked); Pareto k ≤ {PARETO_K_LIMIT} "
-            "for every row's leave-one-out term."
+            f"Laplace + PSIS: the importance weights' Pareto k within the limit of their "
+            f"number (≤ {PARETO_K_LIMIT}) and their effective sample size ≥ "
+            f"{THRESHOLDS['ess']} (R-hat between its chains, slices of one weighted set, is "
+            f"recorded, not checked); Pareto k ≤ {loo} for every row's leave-one-out term."
         )
     return (
         f"R-hat ≤ {THRESHOLDS['r_hat']}, bulk and tail ESS ≥ {THRESHOLDS['ess']}, "
-        f"no divergences, BFMI ≥ {THRESHOLDS['bfmi']}, Pareto k ≤ {PARETO_K_LIMIT}, "
+        f"no divergences, BFMI ≥ {THRESHOLDS['bfmi']}, Pareto k ≤ {loo}, "
         f"emcee ≥ {THRESHOLDS['tau_multiple']} autocorrelation times."
     )
 
@@ -288,7 +290,7 @@ def _answer(run: RunFolder, verdict, summary, bands, scene, rows, member, figure
     """The verdict and the answer first, with the BRDF bands and the studies left out."""
     return [
         _html.verdict_box(verdict),
-        "<p>Thresholds: " + _html.escape(_thresholds(summary["sampler"])) + "</p>",
+        "<p>Thresholds: " + _html.escape(_thresholds(summary)) + "</p>",
         result_box(summary, bands, tis_angles(scene, rows), member),
         fold_note(bands, scene.outputs.reference_params is not None) if "tis" in bands else "",
         *_shown(figures, "brdf_bands"),

@@ -7,7 +7,7 @@ from brdf_infer._internal import arviz as az
 from brdf_infer.report import _html
 from brdf_infer.runs.folder import SUMMARY_FILE, VARIANTS_DIR, RunFolder
 from brdf_infer.runs.records import PosteriorSummary
-from brdf_infer.verdict import PARETO_K_LIMIT
+from brdf_infer.verdict import PARETO_K_LIMIT, limit_text
 
 SPREAD_VARIANT = "spread"
 
@@ -141,7 +141,8 @@ def loo_table(loo: dict) -> str:
             ["elpd_loo", f"{loo['elpd_loo']:.2f} ± {loo['se']:.2f}"],
             ["p_loo", f"{loo['p_loo']:.2f}"],
             [
-                f"points with k > {loo.get('pareto_k_limit', PARETO_K_LIMIT):.2g}, not refitted",
+                f"points with k > {limit_text(loo.get('pareto_k_limit', PARETO_K_LIMIT))}, "
+                "not refitted",
                 int(loo["pareto_k_high"]),
             ],
             ["points refitted without them (exact LOO)", len(loo.get("loo_refit_rows", []))],

@@ -15,7 +15,7 @@ from brdf_infer.model.params import PARAM_NAMES, PARAMETER_SETS
 from brdf_infer.report._table_views import in_plane, panel_grid, value_label
 from brdf_infer.runs.records import Bands
 from brdf_infer.scene import Scene
-from brdf_infer.verdict import PARETO_K_LIMIT
+from brdf_infer.verdict import PARETO_K_LIMIT, limit_text
 
 MAP_THETA_I_DEG = (5.0, 30.0, 50.0, 70.0)
 
@@ -229,7 +229,7 @@ def pareto_k(loo: dict) -> plt.Figure:
     k = np.asarray(loo["pareto_k"])
     limit = loo.get("pareto_k_limit", PARETO_K_LIMIT)
     axis.scatter(np.arange(k.size), k, s=14, c=np.where(k > limit, "crimson", "tab:blue"))
-    axis.axhline(limit, color="crimson", ls=":", label=f"k = {limit:.2g}")
+    axis.axhline(limit, color="crimson", ls=":", label=f"k = {limit_text(limit)}")
     axis.set_xlabel("measurement row [-]")
     axis.set_ylabel("Pareto k [-]")
     axis.set_title(f"PSIS-LOO: elpd = {loo['elpd_loo']:.1f} ± {loo['se']:.1f}")

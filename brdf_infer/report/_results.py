@@ -27,7 +27,7 @@ def width_words(width: dict | None) -> str:
         if entry["ratio"] is not None:
             parts.append(f"{name} {round(100 * (1.0 - entry['ratio'])):+d} %")
         else:
-            parts.append(f"{name}: unreliable (Pareto k {entry['pareto_k']:.1f})")
+            parts.append(f"{name}: unreliable (Pareto k {entry['pareto_k']:.2f})")
     if "without_note" in width:
         parts.append(width["without_note"])
     prior = width["prior"]

@@ -14,6 +14,7 @@ from brdf_infer.report import _html
 from brdf_infer.runs.folder import SENSITIVITY_FIGURE, SENSITIVITY_FILE, RunFolder
 from brdf_infer.scene import TIS_ANGLE_DEG
 from brdf_infer.studies.sensitivity import SensitivityResult
+from brdf_infer.verdict import PARETO_K_LIMIT, limit_text
 
 PRIOR_SENSITIVITY_LIMIT = 0.05  # power-scaling sensitivity above which a component matters
 
@@ -76,9 +77,12 @@ def sensitivity_rows(payload: dict[str, Any]) -> list[list[str]]:
         if health.get("ess_bulk_min", np.inf) < 400:
             notes.append(f"ESS {health['ess_bulk_min']:.0f}")
         refitted = health.get("refitted_rows", [])
+        limit = health.get("pareto_k_limit", PARETO_K_LIMIT)
         if refitted:
-            notes.append(f"rows {', '.join(str(r + 1) for r in refitted)} refitted (k > 0.7)")
-        elif health.get("pareto_k_max", 0.0) > 0.7:
+            notes.append(
+                f"rows {', '.join(str(r + 1) for r in refitted)} refitted (k > {limit_text(limit)})"
+            )
+        elif health.get("pareto_k_max", 0.0) > limit:
             notes.append(f"Pareto k {health['pareto_k_max']:.2f}")
         rows.append(
             [

@@ -82,7 +82,7 @@ class VerdictRecord(TypedDict):
 class VariantWidth(TypedDict):
     """A headline 95 % interval with one assumption of the error model removed."""
 
-    lo95: float | None  # None: unreliable (k̂ > 0.7 and no refit)
+    lo95: float | None  # None: unreliable (k̂ above its limit, no refit)
     hi95: float | None
     ratio: float | None  # its width over the run's (1 − ratio: the share the assumption carries)
     pareto_k: float  # of the importance weights to the variant

@@ -158,7 +158,8 @@ class BatchSettings:
 @dataclass(frozen=True)
 class CompareSettings:
     """How each family of a PSIS-LOO comparison is sampled (NUTS; a warmup of at least 1;
-    ``refit``: compute the leave-one-out term of a row with Pareto k > 0.7 exactly)."""
+    ``refit``: compute the leave-one-out term of a row with Pareto k above its limit
+    (:func:`~brdf_infer.verdict.pareto_k_limit`) exactly)."""
 
     chains: int = 4
     warmup: int = 500
@@ -179,7 +180,8 @@ class SensitivitySettings:
 
     The defaults keep the study at a few minutes on 2 cores: 4 × 500 draws give the 95 %
     intervals of TIS and π·BRDF0 to a few tenths of a per cent and PSIS-LOO its usual
-    precision. ``refit``: compute the leave-one-out term of a row with Pareto k > 0.7 exactly,
+    precision. ``refit``: compute the leave-one-out term of a row with Pareto k above its limit
+    (:func:`~brdf_infer.verdict.pareto_k_limit`) exactly,
     by one more posterior without it.
     """
 

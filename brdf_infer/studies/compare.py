@@ -15,7 +15,8 @@ transitions; :data:`brdf_infer.posterior.THRESHOLDS`) is marked ``sampler_ok: fa
 failures in words, and its place in the ranking is not to be trusted: its elpd comes from draws
 that may not represent its posterior.
 
-Where Pareto k > 0.7 the importance-sampling estimate of a row is unreliable; that row's
+Where Pareto k exceeds its limit (:func:`brdf_infer.verdict.pareto_k_limit` of the draws,
+0.7 from 2200) the importance-sampling estimate of a row is unreliable; that row's
 term is then computed exactly by refitting without it (leave-one-out by refit, i.e. K-fold
 with one row per fold for those rows). Refitting needs no new compilation: the row is left
 out by giving its measurement noise a σ of 10⁶ in ln R, which removes its information from
@@ -53,7 +54,7 @@ from brdf_infer.scene import Scene
 from brdf_infer.scene.settings import CompareSettings
 from brdf_infer.tables.measurements import Measurements
 from brdf_infer.verdict import PARETO_K_LIMIT as PARETO_K_LIMIT  # the old name, kept
-from brdf_infer.verdict import pareto_k_limit
+from brdf_infer.verdict import limit_text, pareto_k_limit
 
 TIS_DRAWS = 400  # posterior draws the TIS band is computed from
 TIS_ANGLE_DEG = 70.0
@@ -70,7 +71,7 @@ class FamilyResult:
         idata: the physical parameters and noise scales (posterior) and the pointwise
             leave-one-out log likelihood (log_likelihood ``obs``: chains, draws, rows).
         r_hat_max, ess_bulk_min, divergences: NUTS diagnostics.
-        refitted_rows: rows whose LOO term was computed by refitting (Pareto k > 0.7).
+        refitted_rows: rows whose LOO term was computed by refitting (Pareto k above its limit).
         exact_elpd: the refitted rows' exact elpd terms.
         seconds: wall time of this family (sampling, refits and TIS).
     """
@@ -155,7 +156,8 @@ def fit_family(
     *,
     progress: bool = False,
 ) -> FamilyResult:
-    """Sample ``name`` on the scene's rows; leave-one-out terms, refits where k > 0.7."""
+    """Sample ``name`` on the scene's rows; leave-one-out terms, refits where k̂ exceeds its
+    limit."""
     started = time.perf_counter()
     model = build_model(scene, measurements, name)
     member = family(name, scene.model.fold, scene.model.constants)
@@ -238,7 +240,8 @@ def rank_families(fits: dict[str, FamilyResult]) -> tuple[list[dict[str, Any]], 
         limit = pareto_k_limit(int(loos[name].n_samples))
         if fit.refitted_rows:
             notes.append(
-                f"{name}: Pareto k > {limit:.2g} for rows {fit.refitted_rows} (LOO by refit there)"
+                f"{name}: Pareto k > {limit_text(limit)} for rows {fit.refitted_rows} "
+                "(LOO by refit there)"
             )
         if fit.sampler_failures:
             notes.append(

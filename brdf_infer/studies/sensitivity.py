@@ -189,8 +189,9 @@ class VariantResult:
         elpd_loo, se: PSIS-LOO (exact where refitted) and its standard error.
         pointwise: each row's leave-one-out elpd term.
         diagnostics: ``r_hat_max``, ``ess_bulk_min``, ``divergences``, ``pareto_k_max``
-            (before the refits) and ``refitted_rows`` (0-based rows with Pareto k > 0.7 whose
-            term is exact).
+            (before the refits), ``pareto_k_limit`` (that of the draws:
+            :func:`~brdf_infer.verdict.pareto_k_limit`) and ``refitted_rows`` (0-based rows
+            with Pareto k above it whose term is exact).
         idata: the posterior (free parameters, noise scales) and its leave-one-out log
             likelihood.
         seconds: wall time of this posterior (sampling and the summaries).
@@ -286,7 +287,7 @@ def _summarise(
         loo_terms,
         tis_band,
     )
-    from brdf_infer.verdict import PARETO_K_LIMIT
+    from brdf_infer.verdict import pareto_k_limit
 
     sites = output.sites
     log_lik = loo_terms(model, sites)[0]
@@ -301,7 +302,8 @@ def _summarise(
         loo = az.loo(idata, pointwise=True)
         summary = az.summary(idata, var_names=names, kind="diagnostics", round_to="none")
     pareto_k = np.asarray(loo.pareto_k)
-    refitted = [int(row) for row in np.flatnonzero(pareto_k > PARETO_K_LIMIT)]
+    limit = pareto_k_limit(int(loo.n_samples))
+    refitted = [int(row) for row in np.flatnonzero(pareto_k > limit)]
     pointwise = np.asarray(loo.loo_i)
     if refit is not None and refitted:
         pointwise = refit(pointwise, refitted)
@@ -321,6 +323,7 @@ def _summarise(
             "ess_bulk_min": float(np.min(summary["ess_bulk"])),
             "divergences": int(np.sum(output.stats["diverging"])),
             "pareto_k_max": float(np.max(pareto_k)),
+            "pareto_k_limit": limit,
             "refitted_rows": refitted,
         },
         idata=idata,

@@ -10,7 +10,7 @@ disagree. It lists, most serious first:
    above 1;
 3. every sampler diagnostic that failed its threshold (R-hat, ESS, divergences, BFMI, emcee's
    autocorrelation times; :data:`brdf_infer.posterior.THRESHOLDS`);
-4. the rows whose PSIS-LOO Pareto k exceeds :data:`PARETO_K_LIMIT` (the leave-one-out
+4. the rows whose PSIS-LOO Pareto k exceeds :func:`pareto_k_limit` of its draws (the leave-one-out
    estimate, and so the report's model comparisons, are unreliable there), each named by its
    series, sample, angles and k, unless the run computed their terms exactly by refitting
    without them (:mod:`brdf_infer.posterior._loo_refit`), which makes them a fact.
@@ -46,8 +46,17 @@ ALL_PASS = "every diagnostic passes"
 def pareto_k_limit(samples: int) -> float:
     """The largest Pareto k̂ of a reliable importance-sampling estimate from ``samples``
     draws: min(1 − 1/log₁₀ S, :data:`PARETO_K_LIMIT`) (Vehtari et al. 2024, JMLR 25(72),
-    Sec. 3; ArviZ's ``loo`` warns at the same value): 0.67 at S = 1000, 0.7 from S ≈ 2200."""
+    Sec. 3; ArviZ's ``loo`` warns at the same value): 0.67 at S = 1000, 0.7 from S ≈ 2200.
+    From 10 draws down the formula is ≤ 0: 0, no weights are trusted."""
+    if samples <= 10:
+        return 0.0
     return min(1.0 - 1.0 / np.log10(samples), PARETO_K_LIMIT)
+
+
+def limit_text(limit: float) -> str:
+    """A k̂ limit in words: three significant digits (0.7, 0.667), so that no row below the
+    limit reads as above it at the precision shown."""
+    return f"{limit:.3g}"
 
 
 FORCED = "forced past a plausibility check: "
@@ -132,8 +141,8 @@ def posterior_verdict(
             words.append(f"{len(named) - NAMED_ROWS} more in summary.json")
         where = ": " + "; ".join(words) if words else ""
         lines.append(
-            f"{bad} measurement(s) with Pareto k > {_loo_limit(summary):.2g} (PSIS-LOO unreliable "
-            f"there){where}"
+            f"{bad} measurement(s) with Pareto k > {limit_text(_loo_limit(summary))} "
+            f"(PSIS-LOO unreliable there){where}"
         )
     return Verdict(tuple(lines), tuple(answer_facts(summary)))
 
@@ -219,9 +228,9 @@ def answer_facts(summary: PosteriorSummary) -> list[str]:
     refitted = summary.get("predictive", {}).get("loo_refit_rows") or []
     if refitted:
         facts.append(
-            f"{len(refitted)} influential measurement(s), Pareto k > {_loo_limit(summary):.2g}, "
-            "their leave-one-out terms from a refit without them: "
-            + "; ".join(row_words(row) for row in refitted)
+            f"{len(refitted)} influential measurement(s), Pareto k > "
+            f"{limit_text(_loo_limit(summary))}, their leave-one-out terms from a refit without "
+            "them: " + "; ".join(row_words(row) for row in refitted)
         )
     return facts
 
