@@ -185,9 +185,9 @@ def test_every_option_the_docs_give_a_command_is_one_it_takes():
 # The docs' quotes of the benchmark's cost curve (reports/benchmarks.md): (file, rows, posterior
 # wall [s] as the docs print them); each must be that row's "posterior wall [s]" cell
 COST_QUOTES = [
-    ("docs/scenes.md", "1986", "31.1"),
-    ("docs/scenes.md", "19637", "223.3"),
-    ("docs/scenes.md", "59585", "492.7"),
+    ("docs/scenes.md", "1986", "30.5"),
+    ("docs/scenes.md", "19637", "243.7"),
+    ("docs/scenes.md", "59585", "474.9"),
 ]
 
 
