@@ -58,7 +58,7 @@ from brdf_infer.runs.records import Bands, PosteriorSummary
 from brdf_infer.scene import Scene, check_instrument, load_scene, parse_scene
 from brdf_infer.scene.settings import PosteriorSettings, resolved_sampler
 from brdf_infer.tables.measurements import Measurements
-from brdf_infer.verdict import PARETO_K_LIMIT, posterior_verdict
+from brdf_infer.verdict import posterior_verdict
 
 
 @dataclass(frozen=True)
@@ -201,9 +201,7 @@ def predictive_checks(
     }
 
 
-def high_k_rows(
-    measurements: Measurements, pareto_k: np.ndarray, limit: float = PARETO_K_LIMIT
-) -> list[dict]:
+def high_k_rows(measurements: Measurements, pareto_k: np.ndarray, limit: float) -> list[dict]:
     """The rows whose Pareto k exceeds ``limit``, each with its index, series, sample, angles
     [deg] and k."""
     rows = []
