@@ -136,9 +136,11 @@ def test_design_json_contract_and_map(nuts_run, candidates_csv, tmp_path, capsys
         # the Kish ESS of 300 draws; the importance estimate only above the ESS floor
         assert 1 <= entry["ess"] <= 300
         assert (entry["method"] == "importance") == (entry["ess"] >= payload["ess_floor"])
-    # an uninformative row's EIG may clip to 0 by Monte Carlo error (0.01 ± 0.08 nats at 32
-    # simulations for (45°, −85°)); uniform weights would clip every one
-    assert all(c["eig_nats"] > 0 for c in payload["chosen"]), payload["chosen"]
+    # any row's EIG may clip to 0 by Monte Carlo error (the first chosen row's: 0.011-0.49
+    # nats over 12 seeds at 32 simulations, mean 0.18, sd 0.13); uniform weights (the planted
+    # fault) clip every one, so at least one candidate must be above the clip
+    assert all(c["eig_nats"] >= 0 for c in payload["candidates"]), payload["candidates"]
+    assert any(c["eig_nats"] > 0 for c in payload["candidates"]), payload["candidates"]
     expected = [c["expected_sd"] for c in payload["candidates"]]
     assert expected == sorted(expected)
     assert payload["chosen"][0]["expected_sd"] == expected[0]
@@ -402,13 +404,21 @@ def test_expected_sd_ratio_agrees_with_refits_of_independently_simulated_data(nu
     """Design's sd ratio for TIS(70°) after one more row (a new session) against NUTS refits of
     data a :class:`~brdf_infer.studies.synthetic.SyntheticLab` measured from truths drawn from the
     posterior (best, median, worst candidate; the benchmark runs 8 replicates)."""
+    from scipy import stats
+
     from brdf_infer.bench._design import RefitSettings, refit_check
 
-    result = refit_check(nuts_run.out, "tis:70", RefitSettings(replicates=3), lambda _: None)
+    replicates = 6
+    result = refit_check(
+        nuts_run.out, "tis:70", RefitSettings(replicates=replicates), lambda _: None
+    )
     assert [r["pick"] for r in result["rows"]] == ["best", "median", "worst"]
+    # the error is the standard error of a mean of 6 replicates: Student's t with 5 degrees of
+    # freedom, two-sided 0.1 % per candidate
+    limit = stats.t.ppf(1 - 0.0005, replicates - 1)
     for row in result["rows"]:
         mean, error = row["difference"]
-        assert abs(mean) < max(0.05, 3 * error), row
+        assert abs(mean) < max(0.05, limit * error), row
 
 
 @pytest.mark.slow  # ≈ 60 s: seven NUTS fits and two design calls

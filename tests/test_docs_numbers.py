@@ -1,7 +1,7 @@
 """The numbers the docs quote from a run agree with a run.
 
 - Posterior quantities of the bundled run (``brdf-infer run lya``, default settings) are
-  checked against the suite's shared run of the same scene (``nuts_run``: 4 chains, 1000
+  checked against the suite's shared run of the same scene (``nuts_run``: 4 chains, 2000
   draws, a shorter warmup) within Monte Carlo error: two runs of one posterior differ by
   chance, not by a bug (see :func:`monte_carlo_tolerance`).
 - Wall times cannot be checked by rerunning them: the docs quote the speed benchmark's report

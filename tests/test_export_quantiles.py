@@ -15,7 +15,7 @@ from brdf_infer.model.params import PAPER_CONSTANTS, UV_PAPER, Params
 from brdf_infer.posterior import draws_params
 from brdf_infer.report.export import brdf_table
 from tests import independent_bsdf as oracle
-from tests.helpers import run_cli
+from tests.helpers import REDUCED_NUTS, run_cli
 
 ANGLES = ["0", "30", "60", "85"]
 COARSE = ["--azimuth-step", "15", "--radial-step", "5"]
@@ -134,7 +134,10 @@ def test_envelope_files_say_they_are_pointwise_envelopes(nuts_run, tmp_path, cap
             assert len(entry["pointwise_excess"]) == len(ANGLES)
         else:
             assert "a real BRDF of the posterior" in comments
-            assert f"posterior draw {entry['draw_index'][2]} of 4000" in comments
+            assert (
+                f"posterior draw {entry['draw_index'][2]} of {4 * REDUCED_NUTS['draws']}"
+                in comments
+            )
 
 
 def test_a_pointwise_median_warns_with_its_cause_and_a_finer_grid_keeps_it(

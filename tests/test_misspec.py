@@ -268,7 +268,9 @@ def test_a_gross_left_out_calibration_lowers_the_coverage():
     )
     settings = SbcSettings(replicates=20, draws=30, thin=1, warmup=150)
     control, gross = run_cases(scene, scene.load_measurements(), cases, settings)
-    assert control.ranks.coverage[0.9]["brdf0"] >= 0.75
+    # 20 replicates of a calibrated 90 % interval: P(coverage < 0.65) = P(Bin(20, 0.9) ≤ 12)
+    # = 0.04 %, whatever the replicates' NUTS draws do on another CPU (measured 0.85)
+    assert control.ranks.coverage[0.9]["brdf0"] >= 0.65
     assert control.shift["brdf0"] < 1.2
     assert gross.ranks.coverage[0.9]["brdf0"] <= 0.6
     assert gross.shift["brdf0"] > 1.5

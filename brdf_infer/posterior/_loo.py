@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import partial
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -73,6 +74,50 @@ def uniformity_p_value(values: np.ndarray) -> float:
 ROWS_PER_CHUNK = 2048  # rows smoothed at once: 2048 rows × 4000 draws × 8 B = 64 MiB a term
 
 
+class ExactTerm(NamedTuple):
+    """A row's leave-one-out term from a refit without it (:mod:`._loo_refit`).
+
+    Attributes:
+        elpd: ln p(yᵢ | y₋ᵢ).
+        pit: P(ỹᵢ ≤ yᵢ | y₋ᵢ), the row's LOO-PIT.
+        mcse: the Monte Carlo standard error of ``elpd`` (:func:`log_mean_mcse`).
+    """
+
+    elpd: float
+    pit: float
+    mcse: float
+
+
+def log_mean_mcse(log_terms: np.ndarray) -> float:
+    """The Monte Carlo standard error of ln mean_s p_s from MCMC draws of ln p_s, (chains,
+    draws): by the delta method, sd(p) / (mean(p) √ESS), ESS of p by ArviZ (autocorrelation
+    across chains), p scaled by its largest value (the ratio is scale-free)."""
+    values = np.exp(np.asarray(log_terms, float) - np.max(log_terms))
+    if np.ptp(values) == 0:
+        return 0.0
+    ess = float(az.ess(values[None] if values.ndim == 1 else values))
+    return float(np.std(values) / (np.mean(values) * np.sqrt(ess)))
+
+
+def psis_mcse(log_weights: np.ndarray, log_terms: np.ndarray, reff: float) -> np.ndarray:
+    """Every row's Monte Carlo standard error of a PSIS-LOO term ln Σ_s w̃_s p_s, by the delta
+    method (Vehtari, Gelman & Gabry 2017, Sec. 2.2, and the ``loo`` package's
+    ``mcse_elpd_loo``): Var ≈ Σ_s w̃_s² (p_s − E)² / r_eff, E = Σ_s w̃_s p_s, se = √Var / E,
+    w̃ the normalised smoothed weights.
+
+    Args:
+        log_weights: (rows, draws) smoothed log weights (:func:`az.psislw`).
+        log_terms: (rows, draws) ln p(yᵢ | y₋ᵢ, θ_s).
+        reff: the draws' relative efficiency.
+    """
+    weights = np.exp(log_weights - np.max(log_weights, axis=1, keepdims=True))
+    weights /= weights.sum(axis=1, keepdims=True)
+    values = np.exp(log_terms - np.max(log_terms, axis=1, keepdims=True))  # scale-free ratio
+    expected = np.sum(weights * values, axis=1)
+    variance = np.sum(weights**2 * (values - expected[:, None]) ** 2, axis=1) / reff
+    return np.sqrt(variance) / expected
+
+
 @dataclass(frozen=True)
 class LeaveOneOut:
     """PSIS-LOO of a run (Vehtari, Gelman & Gabry 2017, Stat. Comput. 27, 1413) and the
@@ -88,6 +133,8 @@ class LeaveOneOut:
         lppd_i: every row's ln mean_s p(yᵢ | y₋ᵢ, θ_s) over the draws, (rows,).
         limit: the k̂ above which a row's estimate is unreliable with this many draws
             (:func:`~brdf_infer.verdict.pareto_k_limit`: 0.7 from 2200 draws, 0.67 at 1000).
+        mcse_i: every row's Monte Carlo standard error of ``elpd_i`` (:func:`psis_loo`; a
+            refitted row's from its refit), (rows,); None where not estimated.
     """
 
     elpd_loo: float
@@ -98,14 +145,19 @@ class LeaveOneOut:
     elpd_i: np.ndarray
     lppd_i: np.ndarray
     limit: float = PARETO_K_LIMIT
+    mcse_i: np.ndarray | None = None
 
-    def with_exact(self, exact: dict[int, tuple[float, float]]) -> LeaveOneOut:
-        """These estimates with the rows of ``exact`` (row → exact ln p(yᵢ | y₋ᵢ) and LOO-PIT,
-        :mod:`brdf_infer.posterior._loo_refit`) put in; ``p_loo`` follows the new elpd
-        (lppd − elpd_loo, the lppd unchanged), the k̂ stay the importance sampling's."""
+    def with_exact(self, exact: dict[int, ExactTerm]) -> LeaveOneOut:
+        """These estimates with the rows of ``exact`` (row → exact ln p(yᵢ | y₋ᵢ), LOO-PIT and
+        Monte Carlo standard error, :mod:`brdf_infer.posterior._loo_refit`) put in; ``p_loo``
+        follows the new elpd (lppd − elpd_loo, the lppd unchanged), the k̂ stay the importance
+        sampling's."""
         elpd_i, pit = self.elpd_i.copy(), self.pit.copy()
-        for row, (elpd, row_pit) in exact.items():
-            elpd_i[row], pit[row] = elpd, row_pit
+        mcse_i = None if self.mcse_i is None else self.mcse_i.copy()
+        for row, term in exact.items():
+            elpd_i[row], pit[row] = term.elpd, term.pit
+            if mcse_i is not None:
+                mcse_i[row] = term.mcse
         return LeaveOneOut(
             elpd_loo=float(elpd_i.sum()),
             se=float(np.sqrt(elpd_i.size * np.var(elpd_i))),
@@ -115,6 +167,7 @@ class LeaveOneOut:
             elpd_i=elpd_i,
             lppd_i=self.lppd_i,
             limit=self.limit,
+            mcse_i=mcse_i,
         )
 
 
@@ -150,7 +203,7 @@ def psis_loo(
     terms = np.reshape(log_likelihood, (-1, rows))
     cdf = np.reshape(cdf, (-1, rows))
     draws = terms.shape[0]
-    elpd, lppd = np.empty(rows), np.empty(rows)
+    elpd, lppd, mcse = np.empty(rows), np.empty(rows), np.empty(rows)
     pareto_k, pit = np.empty(rows), np.empty(rows)
     for start in range(0, rows, rows_per_chunk):
         block = slice(start, start + rows_per_chunk)
@@ -158,6 +211,7 @@ def psis_loo(
         log_weights, pareto_k[block] = az.psislw(-values, reff)
         elpd[block] = logsumexp(log_weights + values, axis=1)
         lppd[block] = logsumexp(values, axis=1) - np.log(draws)
+        mcse[block] = psis_mcse(log_weights, values, reff)
         pit[block] = weighted_pit(log_weights, np.asarray(cdf[:, block], float).T)
     return LeaveOneOut(
         elpd_loo=float(elpd.sum()),
@@ -168,4 +222,5 @@ def psis_loo(
         elpd_i=elpd,
         lppd_i=lppd,
         limit=pareto_k_limit(draws),
+        mcse_i=mcse,
     )

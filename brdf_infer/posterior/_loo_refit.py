@@ -11,10 +11,11 @@ sample p(θ | y₋ᵢ) and average the row's leave-one-out conditional over thos
 
     ln p(yᵢ | y₋ᵢ) = ln mean_s p(yᵢ | y₋ᵢ, θ_s),   θ_s ~ p(θ | y₋ᵢ),
 
-and its LOO-PIT likewise, mean_s P(ỹᵢ ≤ yᵢ | y₋ᵢ, θ_s). The row is left out by giving it σ =
-:data:`LEFT_OUT_SIGMA` in ln R: its information leaves the likelihood, the data keep their
-shape, and the run's compiled NUTS or Laplace program samples the refit (nothing is compiled
-again). A Laplace run's refit starts from its own draws
+and its LOO-PIT likewise, mean_s P(ỹᵢ ≤ yᵢ | y₋ᵢ, θ_s), each term with its Monte Carlo
+standard error (:func:`~brdf_infer.posterior._loo.log_mean_mcse`). The row is left out by
+giving it σ = :data:`LEFT_OUT_SIGMA` in ln R: its information leaves the likelihood, the data
+keep their shape, and the run's compiled NUTS or Laplace program samples the refit (nothing is
+compiled again). A Laplace run's refit starts from its own draws
 (:func:`~brdf_infer.posterior._laplace.importance_refit`: a Student-t with their mean and
 covariance, adapted, Pareto k̂ checked; the left-out posterior of a large table is the run's
 widened by one row), which spares the mode searches. A NUTS run's is sampled anew: on the
@@ -33,6 +34,7 @@ from scipy.special import logsumexp
 from brdf_infer._internal import arviz as az
 from brdf_infer.posterior._laplace import importance_refit
 from brdf_infer.posterior._likelihood import ModelData
+from brdf_infer.posterior._loo import ExactTerm, log_mean_mcse
 from brdf_infer.posterior._model import PosteriorModel
 from brdf_infer.posterior._nuts import NutsProgram, chain_keys
 from brdf_infer.posterior._results import loo_draws, loo_sites, loo_terms
@@ -94,8 +96,9 @@ def _refit(draws: Draws, model: PosteriorModel, data: ModelData) -> dict[str, np
 
 def exact_loo_rows(
     model: PosteriorModel, draws: Draws, pareto_k: np.ndarray, limit: float
-) -> dict[int, tuple[float, float]]:
-    """Row → (exact ln p(yᵢ | y₋ᵢ), exact LOO-PIT) for every row whose k̂ exceeds ``limit``,
+) -> dict[int, ExactTerm]:
+    """Row → its exact ln p(yᵢ | y₋ᵢ), LOO-PIT and their Monte Carlo standard error
+    (:class:`~brdf_infer.posterior._loo.ExactTerm`) for every row whose k̂ exceeds ``limit``,
     by a refit without it (module docstring, :func:`_refit`); a refit that fails its checks
     leaves its row out. Empty when no row exceeds ``limit``, when more than
     :data:`MAX_REFIT_ROWS` do, or when the run was emcee's."""
@@ -109,7 +112,8 @@ def exact_loo_rows(
             continue  # the row stays a failure of the verdict
         # every row's terms are computed for the one row wanted: as few draws as PSIS-LOO's
         log_lik, cdf = loo_terms(model, loo_sites(sites, int(np.shape(model.data.mask)[0]))[0])
-        terms = np.asarray(log_lik[..., row], float).reshape(-1)
+        terms = np.asarray(log_lik[..., row], float)  # (chains, draws)
         pit = float(np.mean(np.asarray(cdf[..., row], float)))
-        exact[row] = (float(logsumexp(terms) - np.log(terms.size)), pit)
+        elpd = float(logsumexp(terms) - np.log(terms.size))
+        exact[row] = ExactTerm(elpd, pit, log_mean_mcse(terms))
     return exact

@@ -29,6 +29,7 @@ from brdf_infer.posterior._bands import (
 )
 from brdf_infer.posterior._laplace import laplace_draws
 from brdf_infer.posterior._loo import (
+    ExactTerm,
     LeaveOneOut,
     psis_loo,
     relative_efficiency,
@@ -167,7 +168,7 @@ def run_fingerprint(model: PosteriorModel, measurements: Measurements) -> dict[s
 def predictive_checks(
     loo: LeaveOneOut,
     measurements: Measurements | None = None,
-    exact: dict[int, tuple[float, float]] | None = None,
+    exact: dict[int, ExactTerm] | None = None,
 ) -> dict:
     """PSIS-LOO (elpd with its standard error, p_loo, every row's Pareto k, the largest, the
     number of rows above ``pareto_k_limit`` (:func:`~brdf_infer.verdict.pareto_k_limit` of the
@@ -183,12 +184,20 @@ def predictive_checks(
     if high is not None:
         named["pareto_k_rows"] = [row for row in high if row["row"] not in exact]
         named["loo_refit_rows"] = [
-            {**row, "elpd_exact": exact[row["row"]][0]} for row in high if row["row"] in exact
+            {
+                **row,
+                "elpd_exact": exact[row["row"]].elpd,
+                "elpd_exact_mcse": exact[row["row"]].mcse,
+            }
+            for row in high
+            if row["row"] in exact
         ]
+    mcse = None if loo.mcse_i is None else float(np.sqrt(np.sum(loo.mcse_i**2)))
     return {
         **named,
         "elpd_loo": loo.elpd_loo,
         "se": loo.se,
+        "elpd_loo_mcse": mcse,  # Monte Carlo standard error (independent rows' terms)
         "p_loo": loo.p_loo,
         "pareto_k_max": float(np.max(pareto_k)),
         "pareto_k_limit": loo.limit,
