@@ -216,3 +216,38 @@ def test_a_sigma_column_in_percent_can_be_insisted_on(tmp_path, capsys):
     implausible = json.loads(stdout)["implausible"]  # the row checks first, then the fit's
     assert "field 'brdf_err': brdf_err exceeds its value in 3 of 4 rows" in implausible[0]
     assert err.count("warning: forced past a plausibility check: ") == len(implausible)
+
+
+@pytest.mark.parametrize("command", ["run", "fit"])
+def test_a_brdf_table_whose_series_forgot_its_quantity_is_told_to_set_it(tmp_path, capsys, command):
+    """A CSV of brdf,brdf_err and a ``[series.S]`` without ``quantity`` or aperture: the
+    scene is refused naming ``series.S.quantity`` and what to write (not the aperture
+    alone)."""
+    scene = own_scene(tmp_path, "brdf", [0.001] * 4, series="")
+    out = tmp_path / "out"
+    argv = [command, str(scene)] + (["--out", str(out)] if command == "run" else [])
+    code, stdout, err = run_cli(*argv, capsys=capsys)
+    assert code == 2 and stdout == "" and err.count("\n") == 1, err
+    assert "scene.toml, field 'series.S.quantity'" in err
+    assert 'rows.csv holds brdf values; set quantity = "brdf" in [series.S]' in err
+    assert "for raw reflectance, give aperture_diameter_mm and aperture_distance_mm" in err
+    assert not out.exists()
+
+
+def test_a_brdf_table_whose_series_has_an_aperture_but_no_quantity_is_told_to_set_it(
+    tmp_path, capsys
+):
+    scene = own_scene(tmp_path, "brdf", [0.001] * 4, series=OWN_TABLES["raw_reflectance"][1])
+    code, stdout, err = run_cli("fit", str(scene), capsys=capsys)
+    assert code == 2 and stdout == "" and err.count("\n") == 1, err
+    assert "rows.csv, row 1 (line 2), field 'brdf'" in err
+    assert "series 'S' measures raw_reflectance but this table holds brdf values" in err
+    assert 'set quantity = "brdf" in the scene\'s [series.S]' in err
+
+
+def test_a_raw_reflectance_series_without_its_aperture_is_still_told_the_key(tmp_path, capsys):
+    """Where the table holds raw reflectance, the missing key stays what is named."""
+    scene = own_scene(tmp_path, "raw_reflectance", [1e-6] * 4, series="")
+    code, stdout, err = run_cli("fit", str(scene), capsys=capsys)
+    assert code == 2 and stdout == "" and err.count("\n") == 1, err
+    assert "field 'series.S.aperture_diameter_mm': missing required key" in err
