@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import json
 import warnings
+from types import SimpleNamespace
 
 import jax
 import jax.numpy as jnp
@@ -16,7 +18,7 @@ from brdf_infer.model import family
 from brdf_infer.model.error_model import NoiseScales
 from brdf_infer.model.params import UV_PAPER
 from brdf_infer.posterior import build_posterior_model
-from brdf_infer.report._compare import compare_frame
+from brdf_infer.report._compare import compare_frame, label
 from brdf_infer.studies.compare import PARETO_K_LIMIT, CompareSettings, compare_families
 from brdf_infer.verdict import pareto_k_limit
 from tests.helpers import SUITE_WARMUP, run_cli
@@ -375,3 +377,134 @@ def test_unknown_scene_model_family_is_named(lya, tmp_path):
     with pytest.raises(BadInputError, match="unknown model family 'phong'") as error:
         load_scene(_family_scene(lya, tmp_path, "phong"))
     assert error.value.field == "model.family"
+
+
+def stub_comparison(bands: dict[str, tuple[float, float, float]], failing=()) -> dict:
+    """A ``compare`` JSON payload of the families ``bands`` (TIS(70°) median, lo95, hi95 as
+    fractions, best first); the families in ``failing`` with failed sampler diagnostics."""
+    models = []
+    for rank, (name, (median, lo95, hi95)) in enumerate(bands.items()):
+        ok = name not in failing
+        models.append(
+            {
+                "name": name,
+                "elpd_loo": 30.0 - 20.0 * rank,
+                "se": 5.0,
+                "d_elpd": 20.0 * rank,
+                "dse": 6.0 if rank else 0.0,
+                "weight": 0.0 if rank else 1.0,
+                "p_loo": 6.0,
+                "pareto_k_max": 0.4,
+                "pareto_k_max_after_refit": 0.4,
+                "tis70": {"median": median, "lo95": lo95, "hi95": hi95},
+                "r_hat_max": 1.002 if ok else 1.04,
+                "ess_bulk_min": 1800.0 if ok else 124.0,
+                "divergences": 0,
+                "sampler_ok": ok,
+                "sampler_failures": [] if ok else ["R-hat 1.040 > 1.01"],
+            }
+        )
+    return {"models": models, "warnings": [], "seconds": 1.0}
+
+
+# TIS(70°) bands within one decade (the families of a glossy fit) and over two (the bundled
+# data's: Lambertian 56 %, ABg 0.94 %, docs/families.md), and two families within 1 %
+NARROW = {
+    "strumik2024": (0.058, 0.052, 0.065),
+    "abg": (0.055, 0.049, 0.061),
+    "harvey-shack": (0.061, 0.050, 0.073),
+    "lambertian": (0.039, 0.037, 0.041),
+    "lambertian+abg": (0.059, 0.051, 0.068),
+}
+BUNDLED = {
+    "strumik2024": (0.0654, 0.0584, 0.0735),
+    "harvey-shack": (0.0083, 0.0035, 0.0472),
+    "abg": (0.0094, 0.0038, 0.0486),
+    "lambertian+abg": (0.0181, 0.0057, 0.162),
+    "lambertian": (0.56, 0.39, 0.76),
+}
+CLOSE = {"strumik2024": (0.0572, 0.0561, 0.0583), "abg": (0.0569, 0.0560, 0.0578)}
+
+
+def test_compare_prints_tis_in_percent_and_its_json_keeps_fractions(capsys, monkeypatch):
+    """The human table gives TIS(70°) in percent (its unit in the header), 100 times the
+    JSON's fractions; the study itself is stubbed (its sampling is tested above)."""
+    payload = stub_comparison(BUNDLED)
+    result = SimpleNamespace(as_json=lambda: payload, warnings=[], seconds=1.0)
+    monkeypatch.setattr("brdf_infer.studies.compare.compare_families", lambda *a, **k: result)
+    argv = ["compare", "lya", "--models", *BUNDLED]
+    code, out, err = run_cli(*argv, "--json", capsys=capsys)
+    assert code == 0, err
+    fractions = {m["name"]: m["tis70"] for m in json.loads(out)["models"]}
+    assert fractions["lambertian"] == {"median": 0.56, "lo95": 0.39, "hi95": 0.76}
+    code, out, err = run_cli(*argv, capsys=capsys)
+    assert code == 0, err
+    header, _, *rows = out.splitlines()[1:]
+    assert "TIS(70°) [%] (95 %)" in header
+    for name, band in fractions.items():
+        (row,) = [row for row in rows if row.split()[0] == name]
+        median, lo95, hi95 = (100 * band[key] for key in ("median", "lo95", "hi95"))
+        assert row.rstrip().endswith(f"{median:.2f} ({lo95:.2f}–{hi95:.2f})"), row
+
+
+def text_boxes(figure):
+    """Every drawn, non-empty text of ``figure`` (tick labels within their axis' view, axis
+    labels, titles) as (axes, kind, text, window extent) after drawing it with Agg."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    canvas = FigureCanvasAgg(figure)
+    canvas.draw()
+    renderer = canvas.get_renderer()
+    found = []
+    for number, axes in enumerate(figure.axes):
+        low, high = sorted(axes.get_xlim())
+        for minor in (False, True):
+            for tick in axes.xaxis.get_ticklabels(minor=minor):
+                inside = low * (1 - 1e-9) <= tick.get_position()[0] <= high * (1 + 1e-9)
+                if tick.get_visible() and tick.get_text() and inside:
+                    found.append(
+                        (number, "xtick", tick.get_text(), tick.get_window_extent(renderer))
+                    )
+        for kind, text in (("xlabel", axes.xaxis.label), ("ylabel", axes.yaxis.label)):
+            if text.get_visible() and text.get_text():
+                found.append((number, kind, text.get_text(), text.get_window_extent(renderer)))
+        for tick in axes.yaxis.get_ticklabels():
+            if tick.get_visible() and tick.get_text():
+                found.append((number, "ytick", tick.get_text(), tick.get_window_extent(renderer)))
+    return found, figure.bbox
+
+
+@pytest.mark.parametrize("bands", [NARROW, BUNDLED, CLOSE], ids=["narrow", "bundled", "close"])
+def test_compare_figure_labels_neither_overlap_nor_leave_the_figure(bands):
+    """compare.png's tick labels of each x axis stand apart, every label lies inside the
+    figure, and each x axis names its unit. (Planted: the old log axis with its default
+    labels overran "4×10⁰ 5×10⁰ …" on the narrow bands, and its layout cut the TIS label.)"""
+    from brdf_infer.report._compare import compare_plot
+
+    figure = compare_plot(stub_comparison(bands, failing=("harvey-shack",)))
+    boxes, frame = text_boxes(figure)
+    for number in {number for number, *_ in boxes}:
+        ticks = sorted(
+            (box for n, kind, _, box in boxes if n == number and kind == "xtick"),
+            key=lambda box: box.x0,
+        )
+        assert len(ticks) >= 2, (number, ticks)
+        for before, after in itertools.pairwise(ticks):
+            assert before.x1 < after.x0, (number, [t for n, k, t, _ in boxes if k == "xtick"])
+    for _, kind, text, box in boxes:
+        assert frame.x0 <= box.x0 and box.x1 <= frame.x1, (kind, text, box)
+        assert frame.y0 <= box.y0 and box.y1 <= frame.y1, (kind, text, box)
+    xlabels = [text for _, kind, text, _ in boxes if kind == "xlabel"]
+    assert len(xlabels) == 2 and "[nats]" in xlabels[0] and "[%]" in xlabels[1], xlabels
+    # the TIS panel names no family: each point stands level with its family's compare row
+    left, right = figure.axes
+    rows = dict(zip([t.get_text() for t in left.get_yticklabels()], left.get_yticks(), strict=True))
+    points = {
+        (float(x), float(y))
+        for bar in right.containers
+        for x, y in zip(*bar.lines[0].get_data(), strict=True)
+    }
+    assert points == {
+        (100 * entry["tis70"]["median"], rows[label(entry)])
+        for entry in stub_comparison(bands, failing=("harvey-shack",))["models"]
+    }

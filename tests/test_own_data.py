@@ -143,16 +143,111 @@ def test_bad_options_create_nothing(tmp_path, capsys, argv):
     assert not out.exists()
 
 
-def test_a_sigma_column_larger_than_its_values_is_warned_about(tmp_path):
-    from brdf_infer.tables.measurements import load_measurements
-    from brdf_infer.verdict.plausibility import measurement_warnings
+# a raw-reflectance series (through an aperture) and a BRDF series (none): their columns
+OWN_TABLES = {
+    "raw_reflectance": (
+        "reflectance",
+        "aperture_diameter_mm = 7.2\naperture_distance_mm = 103.8\n",
+        (5e-5, 2e-4, 1e-3, 4e-3),
+    ),
+    "brdf": ("brdf", 'quantity = "brdf"\n', (0.012, 0.02, 0.08, 6.0)),  # 6: a specular peak
+}
 
-    path = tmp_path / "sigma.csv"
-    path.write_text(
-        "series,sample,theta_i_deg,theta_s_deg,reflectance,reflectance_err\n"
-        "I,1,10,30,5e-5,9e-5\nI,1,40,60,1e-3,1e-4\n"
-    )
-    warnings = measurement_warnings(load_measurements(path))
-    assert (
-        len(warnings) == 1 and "larger than the value" in warnings[0] and "rows 1)" in warnings[0]
-    )
+
+def own_scene(folder, quantity: str, sigma, series: str | None = None):
+    """A one-series scene (series S at θi = 10, 40°) of ``quantity`` with the σ column
+    ``sigma`` (one per row); ``series``: its ``[series.S]`` keys (default: the quantity's)."""
+    value, keys, values = OWN_TABLES[quantity]
+    lines = [f"series,sample,theta_i_deg,theta_s_deg,{value},{value}_err"]
+    angles = ((10, 30), (10, 60), (40, 20), (40, 40))
+    lines += [
+        f"S,1,{ti},{ts},{v:g},{e:g}" for (ti, ts), v, e in zip(angles, values, sigma, strict=True)
+    ]
+    (folder / "rows.csv").write_text("\n".join(lines) + "\n")
+    scene = folder / "scene.toml"
+    keys = keys if series is None else series
+    scene.write_text(f'name = "own"\nmeasurements = "rows.csv"\n[series.S]\n{keys}')
+    return scene
+
+
+@pytest.mark.parametrize("quantity", ["raw_reflectance", "brdf"])
+def test_a_few_sigmas_above_their_values_are_only_warned_about_naming_the_sigma_column(
+    tmp_path, quantity
+):
+    """One row of four with σ above its value (a faint row measured below its noise floor):
+    a warning naming the table's own σ column, and no refusal."""
+    from brdf_infer.verdict.plausibility import measurement_checks, measurement_warnings
+
+    value, _, values = OWN_TABLES[quantity]
+    sigma = [1.8 * values[0], *(0.1 * v for v in values[1:])]
+    scene = load_scene(own_scene(tmp_path, quantity, sigma))
+    rows = scene.load_measurements()
+    (warning,) = measurement_warnings(rows)
+    assert f"1 row(s) have {value}_err larger than the value (rows 1)" in warning, warning
+    assert "rows.csv" in warning
+    assert not any("_err" in str(found.field) for found in measurement_checks(scene, rows))
+
+
+@pytest.mark.parametrize("quantity", ["raw_reflectance", "brdf"])
+def test_a_sigma_column_in_percent_stops_run_before_any_work_naming_the_sigma_column(
+    tmp_path, capsys, quantity
+):
+    """Every σ "5" (percent) while the values are fractions or sr⁻¹: the run stops with one
+    line naming the file and the σ column of the table (``brdf_err`` for a BRDF series), and
+    nothing is created; a specular peak above 5 sr⁻¹ is no excuse for the other rows."""
+    value, _, _ = OWN_TABLES[quantity]
+    unit = "sr^-1" if quantity == "brdf" else "a fraction"
+    scene = own_scene(tmp_path, quantity, [5.0] * 4)
+    out = tmp_path / "out"
+    code, stdout, err = run_cli("run", str(scene), "--out", str(out), capsys=capsys)
+    assert code == 2 and stdout == "" and err.count("\n") == 1, err
+    assert err.startswith("brdf-infer: error: ") and "rows.csv" in err
+    above = 3 if quantity == "brdf" else 4
+    assert f"field '{value}_err'" in err and f"exceeds its value in {above} of 4 rows" in err
+    assert f"give σ in the units of {value} [{unit}]" in err and "--force" in err
+    assert "warning" not in err and not out.exists()
+
+
+def test_a_sigma_column_in_percent_can_be_insisted_on(tmp_path, capsys):
+    """``--force`` goes past the σ check as past the other plausibility checks, and names it."""
+    scene = own_scene(tmp_path, "brdf", [5.0] * 4)
+    code, stdout, err = run_cli("fit", str(scene), "--force", "--json", capsys=capsys)
+    assert code == 0, err
+    implausible = json.loads(stdout)["implausible"]  # the row checks first, then the fit's
+    assert "field 'brdf_err': brdf_err exceeds its value in 3 of 4 rows" in implausible[0]
+    assert err.count("warning: forced past a plausibility check: ") == len(implausible)
+
+
+@pytest.mark.parametrize("command", ["run", "fit"])
+def test_a_brdf_table_whose_series_forgot_its_quantity_is_told_to_set_it(tmp_path, capsys, command):
+    """A CSV of brdf,brdf_err and a ``[series.S]`` without ``quantity`` or aperture: the
+    scene is refused naming ``series.S.quantity`` and what to write (not the aperture
+    alone)."""
+    scene = own_scene(tmp_path, "brdf", [0.001] * 4, series="")
+    out = tmp_path / "out"
+    argv = [command, str(scene)] + (["--out", str(out)] if command == "run" else [])
+    code, stdout, err = run_cli(*argv, capsys=capsys)
+    assert code == 2 and stdout == "" and err.count("\n") == 1, err
+    assert "scene.toml, field 'series.S.quantity'" in err
+    assert 'rows.csv holds brdf values; set quantity = "brdf" in [series.S]' in err
+    assert "for raw reflectance, give aperture_diameter_mm and aperture_distance_mm" in err
+    assert not out.exists()
+
+
+def test_a_brdf_table_whose_series_has_an_aperture_but_no_quantity_is_told_to_set_it(
+    tmp_path, capsys
+):
+    scene = own_scene(tmp_path, "brdf", [0.001] * 4, series=OWN_TABLES["raw_reflectance"][1])
+    code, stdout, err = run_cli("fit", str(scene), capsys=capsys)
+    assert code == 2 and stdout == "" and err.count("\n") == 1, err
+    assert "rows.csv, row 1 (line 2), field 'brdf'" in err
+    assert "series 'S' measures raw_reflectance but this table holds brdf values" in err
+    assert 'set quantity = "brdf" in the scene\'s [series.S]' in err
+
+
+def test_a_raw_reflectance_series_without_its_aperture_is_still_told_the_key(tmp_path, capsys):
+    """Where the table holds raw reflectance, the missing key stays what is named."""
+    scene = own_scene(tmp_path, "raw_reflectance", [1e-6] * 4, series="")
+    code, stdout, err = run_cli("fit", str(scene), capsys=capsys)
+    assert code == 2 and stdout == "" and err.count("\n") == 1, err
+    assert "field 'series.S.aperture_diameter_mm': missing required key" in err

@@ -100,9 +100,16 @@ def main(args: argparse.Namespace) -> int:
     return 0
 
 
+def tis_percent(band: dict) -> str:
+    """A TIS band of the JSON (fractions) as the human tables print TIS: in percent, the
+    median and its 95 % interval."""
+    return "{:.2f} ({:.2f}–{:.2f})".format(*(100 * band[key] for key in ("median", "lo95", "hi95")))
+
+
 def comparison_table(payload: dict) -> str:
     """The human table of ``compare``'s JSON (best first): each family's rank with its
-    sampler diagnostics beside it, and a line for each family whose diagnostics fail."""
+    sampler diagnostics beside it, and a line for each family whose diagnostics fail; TIS in
+    percent, as every command prints it (the JSON keeps fractions)."""
     rows = [
         [
             row["name"],
@@ -115,7 +122,7 @@ def comparison_table(payload: dict) -> str:
             f"{row['ess_bulk_min']:.0f}",
             str(row["divergences"]),
             "ok" if row["sampler_ok"] else "FAIL",
-            "{median:.4f} ({lo95:.4f}–{hi95:.4f})".format(**row["tis70"]),
+            tis_percent(row["tis70"]),
         ]
         for row in payload["models"]
     ]
@@ -130,7 +137,7 @@ def comparison_table(payload: dict) -> str:
         "ESS bulk min",
         "div.",
         "sampler",
-        "TIS(70°)",
+        "TIS(70°) [%] (95 %)",
     ]
     lines = [table(headers, rows)]
     lines += [

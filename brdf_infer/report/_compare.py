@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
+from matplotlib.ticker import FuncFormatter, LogLocator, MaxNLocator, NullFormatter
 
 from brdf_infer._internal import arviz as az
 from brdf_infer.posterior import THRESHOLDS
@@ -21,6 +22,8 @@ from brdf_infer.studies.compare import ComparisonResult
 from brdf_infer.verdict import PARETO_K_LIMIT
 
 UNTRUSTED = "sampler diagnostics fail"
+TEXT_SIZE = 9  # both panels' labels (ArviZ's default for a 10-in figure is twice that)
+UNTRUSTED_STYLE = {"fmt": "o", "color": "tab:red", "mfc": "white", "label": UNTRUSTED}
 
 
 def label(row: dict[str, Any]) -> str:
@@ -54,29 +57,62 @@ def compare_frame(payload: dict[str, Any]) -> pd.DataFrame:
 def compare_figure(payload: dict[str, Any], dpi: int = 90) -> bytes:
     """PNG: ArviZ's compare plot (elpd_loo ± se, Δelpd ± dse) beside each family's TIS(70°);
     a family whose sampler diagnostics fail is marked in both."""
-    figure = Figure(figsize=(10.0, 0.6 * len(payload["models"]) + 1.8))
-    left, right = figure.subplots(1, 2, gridspec_kw={"width_ratios": [3, 2]})
+    buffer = io.BytesIO()
+    compare_plot(payload).savefig(buffer, format="png", dpi=dpi)
+    return buffer.getvalue()
+
+
+def compare_plot(payload: dict[str, Any]) -> Figure:
+    """The figure of :func:`compare_figure`, laid out (10 in wide, 0.6 in per family + 1.8 in
+    high): one text size in both panels; the TIS panel's rows level with the compare plot's
+    (named there once; a family whose sampler diagnostics fail drawn hollow and in red, as its
+    legend says), its axis in percent with at most five plain labels (:func:`tis_axis`); every
+    label inside the figure."""
+    models = payload["models"]
+    figure = Figure(figsize=(10.0, 0.6 * len(models) + 1.8), layout="constrained")
+    left, right = figure.subplots(1, 2, sharey=True, gridspec_kw={"width_ratios": [3, 2]})
     with warnings.catch_warnings():  # ArviZ's own use of a deprecated pandas keyword
         warnings.simplefilter("ignore")
-        az.plot_compare(compare_frame(payload), ax=left, insample_dev=False, legend=False)
-    left.set_xlabel("elpd_loo (log predictive density, higher is better) [nats]")
-    left.set_title("PSIS-LOO, best on top: elpd_loo ± se", fontsize=9)
-    names = [label(row) for row in payload["models"]]
-    medians = np.array([row["tis70"]["median"] for row in payload["models"]])
-    low = np.array([row["tis70"]["lo95"] for row in payload["models"]])
-    high = np.array([row["tis70"]["hi95"] for row in payload["models"]])
-    positions = np.arange(len(names))[::-1]
-    right.errorbar(
-        100 * medians, positions, xerr=100 * np.stack([medians - low, high - medians]), fmt="o"
+        az.plot_compare(
+            compare_frame(payload), ax=left, insample_dev=False, legend=False, textsize=TEXT_SIZE
+        )
+    left.set_xlabel("elpd_loo (higher is better) [nats]", fontsize=TEXT_SIZE)
+    left.set_ylabel("ranked models", fontsize=TEXT_SIZE)
+    left.set_title("PSIS-LOO, best on top: elpd_loo ± se", fontsize=TEXT_SIZE)
+    positions = left.get_yticks()  # ArviZ's rows, best on top, in the payload's order
+    bands = 100 * np.array(
+        [[row["tis70"][key] for key in ("median", "lo95", "hi95")] for row in models]
     )
-    right.set_yticks(positions, names)
-    right.set_xscale("log")
-    right.set_xlabel("TIS(70°) [%], median and 95 % interval")
+    for ok, style in ((True, {"fmt": "o"}), (False, UNTRUSTED_STYLE)):
+        rows = np.array([row["sampler_ok"] is ok for row in models])
+        if rows.any():
+            right.errorbar(
+                bands[rows, 0],
+                positions[rows],
+                xerr=np.abs(bands[rows, 1:] - bands[rows, :1]).T,
+                **style,
+            )
+    if not all(row["sampler_ok"] for row in models):
+        right.legend(fontsize=TEXT_SIZE, loc="best")
+    right.tick_params(labelleft=False, labelsize=TEXT_SIZE)
+    tis_axis(right, bands[:, 1].min(), bands[:, 2].max())
+    right.set_xlabel("TIS(70°) [%]: median, 95 % interval", fontsize=TEXT_SIZE)
+    right.set_title("TIS(70°) of each family", fontsize=TEXT_SIZE)
     right.grid(alpha=0.3)
-    figure.tight_layout()
-    buffer = io.BytesIO()
-    figure.savefig(buffer, format="png", dpi=dpi)
-    return buffer.getvalue()
+    return figure
+
+
+def tis_axis(axes, low: float, high: float) -> None:
+    """The TIS axis from ``low`` to ``high`` [%]: linear where the bands span less than a
+    decade, else logarithmic; either way at most five major labels in plain numbers (a log
+    axis's minor ticks unlabelled: on a narrow span their "4×10⁰" labels overran each other)."""
+    if high > 10 * low > 0:
+        axes.set_xscale("log")
+        axes.xaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0), numticks=5))
+    else:
+        axes.xaxis.set_major_locator(MaxNLocator(nbins=5))
+    axes.xaxis.set_major_formatter(FuncFormatter(lambda value, _: f"{value:g}"))
+    axes.xaxis.set_minor_formatter(NullFormatter())
 
 
 def compare_table_html(payload: dict[str, Any]) -> str:

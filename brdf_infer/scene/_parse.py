@@ -31,7 +31,10 @@ from brdf_infer.scene._tables import (
     _selection,
 )
 from brdf_infer.tables.bsdf_measurements import BSDF_SERIES, is_bsdf_path
-from brdf_infer.tables.measurements import QUANTITIES
+from brdf_infer.tables.measurements import QUANTITIES, header_quantity
+
+# the keys a raw_reflectance series needs (a brdf series has no aperture)
+APERTURE_KEYS = ("aperture_diameter_mm", "aperture_distance_mm")
 
 _TOP_KEYS = {
     "instrument",
@@ -62,7 +65,7 @@ def parse_scene(document: dict, path: Path) -> Scene:
                 f"unknown key (allowed: {', '.join(sorted(_TOP_KEYS))})", file=path, field=key
             )
     measurements = _string(document, "measurements", path)
-    series, thinning = _parse_series(document, path, is_bsdf_path(Path(measurements)))
+    series, thinning = _parse_series(document, path, path.parent / measurements)
     errors_table = document.get("errors", {})
     if not isinstance(errors_table, dict):
         raise BadInputError("expected a table [errors]", file=path, field="errors")
@@ -114,10 +117,11 @@ def parse_scene(document: dict, path: Path) -> Scene:
 
 
 def _parse_series(
-    document: dict, path: Path, from_bsdf: bool
+    document: dict, path: Path, measurements: Path
 ) -> tuple[dict[str, SeriesGeometry], tuple[int, int]]:
     """The ``[series.NAME]`` tables (one implied for a .BSDF table) and the ``[bsdf]``
-    thinning."""
+    thinning; ``measurements``: the scene's measurement file."""
+    from_bsdf = is_bsdf_path(measurements)
     series_table = document.get(
         "series", {BSDF_SERIES: {"quantity": "brdf"}} if from_bsdf else None
     )
@@ -139,7 +143,7 @@ def _parse_series(
             series_table,
             name,
             path,
-            {"aperture_diameter_mm", "aperture_distance_mm", "quantity"},
+            {*APERTURE_KEYS, "quantity"},
             "series.",
         )
         prefix = f"series.{name}."
@@ -152,8 +156,32 @@ def _parse_series(
                 quantity,
             )
         except BadInputError as error:
+            if "quantity" not in table and error.field in APERTURE_KEYS:
+                _missing_quantity(name, table, path, measurements, from_bsdf)
             raise BadInputError(error.problem, file=path, field=prefix + str(error.field)) from None
     return series, thinning
+
+
+def _missing_quantity(
+    name: str, table: dict, path: Path, measurements: Path, from_bsdf: bool
+) -> None:
+    """A series without ``quantity`` (so raw reflectance) that lacks its aperture: where the
+    measurement file holds BRDF values, the series most likely forgot ``quantity = "brdf"``.
+
+    Raises:
+        BadInputError: naming ``series.NAME.quantity``, when the file holds BRDF values.
+    """
+    if any(key in table for key in APERTURE_KEYS):
+        return  # an aperture half given: the missing key is the problem
+    if not from_bsdf and header_quantity(measurements) != "brdf":
+        return
+    raise BadInputError(
+        f'missing: {measurements.name} holds brdf values; set quantity = "brdf" in '
+        f"[series.{name}] (for raw reflectance, give {' and '.join(APERTURE_KEYS)} and name "
+        "the columns reflectance,reflectance_err)",
+        file=path,
+        field=f"series.{name}.quantity",
+    )
 
 
 def _reference_params(outputs: dict, path: Path) -> str | None:

@@ -252,6 +252,24 @@ def load_measurements(
     )
 
 
+def header_quantity(path: str | Path) -> str | None:
+    """The quantity a CSV's header names (``brdf`` or ``raw_reflectance``), read from its first
+    non-blank line only; None where the file cannot be read or the header names neither (or
+    both): :func:`load_measurements` then says what is wrong."""
+    names: set[str] = set()
+    try:
+        with Path(path).open(encoding="utf-8-sig", newline="") as handle:
+            for cells in csv.reader(handle):
+                names = {cell.strip() for cell in cells} - {""}
+                if names:
+                    break
+    except (OSError, UnicodeDecodeError, csv.Error):
+        return None
+    if ("brdf" in names) == ("reflectance" in names):
+        return None
+    return "brdf" if "brdf" in names else "raw_reflectance"
+
+
 def _check_header(header: list[str], path: Path) -> None:
     """Every header column named, and named once."""
     for position, name in enumerate(header):
@@ -306,7 +324,8 @@ def _check_series(
     if expected != quantity:
         raise BadInputError(
             f"series {record['series']!r} measures {expected} but this table holds "
-            f"{quantity} values",
+            f'{quantity} values (set quantity = "{quantity}" in the scene\'s '
+            f"[series.{record['series']}]?)",
             **at,
         )
 

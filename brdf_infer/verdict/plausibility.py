@@ -1,6 +1,6 @@
 """Plausibility checks: inputs in the wrong unit and answers that scatter more than they receive.
 
-Angles are in degrees, reflectance and TIS are fractions, BRDF is in sr⁻¹. Three kinds of
+Angles are in degrees, reflectance and TIS are fractions, BRDF is in sr⁻¹. Four kinds of
 value are implausible enough to stop a job before any sampling (unless the user insists with
 ``--force``, and then the verdict turns red, :mod:`brdf_infer.verdict`):
 
@@ -13,10 +13,18 @@ value are implausible enough to stop a job before any sampling (unless the user 
   exceed 1/π only near its specular peak; the dimmest row of the bundled Lyman-α series is at
   π·BRDF = 0.048 (I) and 0.073 (II), 100 times less in percent would be 4.8 and 7.3. (A glossy
   sample measured at its specular peak only can pass this line legitimately: ``--force``.)
+- **A σ column in percent**: in a series, the median of σ/value (σ: ``reflectance_err`` or
+  ``brdf_err``) is above 1, i.e. most of its rows are measured at a signal-to-noise ratio below
+  1: the σ is in percent (or relative) rather than in the value's units. A σ of a few percent
+  exceeds every raw reflectance (< 1) and every BRDF of a black coating but near a specular
+  peak, so the median, not every row, decides; a run on such rows answers nothing (the
+  reported BRDF table with its σ in percent sampled 2529 divergent transitions). (A series
+  measured mostly below its noise floor can pass this line legitimately: ``--force``.)
 - **An answer above 1**: a fit's or a posterior's π·BRDF0 (the near-normal TIS, Sec. 7) or its
   TIS at the scene's incidence angles above 1, more light scattered than received.
 
-A σ column larger than its values is only warned about (:func:`measurement_warnings`).
+Where only some rows have a σ above their value, that is only warned about
+(:func:`measurement_warnings`): a faint row can be measured at a signal-to-noise ratio below 1.
 """
 
 from __future__ import annotations
@@ -64,9 +72,60 @@ def value_field(measurements: Measurements) -> str:
     return "reflectance" if measurements.quantity == "raw_reflectance" else "brdf"
 
 
+def error_field(measurements: Measurements) -> str:
+    """The column holding the values' 1σ: ``reflectance_err`` or ``brdf_err``."""
+    return f"{value_field(measurements)}_err"
+
+
+def _value_unit(measurements: Measurements) -> str:
+    """The unit of the value column, in words."""
+    return "sr^-1" if measurements.quantity == "brdf" else "a fraction"
+
+
+def _sigma_above(measurements: Measurements) -> np.ndarray:
+    """True for the rows whose σ exceeds their value (none without a σ column)."""
+    if measurements.reflectance_err is None:
+        return np.zeros(len(measurements), bool)
+    return measurements.reflectance_err > measurements.reflectance
+
+
+def _sigma_series(measurements: Measurements) -> dict[str, tuple[int, int, float]]:
+    """The series of at least :data:`PERCENT_ROWS` rows whose median σ/value exceeds 1, each
+    with (rows whose σ exceeds the value, rows, median σ/value)."""
+    if measurements.reflectance_err is None:
+        return {}
+    ratio = measurements.reflectance_err / measurements.reflectance
+    found = {}
+    for series in dict.fromkeys(measurements.series.tolist()):
+        rows = ratio[measurements.series == series]
+        if rows.size >= PERCENT_ROWS and np.median(rows) > 1:
+            found[series] = (int((rows > 1).sum()), rows.size, float(np.median(rows)))
+    return found
+
+
+def _sigma_check(measurements: Measurements) -> list[Implausible]:
+    """A σ column in percent (module docstring), naming the table's σ column."""
+    found = _sigma_series(measurements)
+    if not found:
+        return []
+    field, value = error_field(measurements), value_field(measurements)
+    counts = "; ".join(
+        f"{above} of {rows} rows of series {name} (median σ/value {median:.3g})"
+        for name, (above, rows, median) in found.items()
+    )
+    return [
+        Implausible(
+            f"{field} exceeds its value in {counts}: a σ in percent, or relative?",
+            str(measurements.path),
+            field,
+            f"give σ in the units of {value} [{_value_unit(measurements)}]",
+        )
+    ]
+
+
 def measurement_checks(scene: Scene, measurements: Measurements) -> list[Implausible]:
-    """Angles that look like radians and series whose values look like percent (module
-    docstring), each naming the measurement file and the column."""
+    """Angles that look like radians, series whose values look like percent and series whose
+    σ looks like percent (module docstring), each naming the measurement file and the column."""
     found = []
     where = str(measurements.path)
     angles = np.abs(np.concatenate([measurements.theta_i_deg, measurements.theta_s_deg]))
@@ -98,7 +157,7 @@ def measurement_checks(scene: Scene, measurements: Measurements) -> list[Implaus
                 "brdf_infer reads fractions (π·BRDF = 1 is a white diffuser)",
             )
         )
-    return found
+    return found + _sigma_check(measurements)
 
 
 def answer_checks(
@@ -190,14 +249,16 @@ def require_plausible(found: Sequence[Implausible], force: bool) -> None:
 
 
 def measurement_warnings(measurements: Measurements) -> list[str]:
-    """Warnings (not errors) about a table: a σ column larger than its values."""
-    if measurements.reflectance_err is None:
-        return []
-    large = np.flatnonzero(measurements.reflectance_err > measurements.reflectance)
+    """Warnings (not errors) about a table: rows whose σ exceeds their value, outside the
+    series :func:`measurement_checks` finds with their σ in percent."""
+    flagged = list(_sigma_series(measurements))
+    above = _sigma_above(measurements) & ~np.isin(measurements.series, flagged)
+    large = np.flatnonzero(above)
     if not large.size:
         return []
     rows = ", ".join(str(k + 1) for k in large[:5]) + (" ..." if large.size > 5 else "")
     return [
-        f"{measurements.path}: {large.size} row(s) have reflectance_err larger than the value "
-        f"(rows {rows}): is the σ column in other units than the values?"
+        f"{measurements.path}: {large.size} row(s) have {error_field(measurements)} larger than "
+        f"the value (rows {rows}): is the σ column in other units than the "
+        f"{value_field(measurements)} values [{_value_unit(measurements)}]?"
     ]
