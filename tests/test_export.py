@@ -20,7 +20,7 @@ from brdf_infer.report.export import (
     write_bsdf,
 )
 from tests import independent_bsdf as oracle
-from tests.helpers import reference_brdf_hemisphere, run_cli
+from tests.helpers import REDUCED_NUTS, reference_brdf_hemisphere, run_cli
 
 COARSE = ["--azimuth-step", "15", "--radial-step", "5"]
 
@@ -236,14 +236,18 @@ def test_posterior_exports_are_ordered_and_their_tis_lines_are_the_tis_band(
     band = json.loads(out)
     for kind, key in (("lower95", "lo95"), ("median", "median"), ("upper95", "hi95")):
         np.testing.assert_allclose(tables[kind]["tis"][0], band[key], rtol=1e-10)
-    # a draw file is one consistent BRDF: its TIS lines are its own exact TIS
+    # a draw file is one consistent BRDF: its TIS lines are its own exact TIS, at its own
+    # out-of-plane width (Δφ × the draw's dphi_scale)
     draws = draws_params(nuts_run.idata.posterior)
     from brdf_infer.model import tis
+    from brdf_infer.model.params import PAPER_CONSTANTS, with_dphi_scale
 
     first = type(draws)(*(float(v[0]) for v in draws))
+    scale = float(np.asarray(nuts_run.idata.posterior["dphi_scale"]).reshape(-1)[0])
+    constants = with_dphi_scale(PAPER_CONSTANTS, scale)
     np.testing.assert_allclose(
         oracle.read_bsdf(payload["files"][6]["path"])["tis"][0],
-        np.asarray(tis(np.array([0.0, 30.0, 60.0, 85.0]), first)),
+        np.asarray(tis(np.array([0.0, 30.0, 60.0, 85.0]), first, False, constants)),
         rtol=1e-10,
     )
 
@@ -296,7 +300,8 @@ def test_more_draws_than_the_run_has_is_a_clear_error(nuts_run, tmp_path, capsys
     out = tmp_path / "out"
     argv = ["export", "--run", str(nuts_run.out), "--draws", "100000", "--out", str(out)]
     code, _, err = run_cli(*argv, capsys=capsys)
-    assert code == 2 and "--draws" in err and "4000 draws" in err and not out.exists()
+    draws = f"{4 * REDUCED_NUTS['draws']} draws"
+    assert code == 2 and "--draws" in err and draws in err and not out.exists()
 
 
 def test_a_grid_too_coarse_for_its_tis_is_warned_about(tmp_path, capsys):

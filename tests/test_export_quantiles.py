@@ -11,7 +11,7 @@ import pytest
 
 from brdf_infer._internal import arviz as az
 from brdf_infer.model import tis
-from brdf_infer.model.params import PAPER_CONSTANTS, UV_PAPER, Params
+from brdf_infer.model.params import PAPER_CONSTANTS, UV_PAPER, Params, with_dphi_scale
 from brdf_infer.posterior import draws_params
 from brdf_infer.report.export import brdf_table
 from tests import independent_bsdf as oracle
@@ -21,6 +21,11 @@ ANGLES = ["0", "30", "60", "85"]
 COARSE = ["--azimuth-step", "15", "--radial-step", "5"]
 QUANTILE_FILES = {"tis_q025": 0.025, "tis_q500": 0.5, "tis_q975": 0.975}
 DIGITS = 1e-6  # the files' 7 significant digits, on an integral
+
+
+def draw_widths(run) -> np.ndarray:
+    """Every draw's factor on Eq. (8)'s Δφ (its out-of-plane width), chains flattened."""
+    return np.asarray(run.idata.posterior["dphi_scale"]).reshape(-1)
 
 
 def export(capsys, run, out, *argv):
@@ -61,8 +66,10 @@ def test_tis_quantile_tables_are_the_draws_at_the_tis_quantiles(nuts_run, tmp_pa
         "lower95", "median", "upper95", "tis_q025", "tis_q500", "tis_q975",
     ]  # fmt: skip
     draws = draws_params(nuts_run.idata.posterior)
+    scales = draw_widths(nuts_run)  # each draw's out-of-plane width
     theta = np.array([float(a) for a in ANGLES])
-    every = np.stack([np.asarray(tis(t, draws)) for t in theta])  # (angles, draws)
+    widths = with_dphi_scale(PAPER_CONSTANTS, scales)
+    every = np.stack([np.asarray(tis(t, draws, False, widths)) for t in theta])  # (angles, draws)
     n = every.shape[1]
     for kind, level in QUANTILE_FILES.items():
         entry = files[kind]
@@ -77,7 +84,7 @@ def test_tis_quantile_tables_are_the_draws_at_the_tis_quantiles(nuts_run, tmp_pa
             one = Params(*(float(v[index[k]]) for v in draws))
             block = np.asarray(
                 brdf_table(t, read["scatter_azimuth"], read["scatter_radial"], one, False,
-                           PAPER_CONSTANTS)
+                           with_dphi_scale(PAPER_CONSTANTS, scales[index[k]]))
             )  # fmt: skip
             np.testing.assert_allclose(read["bsdf"][0, k], block, rtol=1e-6, atol=1e-300)
         band = np.quantile(every, level, axis=1)
@@ -111,7 +118,8 @@ def test_tis_quantile_tables_integrate_to_their_tis_within_the_stated_grid_error
 def test_tis_quantile_at_one_angle_is_one_draw_for_every_block(nuts_run, tmp_path, capsys):
     payload, _ = export(capsys, nuts_run.out, tmp_path, *COARSE, "--tis-quantile-at", "70")
     assert payload["tis_quantile_at_deg"] == 70.0
-    at70 = np.asarray(tis(70.0, draws_params(nuts_run.idata.posterior)))
+    widths = with_dphi_scale(PAPER_CONSTANTS, draw_widths(nuts_run))
+    at70 = np.asarray(tis(70.0, draws_params(nuts_run.idata.posterior), False, widths))
     for kind, level in QUANTILE_FILES.items():
         entry = by_kind(payload)[kind]
         assert len(set(entry["draw_index"])) == 1 and entry["tis_quantile_at_deg"] == 70.0

@@ -16,7 +16,6 @@ from brdf_infer.fit.quality import (
     POOR_P_VALUE,
     TREND_P_VALUE,
     FitQuality,
-    loo_pit_check,
     repeatability_check,
     residual_trends,
     scaled_sigma,
@@ -122,11 +121,20 @@ def test_statements_and_json_say_what_they_measured():
     rng = np.random.default_rng(1)
     ok_check = repeatability_check(rng.normal(0, 0.06, 42), np.full(42, 1e-4), 36, 0.065)
     trends = {"theta_s": 0.2, "theta_i": 0.5, "series": 0.3, "joint": 0.4}
-    learned = FitQuality(36.0, 36, 0.06, ok_check, 0.065, trends)
-    assert learned.statement.startswith("ok: χ²/dof = 1 for 36 dof") and learned.verdict == "ok"
-    assert "by construction" in learned.statement and "not wholly above 2 × the expected" in (
-        learned.statement
-    )
+    sizes = {"theta_s": 0.2, "theta_i": 0.3, "series": 0.1}
+    # a learned repeatability: σ_rep one more parameter (dof 36 − 1), χ² set by construction,
+    # so no χ²/dof sentence; "no misfit detected" with what the checks could have seen
+    learned = FitQuality(36.0, 35, 0.06, ok_check, 0.065, trends, 0.9, sizes, 0.004)
+    assert learned.verdict == "no misfit detected" and "χ²" not in learned.statement
+    assert learned.statement.startswith(
+        "no misfit detected (it would see a misfit adding 19 % scatter per row, a θs trend of "
+        "22 %, a θi trend of 35 %, a series offset of 11 %)"
+    ), learned.statement
+    assert "not wholly above 2 × the expected" in learned.statement
+    assert learned.sigma_factor == 1.0  # χ² by construction: nothing to scale by
+    names = [entry["name"] for entry in learned.model_checks()]
+    assert names == ["fit_repeatability", "fit_residual_trend"]
+    assert all(entry["ok"] for entry in learned.model_checks())
     bad_check = repeatability_check(rng.normal(0, 0.3, 42), np.full(42, 1e-4), 36, 0.065)
     trended = {"theta_s": 1e-5, "theta_i": 0.5, "series": 0.3, "joint": 1e-4}
     bad = FitQuality(36.0, 36, 0.3, bad_check, 0.065, trended)
@@ -144,13 +152,6 @@ def test_statements_and_json_say_what_they_measured():
     undefined = FitQuality(0.0, 0)
     assert undefined.statement.startswith("undefined") and undefined.verdict == "undefined"
     assert not undefined.poor and undefined.sigma_factor == 1.0
-
-
-def test_a_posterior_loo_pit_enters_the_verdict():
-    assert loo_pit_check(0.63) == (False, loo_pit_check(0.63)[1])
-    assert loo_pit_check(1e-4)[0] and loo_pit_check(1e-4)[1].startswith("poor:")
-    assert FitQuality(36.0, 36, loo_pit_ks_p=1e-5).reasons == ["loo-pit"]
-    assert "LOO-PIT is uniform" in FitQuality(36.0, 36, loo_pit_ks_p=0.5).statement
 
 
 def test_the_scene_states_its_expected_repeatability(tmp_path):
@@ -214,7 +215,7 @@ def _quality(scene, data, init=None) -> FitQuality:
     fit = fit_lsq(scene, data, starts=4, init=init)
     return FitQuality(
         fit.cost,
-        fit.n_points - len(fit.free),
+        fit.n_points - len(fit.free) - 1,  # σ_rep learned: one more parameter
         fit.repeatability,
         fit.repeatability_check,
         scene.errors.expected_repeatability,
@@ -229,7 +230,7 @@ def test_the_bundled_fit_is_ok(lya):
     assert quality.learned_repeatability == pytest.approx(0.057, abs=0.001)
     assert quality.repeatability.high < POOR_MULTIPLE * 0.065 < 0.13 + 1e-12
     assert quality.trend_p_values["joint"] > TREND_P_VALUE
-    assert quality.verdict == "ok", quality.statement
+    assert quality.verdict == "no misfit detected", quality.statement
 
 
 def test_a_vendor_like_28_percent_misfit_is_poor(lya):

@@ -1,5 +1,6 @@
-"""One fold switch (Eq. 10) for likelihood, bands and exports; products default to the
-physical, unfolded BRDF and say what they include.
+"""Two fold switches (Eq. 10): what the instrument measured (``[model] fold``, the likelihood)
+and what the products describe (``[outputs] fold``: bands, TIS, exports); products default to
+the physical, unfolded BRDF whatever the instrument measured, and say what they include.
 
 Hand-checked numbers (2-D adaptive quadrature of the plain-Python model in tests/helpers.py,
 tests/test_tis.py): uv-paper's TIS(85°) is 7.8987 % unfolded and 7.4650 % folded, a ratio of
@@ -15,7 +16,7 @@ import pytest
 from brdf_infer._internal import arviz as az
 from brdf_infer.model import strumik_family, tis
 from brdf_infer.model.params import PAPER_CONSTANTS, UV_PAPER, Params
-from brdf_infer.posterior import draws_params, posterior_bands
+from brdf_infer.posterior import posterior_bands
 from brdf_infer.posterior._results import write_inference_data
 from tests import independent_bsdf as oracle
 from tests.helpers import run_cli
@@ -79,20 +80,46 @@ def test_a_run_is_unfolded_by_default_and_says_so(nuts_run, capsys):
     assert code == 0 and UNFOLDED in out
 
 
-def test_a_run_whose_scene_folds_gives_folded_products(nuts_run, tmp_path, capsys):
-    """The run's own switch (its scene's [model] fold, stored with the draws) is what
-    ``tis --run`` and ``export --run`` follow; ``--no-fold`` overrides it."""
+def _run_with_attributes(nuts_run, folder: Path, **attributes) -> Path:
+    """A copy of the suite's run folder whose posterior.nc carries ``attributes``."""
     idata = az.from_netcdf(nuts_run.out / "posterior.nc")
-    idata.posterior.attrs["fold"] = 1
-    run = tmp_path / "folded_run"
-    run.mkdir()
-    write_inference_data(idata, run / "posterior.nc")
-    (run / "summary.json").write_text((nuts_run.out / "summary.json").read_text())
-    draws = draws_params(idata.posterior)
+    idata.posterior.attrs.update(attributes)
+    folder.mkdir()
+    write_inference_data(idata, folder / "posterior.nc")
+    (folder / "summary.json").write_text((nuts_run.out / "summary.json").read_text())
+    return folder
+
+
+def test_an_instrument_that_folds_leaves_the_products_physical(nuts_run, tmp_path, capsys):
+    """A run whose likelihood folded ([model] fold = true: the instrument's readings fold near
+    grazing) but whose products follow [outputs] fold = false: ``tis --run`` is of the physical
+    BRDF, the run's own band; a run written before the two switches (no ``products_fold``)
+    folded both, and still reads so."""
+    run = _run_with_attributes(nuts_run, tmp_path / "instrument", fold=1, products_fold=0)
+    argv = ["tis", "--run", str(run), "--theta-i", "85"]
+    assert json_of(capsys, *argv)["fold"] is False
+    older = _run_with_attributes(nuts_run, tmp_path / "older", fold=1)
+    idata = az.from_netcdf(older / "posterior.nc")
+    del idata.posterior.attrs["products_fold"]
+    write_inference_data(idata, older / "posterior.nc")
+    assert json_of(capsys, "tis", "--run", str(older), "--theta-i", "85")["fold"] is True
+
+
+def test_a_run_whose_scene_folds_gives_folded_products(nuts_run, tmp_path, capsys):
+    """The run's own products switch (its scene's [outputs] fold, stored with the draws) is
+    what ``tis --run`` and ``export --run`` follow; ``--no-fold`` overrides it. Each draw's TIS
+    with its own out-of-plane width."""
+    run = _run_with_attributes(nuts_run, tmp_path / "folded_run", products_fold=1)
+    idata = az.from_netcdf(run / "posterior.nc")
+    physical = {
+        name: np.asarray(idata.posterior[name]).reshape(-1)
+        for name in strumik_family(dphi_free=True).parameters
+    }
     argv = ["tis", "--run", str(run), "--theta-i", "85"]
     folded, plain = json_of(capsys, *argv), json_of(capsys, *argv, "--no-fold")
     assert folded["fold"] is True and plain["fold"] is False
-    expected = np.median(np.asarray(tis(85.0, draws, True)))
+    member = strumik_family(True, dphi_free=True)
+    expected = np.median(np.exp(np.asarray(member.log_tis_draws(np.array([85.0]), physical))))
     assert folded["median"][0] == pytest.approx(expected, rel=1e-12)
     payload = json_of(
         capsys,

@@ -171,7 +171,8 @@ def test_posterior_truths_are_distinct_draws_of_the_run_at_every_drawn_site(lya,
     from brdf_infer.bench import _misspec
 
     chains, draws = 3, 7
-    drawn = ("log_brdf0", "b1", "b2", "b3", "alpha", "t_s0", "sample_sd", "repeatability")
+    drawn = ("log_brdf0", "b1", "b2", "b3", "alpha", "t_s0", "log_dphi_scale", "sample_sd")
+    drawn += ("repeatability",)
     index = np.arange(chains * draws, dtype=float).reshape(chains, draws)  # the pooled draw
 
     def fake_run(model, *, seed, progress, chains, warmup, draws):

@@ -15,14 +15,15 @@ def test_a_nuts_runs_files_are_its_records(nuts_run):
     assert record_mismatches(nuts_run.summary, PosteriorSummary) == []
 
 
-# 16 walkers on lya: the emcee programs (MAP search, potential) of test_posterior's emcee16
-# tests, which compile the data in; in their group, one compile for the three
-@pytest.mark.xdist_group("emcee16")
+# 18 walkers on lya (2 × its 9 sampled dimensions): the emcee programs (MAP search, potential)
+# of test_posterior's emcee18 tests, which compile the data in; in their group, one compile for
+# the three
+@pytest.mark.xdist_group("emcee18")
 def test_an_emcee_runs_summary_is_its_record(lya, tmp_path):
     run = run_posterior(
         *lya,
         sampler="emcee",
-        walkers=16,
+        walkers=18,
         steps=300,
         warmup=100,
         out=tmp_path,

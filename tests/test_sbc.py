@@ -176,6 +176,25 @@ def test_sbc_command_passes_lya_fixed_as_built_without_ranking_its_fixed_paramet
     assert "It cannot see a wrong model" in page and "Planted fault" not in page
 
 
+def test_sbc_passes_with_the_out_of_plane_width_free_and_ranks_it(tmp_path, capsys):
+    """``lya-fixed`` with Eq. (8)'s out-of-plane width left uncertain (its scene key removed:
+    the default prior, ln s ~ N(0, 0.25)): the width's factor is ranked and SBC passes at 40
+    replicates, TIS(70°) carrying each replicate's own Δφ."""
+    from brdf_infer.scene import load_scene
+
+    fixed = load_scene("lya-fixed")
+    text = fixed.path.read_text()
+    text = text[: text.index("[priors.dphi_scale]")] + text[text.index("# Ray-tracing") :]
+    for name in ("lya_measurements.csv", "lya_tis_reference.csv"):
+        text = text.replace(f'"{name}"', f'"{(fixed.path.parent / name).as_posix()}"')
+    scene = tmp_path / "free-width.toml"
+    scene.write_text(text)
+    assert load_scene(scene).dphi_free
+    payload = run_sbc_command(tmp_path / "out", capsys, str(scene), "--replicates", "40")
+    assert payload["passed"], payload["failures"]
+    assert "dphi_scale" in payload["quantities"] and "tis70" in payload["quantities"]
+
+
 @pytest.mark.slow  # 60 replicates (≈ 40 s); the suite checks the dropped term exactly below
 def test_sbc_command_flags_the_dropped_whitening_jacobian(tmp_path, capsys):
     """The whitening's log-Jacobian dropped in the inference: the verdict fails at 60
@@ -228,7 +247,8 @@ def test_planted_jacobian_fault_drops_exactly_the_whitening_log_jacobian(lya):
     faulty = planted_inference(built, "jacobian")
     direct = build_posterior_model(*lya, reparametrise=False)
     assert faulty.drop_log_jacobian and not built.drop_log_jacobian
-    shared = {"alpha": 3.4, "t_s0": -0.13, "sample_sd": 0.04, "repeatability": 0.06}
+    shared = {"alpha": 3.4, "t_s0": -0.13, "log_dphi_scale": 0.1}
+    shared |= {"sample_sd": 0.04, "repeatability": 0.06}
     linear = ("log_brdf0", "b1", "b2", "b3")
 
     def coefficients(u):
@@ -270,6 +290,7 @@ def test_planted_prior_fault_moves_every_free_prior_by_one_sd(lya):
         "b3": 0.7,
         "alpha": 3.4,
         "t_s0": -0.13,
+        "log_dphi_scale": 0.1,
         "sample_sd": 0.04,
         "repeatability": 0.06,
     }
@@ -280,6 +301,7 @@ def test_planted_prior_fault_moves_every_free_prior_by_one_sd(lya):
         "a3": point["b3"],
         "alpha": point["alpha"],
         "theta_s0": point["t_s0"] * 90.0,
+        "dphi_scale": point["log_dphi_scale"],  # its prior is on ln of the factor
     }
     expected = 0.0
     for name, value in coordinate.items():

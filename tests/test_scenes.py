@@ -54,7 +54,7 @@ def test_every_scene_runs_through_fit_posterior_and_tis(scene, minimal_scene, tm
         "--sampler",
         "emcee",
         "--walkers",
-        "16",
+        "18",
         "--steps",
         "600",
         "--warmup",

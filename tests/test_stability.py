@@ -170,7 +170,7 @@ def test_near_collinear_a2_a3_is_reported_with_finite_output(lya):
     scene, measurements = lya
     single = measurements.subset(measurements.theta_i_deg == 80.0)
     result = fit_lsq(scene, single, starts=4)
-    assert all(np.isfinite(v) for v in result.sigma.values())
+    assert all(np.isfinite(v) for v in result.sigma.values() if v is not None)  # None: flat
     assert any("singular" in w or "ill-conditioned" in w for w in result.warnings), result.warnings
 
 

@@ -41,7 +41,8 @@ def _whitened_draws(lab_scene, model_scene, measurements, labs: int) -> np.ndarr
         ]
     )
     model = build_posterior_model(model_scene, measurements)
-    parts = model.draw_parts({name: np.array([value]) for name, value in TRUTH.items()})
+    point = {**TRUTH, "dphi_scale": 1.0}  # the out-of-plane width: no in-plane row sees it
+    parts = model.draw_parts({name: np.array([value]) for name, value in point.items()})
     factor = np.asarray(parts.factor[0])
     covariance = factor @ factor.T + np.diag(np.asarray(parts.diagonal[0]))
     cholesky = np.linalg.cholesky(covariance)
@@ -115,7 +116,7 @@ def test_at_the_articles_one_degree_the_linearisation_misses_the_grazing_rows():
         ]
     )
     parts = build_posterior_model(scene, measurements).draw_parts(
-        {name: np.array([value]) for name, value in TRUTH.items()}
+        {name: np.array([value]) for name, value in {**TRUTH, "dphi_scale": 1.0}.items()}
     )
     factor = np.asarray(parts.factor[0])
     sd = np.sqrt(np.sum(factor**2, 1) + np.asarray(parts.diagonal[0]))

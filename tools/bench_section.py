@@ -2,7 +2,7 @@
 
     python tools/bench_section.py SECTION [--report reports/benchmarks.md]
 
-(SECTION: sbc, misspec, design, design-time or cost-curve.)
+(SECTION: sbc, misspec, design, design-time, cost-curve or model-check-power.)
 
 The full benchmark (``brdf-infer bench``) takes long; after a change that touches one study,
 this reruns that study's section as ``brdf-infer bench`` would and replaces the section of the
@@ -64,12 +64,19 @@ def cost_curve(report: Path) -> list[str]:
     return cost_section(cost_rows(quick=False))
 
 
+def model_check_power(report: Path) -> list[str]:
+    from brdf_infer.bench._model_check_power import model_check_power, power_section
+
+    return power_section(model_check_power())
+
+
 SECTIONS = {
     "sbc": sbc,
     "misspec": misspec,
     "design": design,
     "design-time": design_time,
     "cost-curve": cost_curve,
+    "model-check-power": model_check_power,
 }
 
 

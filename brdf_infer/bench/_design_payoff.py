@@ -43,7 +43,7 @@ from brdf_infer.design import (
     reachable,
 )
 from brdf_infer.model import tis
-from brdf_infer.model.params import PARAM_NAMES, Params
+from brdf_infer.model.params import DPHI_NAME, PARAM_NAMES, Params, with_dphi_scale
 from brdf_infer.scene import Scene
 from brdf_infer.tables.measurements import Measurements
 
@@ -103,10 +103,15 @@ class _Study:
         self.fitter = Fitter(self.scene, settings.chains, settings.warmup, settings.draws)
 
     def tis(self, sites: dict) -> np.ndarray:
+        """TIS at the study's angle of every draw: the products' (``[outputs] fold``), each
+        draw's out-of-plane width where the run has one."""
         params = Params(*(jnp.asarray(sites[n]) for n in PARAM_NAMES))
-        model = self.scene.model
+        constants = self.scene.model.constants
+        if DPHI_NAME in sites:
+            constants = with_dphi_scale(constants, jnp.asarray(sites[DPHI_NAME]))
         angle = jnp.asarray(self.settings.theta_i_deg)
-        return np.asarray(tis(angle, params, model.fold, model.constants)).reshape(-1)
+        fold = self.scene.outputs.fold
+        return np.asarray(tis(angle, params, fold, constants)).reshape(-1)
 
     def interval(self, sites: dict, truth: float) -> tuple[float, bool]:
         """95 % width of TIS(θ) and whether the interval covers the truth."""

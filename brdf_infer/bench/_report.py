@@ -15,6 +15,12 @@ from brdf_infer.bench._families import comparison_row, quadrature_rows
 from brdf_infer.bench._fits import fit_rows
 from brdf_infer.bench._instrument import bias_rows, ess_rows, node_rows
 from brdf_infer.bench._misspec import misspec_rows
+from brdf_infer.bench._model_check_power import (
+    QUICK_REPLICATES,
+    REPLICATES,
+    model_check_power,
+    power_section,
+)
 from brdf_infer.bench._raytrace import raytrace_rows
 from brdf_infer.bench._robustness import loader_rows, robustness_rows
 from brdf_infer.bench._samplers import sampler_rows
@@ -105,6 +111,8 @@ def write_report(out: Path, quick: bool, progress=print) -> Path:
     calibrations = sbc_rows(scene, quick, progress)
     progress("benchmark 7/12: misspecification ...")
     misspecified = misspec_rows(scene, quick, progress)
+    progress("benchmark: the model checks' power ...")
+    power = model_check_power(QUICK_REPLICATES if quick else REPLICATES, progress=progress)
     progress("benchmark: experimental design (estimate against refit, pay-off) ...")
     design_lines = design_section(quick, out.with_name(out.stem + "_design.png"), progress)
     design_lines += command_section(quick, progress)
@@ -144,6 +152,7 @@ def write_report(out: Path, quick: bool, progress=print) -> Path:
         *loader_section(loaders),
         *sbc_section(calibrations, sbc_plots),
         *misspec_section(misspecified),
+        *power_section(power),
         *export_section(grids, abgs),
         *family_section(quadratures, comparison, quick),
         *batch_section(batches),

@@ -177,6 +177,27 @@ def print_verdict(verdict: dict[str, Any]) -> None:
     print(f"verdict: {verdict['text']}")
 
 
+EXIT_MODEL_REJECTED = 3  # --strict-model: the run was written, but the data reject its model
+
+
+def add_strict_model_argument(parser: argparse.ArgumentParser) -> None:
+    """``--strict-model``: exit :data:`EXIT_MODEL_REJECTED` where the model check fails."""
+    parser.add_argument(
+        "--strict-model",
+        action="store_true",
+        help=f"exit with code {EXIT_MODEL_REJECTED} (after writing every file) where the data "
+        "reject the model (summary.json model_check.ok false), for pipelines",
+    )
+
+
+def model_exit_code(args: argparse.Namespace, summary: PosteriorSummary) -> int:
+    """0, or :data:`EXIT_MODEL_REJECTED` with ``--strict-model`` where the run's model check
+    failed (a run written before the record: 0)."""
+    record = summary.get("model_check")
+    rejected = record is not None and not record["ok"]
+    return EXIT_MODEL_REJECTED if getattr(args, "strict_model", False) and rejected else 0
+
+
 def print_posterior_summary(summary: PosteriorSummary, out: Path) -> None:
     """A posterior run's parameters with their diagnostics, TIS(70°) and times."""
     diagnostics = summary["diagnostics"]
@@ -205,14 +226,11 @@ def print_posterior_summary(summary: PosteriorSummary, out: Path) -> None:
             f"(95 %: {100 * tis70['lo95']:.2f}-{100 * tis70['hi95']:.2f} %; "
             f"{'with' if summary['fold'] else 'without'} Eq. (10) folding)"
         )
-        without = summary.get("width", {}).get("tis_70deg", {}).get("without", {})
-        shares = [
-            f"{entry['words']} {100 * (1 - entry['ratio']):.0f} %"
-            for entry in without.values()
-            if entry["ratio"] is not None
-        ]
-        if shares:
-            print(f"  share of its 95 % width carried by each assumption: {', '.join(shares)}")
+        width = summary.get("width", {}).get("tis_70deg")
+        if width and width.get("without"):
+            from brdf_infer.verdict import width_words
+
+            print(f"  what carries its width: {width_words(width, 'tis_70deg')}")
     seconds = summary["seconds"]
     print(
         f"posterior: {seconds['total']:.1f} s from building the model to its files, "

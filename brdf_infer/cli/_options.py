@@ -46,10 +46,18 @@ def add_force_argument(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def add_model_argument(parser: argparse.ArgumentParser) -> None:
+def add_model_argument(parser: argparse.ArgumentParser, auto: bool = False) -> None:
+    """``--model FAMILY``; with ``auto`` also ``--model auto`` (the family PSIS-LOO ranks
+    first, :data:`brdf_infer.scene.settings.AUTO_FAMILIES`)."""
+    choose = (
+        "; auto: the family PSIS-LOO ranks first among strumik2024, abg, lambertian and "
+        "lambertian+abg"
+        if auto
+        else ""
+    )
     action = parser.add_argument(
         "--model",
-        help="model family: %(known)s (default: the scene's [model] family)",
+        help=f"model family: %(known)s (default: the scene's [model] family{choose})",
     )
     with_known_names(action, FAMILY_REGISTRY)
 

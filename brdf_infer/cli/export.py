@@ -102,7 +102,7 @@ def _source(args: argparse.Namespace, scene_name: str):
     from brdf_infer.scene import load_scene
 
     scene = load_scene(scene_name)
-    member = strumik_family(chosen_fold(args.fold, scene.model.fold), scene.model.constants)
+    member = strumik_family(chosen_fold(args.fold, scene.outputs.fold), scene.model.constants)
     physical = params_to_dict(resolve_params(args.params))
     return Source(args.params, member, physical, False, scene.name)
 

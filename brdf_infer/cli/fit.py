@@ -114,12 +114,15 @@ def _fit(args: argparse.Namespace, scene, measurements, member) -> dict[str, Any
 def _sigma_table(payload: dict[str, Any]) -> str:
     """Parameters with the unscaled 1σ and the 1σ scaled by sqrt(chi2/dof), side by side."""
     factor = math.sqrt(payload["chi2_dof"]) if payload.get("covariance_scaled") else 1.0
+    flat = "flat profile: none"  # the data constrain it less than its prior (fit.lsq)
     rows = [
         [
             name,
             f"{value:.4g}",
-            f"{payload['sigma'][name] / factor:.2g}",
-            f"{payload['sigma_scaled'][name]:.2g}",
+            flat if payload["sigma"][name] is None else f"{payload['sigma'][name] / factor:.2g}",
+            flat
+            if payload["sigma_scaled"][name] is None
+            else f"{payload['sigma_scaled'][name]:.2g}",
         ]
         for name, value in payload["params"].items()
     ]

@@ -8,8 +8,10 @@ from pathlib import Path
 
 from brdf_infer.cli._common import (
     add_nuts_arguments,
+    add_strict_model_argument,
     claimed_output_dir,
     emit_json,
+    model_exit_code,
     print_posterior_summary,
     print_verdict,
     progress,
@@ -77,6 +79,7 @@ def add_parser(commands) -> argparse.ArgumentParser:
     add_model_argument(parser)
     add_instrument_argument(parser)
     add_force_argument(parser)
+    add_strict_model_argument(parser)
     parser.set_defaults(handler=main)
     return parser
 
@@ -109,7 +112,7 @@ def main(args: argparse.Namespace) -> int:
     summary = run.summary
     if args.json:
         emit_json({"out": str(out), **summary})
-        return 0
-    print_posterior_summary(summary, out)
-    print_verdict(summary["verdict"])
-    return 0
+    else:
+        print_posterior_summary(summary, out)
+        print_verdict(summary["verdict"])
+    return model_exit_code(args, summary)

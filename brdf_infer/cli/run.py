@@ -8,9 +8,11 @@ from pathlib import Path
 
 from brdf_infer.cli._common import (
     add_nuts_arguments,
+    add_strict_model_argument,
     claimed_output_dir,
     emit_json,
     headless,
+    model_exit_code,
     print_posterior_summary,
     print_verdict,
     progress,
@@ -28,7 +30,7 @@ from brdf_infer.cli._options import (
     with_known_names,
 )
 from brdf_infer.errors import BadInputError
-from brdf_infer.scene.settings import RunSettings, check_family_name
+from brdf_infer.scene.settings import AUTO_MODEL, RunSettings, check_family_name
 
 
 def add_parser(commands) -> argparse.ArgumentParser:
@@ -77,9 +79,10 @@ def add_parser(commands) -> argparse.ArgumentParser:
         help="where to measure next for TARGET (brdf-infer design: tis:70, pi_brdf0, a "
         "parameter, brdf:THETA_I,THETA_S or all), with the scene's [design] budget",
     )
-    add_model_argument(parser)
+    add_model_argument(parser, auto=True)
     add_instrument_argument(parser)
     add_force_argument(parser)
+    add_strict_model_argument(parser)
     parser.set_defaults(handler=main)
     return parser
 
@@ -89,7 +92,8 @@ def main(args: argparse.Namespace) -> int:
     headless()
     from brdf_infer.workflow import run
 
-    check_family_name(args.model)
+    if args.model != AUTO_MODEL:
+        check_family_name(args.model)
     # the input checks stop here, the fits' in run(); run() reports what it is forced past
     scene, measurements = scene_and_measurements(args.scene, args.instrument, args.force)
     settings = record_from_args(RunSettings, args, studies=requested_studies(args, scene))
@@ -104,9 +108,9 @@ def main(args: argparse.Namespace) -> int:
     )
     if args.json:
         emit_json(result.as_json())
-        return 0
-    _print_result(result, scene, measurements, out)
-    return 0
+    else:
+        _print_result(result, scene, measurements, out)
+    return model_exit_code(args, result.posterior)
 
 
 def _print_result(result, scene, measurements, out: Path) -> None:

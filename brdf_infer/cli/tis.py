@@ -12,8 +12,6 @@ import numpy as np
 from brdf_infer.cli._common import add_json_argument, command_parser, emit_json, progress, table
 from brdf_infer.cli._options import add_fold_arguments, angles, chosen_fold, folded_family
 
-TIS_RUN_FAMILY_DRAWS = 1000  # a lobe family's TIS is a 2-D quadrature (≈ 1 ms each)
-
 
 def add_parser(commands) -> argparse.ArgumentParser:
     """The options of ``brdf-infer tis``."""
@@ -26,7 +24,7 @@ def add_parser(commands) -> argparse.ArgumentParser:
     parser.add_argument(
         "--theta-i", type=float, nargs="+", default=[0, 5, 30, 50, 70], help="θi [deg]"
     )
-    add_fold_arguments(parser, "a parameter set: no folding; a run: its scene's [model] fold")
+    add_fold_arguments(parser, "a parameter set: no folding; a run: its scene's [outputs] fold")
     add_json_argument(parser)
     parser.set_defaults(handler=main)
     return parser
@@ -97,13 +95,15 @@ def _tis_warnings(theta_i: np.ndarray, values: np.ndarray) -> list[str]:
 
 def _tis_from_run(args: argparse.Namespace, theta_i: np.ndarray) -> None:
     from brdf_infer.model import fold_statement
-    from brdf_infer.posterior import load_run_family, tis_band
+    from brdf_infer.posterior import FAMILY_TIS_DRAWS, load_run_family, tis_band
 
     start = time.perf_counter()
     member, physical = load_run_family(Path(args.run))
     member = folded_family(member, args.fold)
     fold = member.fold
-    band = tis_band(member, physical, theta_i, TIS_RUN_FAMILY_DRAWS)
+    # the run's own draws: a lobe family's band over the same evenly spaced draws as the run's
+    # (its TIS is a 2-D quadrature, ≈ 1 ms each), so the two intervals are one
+    band = tis_band(member, physical, theta_i, FAMILY_TIS_DRAWS)
     band.setdefault("draws", int(np.size(next(iter(physical.values())))))  # every draw
     what = "Eq. (9)" if member.paper_parameters else member.name
     seconds = time.perf_counter() - start

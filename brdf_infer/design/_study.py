@@ -60,7 +60,7 @@ from brdf_infer.model.error_model import (
     group_members,
     noise_layout,
 )
-from brdf_infer.model.params import PARAM_NAMES, Params
+from brdf_infer.model.params import DPHI_NAME, PARAM_NAMES, Params, with_dphi_scale
 from brdf_infer.posterior import build_posterior_model, interval95, run_scene
 from brdf_infer.predict.observations import (
     build_observation_model,
@@ -127,7 +127,7 @@ def load_design_run(run: str | Path, scene: Scene | str | None = None) -> Design
         observed, np.log(measurements.reflectance)
     ):
         raise BadInputError(f"a run on other rows than scene '{scene.name}' has now", file=path)
-    names = [*PARAM_NAMES, "sample_sd", "repeatability"]
+    names = [*PARAM_NAMES, DPHI_NAME, "sample_sd", "repeatability"]
     sites = {
         name: np.asarray(idata.posterior[name]).reshape(-1)
         for name in names
@@ -136,9 +136,15 @@ def load_design_run(run: str | Path, scene: Scene | str | None = None) -> Design
     return DesignRun(scene, measurements, sites, path)
 
 
-def target_values(target: DesignTarget, params: Params, scene: Scene) -> np.ndarray:
-    """(draws, P) values of the target per draw (P = 1, or the free parameters for ``all``)."""
-    fold, constants = scene.model.fold, scene.model.constants
+def target_values(target: DesignTarget, draws: dict[str, np.ndarray], scene: Scene) -> np.ndarray:
+    """(draws, P) values of the target per draw of ``draws`` (P = 1, or the free parameters
+    for ``all``): the products' BRDF and TIS (``[outputs] fold``; each draw's out-of-plane
+    width where the run has one)."""
+    params = Params(*(jnp.asarray(draws[name]) for name in PARAM_NAMES))
+    fold = scene.outputs.fold
+    constants = scene.model.constants
+    if DPHI_NAME in draws:
+        constants = with_dphi_scale(constants, jnp.asarray(draws[DPHI_NAME]))
     if target.kind == "tis":
         values = tis(jnp.asarray(target.angles_deg[0]), params, fold, constants)
     elif target.kind == "brdf":
@@ -374,8 +380,7 @@ def design(
     total = len(run.sites["brdf0"])
     keep = np.unique(np.linspace(0, total - 1, min(options.draws, total)).round().astype(int))
     draws = {name: values[keep] for name, values in run.sites.items()}
-    params = Params(*(jnp.asarray(draws[name]) for name in PARAM_NAMES))
-    values = target_values(target, params, scene)
+    values = target_values(target, draws, scene)
     scale = np.std(values, axis=0)
     scale = np.where(scale > 0, scale, 1.0)
     row_predictive_ = predictive(run, candidates, draws)
@@ -469,8 +474,7 @@ def _current(target: DesignTarget, run: DesignRun, scene: Scene, scale) -> dict[
     the thinned draws the expectation uses, so that the ratio compares like with like)."""
     if target.kind == "all":
         return {"median": None, "lo95": None, "hi95": None, "sd": 1.0}
-    params = Params(*(jnp.asarray(run.sites[name]) for name in PARAM_NAMES))
-    values = target_values(target, params, scene)[:, 0]
+    values = target_values(target, run.sites, scene)[:, 0]
     return {**interval95(values), "sd": float(scale[0])}
 
 

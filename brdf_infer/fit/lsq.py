@@ -46,9 +46,10 @@ from brdf_infer.fit._space import start_points as start_points
 from brdf_infer.fit.quality import (
     LowRankNoise,
     RepeatabilityCheck,
+    detectable_trends,
     repeatability_check,
-    residual_trends,
     trend_regressors,
+    trend_tests,
 )
 from brdf_infer.model import FAMILY_NAMES, ModelFamily, family
 from brdf_infer.model.error_model import noise_layout
@@ -90,7 +91,8 @@ class LsqResult:
         reduced_chi2: χ² / (n_points − n_free).
         sigma: 1σ per parameter (0 for fixed ones), linearised: for Eq. (7)'s a2 and a3 it is
             only meaningful when α is well determined, since a2 = b2·90^−(1+α) (see
-            ``sigma_internal``).
+            ``sigma_internal``); None for a parameter whose profile is flat (:func:`flat_profile`):
+            the curvature there is no uncertainty.
         internal: the optimum in internal coordinates (:mod:`brdf_infer.fit._space`).
         sigma_internal: 1σ in internal coordinates, where the linearisation holds better.
         correlation: correlation matrix of the physical parameters (identity rows for fixed
@@ -113,6 +115,9 @@ class LsqResult:
             (:func:`brdf_infer.fit.quality.repeatability_check`); else None.
         residual_trend_p_values: F-test p-values of the residuals' trends in θs, θi and series
             (:func:`brdf_infer.fit.quality.residual_trends`; empty without degrees of freedom).
+        residual_trend_statistic: the joint trend test's F statistic (NaN: not judged).
+        residual_trend_detectable: the smallest trend or offset of each group that test finds
+            with 80 % power [ln R] (:func:`brdf_infer.fit.quality.detectable_trends`).
         reweightings: solves of the reweighting loop.
         warnings: identifiability and convergence warnings, in words.
     """
@@ -140,6 +145,8 @@ class LsqResult:
     repeatability: float
     repeatability_check: RepeatabilityCheck | None
     residual_trend_p_values: dict[str, float]
+    residual_trend_statistic: float
+    residual_trend_detectable: dict[str, float]
     reweightings: int
     warnings: list[str] = field(default_factory=list)
 
@@ -347,6 +354,8 @@ def _lsq_result(
     warnings += _identifiability_warnings(
         measurements, physical, sigma_of, condition, space, z_best
     )
+    for name in flat_profile(scene, space, sigma_of):
+        sigma_of[name] = None
     warnings += _solver_warnings(settled, reweight, converged, starts, best_cost)
     row_sigma = np.asarray(model.data.sigma)
     residuals = np.asarray(residuals_free(jnp.asarray(z_best))) * row_sigma  # [ln R]
@@ -373,9 +382,7 @@ def _lsq_result(
         row_sigma=row_sigma,
         repeatability=reweight.repeatability,
         repeatability_check=_repeatability_check(scene, reweight, residuals),
-        residual_trend_p_values=_residual_trends(
-            scene, measurements, residuals, row_sigma, absorbed, reweight
-        ),
+        **_residual_trends(scene, measurements, residuals, row_sigma, absorbed, reweight),
         reweightings=reweight.solves,
         warnings=warnings,
     )
@@ -407,15 +414,23 @@ def _repeatability_check(scene, reweight: Reweighting, residuals) -> Repeatabili
     return repeatability_check(residuals, variances, reweight.dof, expected)
 
 
-def _residual_trends(scene, measurements, residuals, sigma, absorbed, reweight: Reweighting):
-    """The residual-trend p-values of the fit (:func:`brdf_infer.fit.quality.residual_trends`):
+def _residual_trends(
+    scene, measurements, residuals, sigma, absorbed, reweight: Reweighting
+) -> dict[str, Any]:
+    """The residual-trend fields of :class:`LsqResult`: the tests' p-values, the joint F and
+    what it could detect (:func:`brdf_infer.fit.quality.trend_tests`,
+    :func:`~brdf_infer.fit.quality.detectable_trends`), with
     the rows whitened by the error model's covariance as least squares knows it: each row's
     σ² of the last solve, with its rotation term shared by the rows of one rotation setting,
     and the scene's calibration factors (the sample effect, whose scale the scene does not
     state, left out); ``absorbed``: a basis of what the fitted parameters absorb, in
     σ-weighted residuals."""
     if reweight.dof <= 0:
-        return {}
+        return {
+            "residual_trend_p_values": {},
+            "residual_trend_statistic": float("nan"),
+            "residual_trend_detectable": {},
+        }
     layout = noise_layout(scene.errors, measurements)
     rotation = reweight.rotation_slope * scene.errors.rotation_deg
     calibration = float(layout.calibration_sd)
@@ -434,7 +449,13 @@ def _residual_trends(scene, measurements, residuals, sigma, absorbed, reweight: 
     regressors = trend_regressors(
         measurements.theta_i_deg, measurements.theta_s_deg, np.asarray(measurements.series)
     )
-    return residual_trends(residuals, noise, sigma[:, None] * absorbed, regressors)
+    base = sigma[:, None] * absorbed
+    tests = trend_tests(residuals, noise, base, regressors)
+    return {
+        "residual_trend_p_values": {name: p for name, (_, p) in tests.items()},
+        "residual_trend_statistic": tests["joint"][0],
+        "residual_trend_detectable": detectable_trends(noise, base, regressors),
+    }
 
 
 def _internal_covariance(residuals_free, z_best, reduced_chi2):
@@ -468,6 +489,24 @@ def _correlation(covariance: np.ndarray, sigma: np.ndarray) -> np.ndarray:
     return np.clip(correlation, -1.0, 1.0)
 
 
+def flat_profile(scene: Scene, space: FitSpace, sigma: dict[str, float]) -> list[str]:
+    """Eq. (7)'s bounded parameters (α, θs0) whose linearised 1σ exceeds their prior's sd (a
+    uniform prior: its range / √12): the data constrain them less than the prior does, the
+    least-squares profile is flat there, and the curvature's 1σ describes no uncertainty (the
+    posterior says what data and prior leave of it)."""
+    if not space.member.paper_parameters:
+        return []
+    flat = []
+    for name in ("alpha", "theta_s0"):
+        prior = scene.priors[name]
+        if name not in space.free or prior.kind == "normal":
+            continue
+        spread = prior.scale if prior.kind != "uniform" else (prior.upper - prior.lower) / 12**0.5
+        if sigma[name] > spread:
+            flat.append(name)
+    return flat
+
+
 def _identifiability_warnings(measurements, physical, sigma, condition, space, z_best):
     warnings = []
     if condition > ILL_CONDITIONED:
@@ -480,8 +519,7 @@ def _identifiability_warnings(measurements, physical, sigma, condition, space, z
         warnings.append(
             f"theta_s0 is not identified directly: no measurement lies below theta_s0 = "
             f"{physical['theta_s0']:.3g} deg (lowest theta_s = {lowest:.3g} "
-            f"deg); it is constrained only through the curve's shape above it "
-            f"(1 sigma = {sigma['theta_s0']:.3g} deg)"
+            f"deg); it is constrained only through the curve's shape above it"
         )
     transform = space.transform
     for position, name in enumerate(space.names[k] for k in space.free_index):

@@ -43,8 +43,12 @@ as least squares knows it (each row's σ, its rotation term shared by the rows o
 setting, the calibration factors); the sample effect, whose scale the scene does not state, is
 left out, which makes the test somewhat liberal where one series is one sample.
 
-Where a posterior run of the scene exists, its LOO-PIT (``predictive.loo_pit_ks_p`` of its
-summary) judges the full error model by the data: :func:`loo_pit_check`.
+What each check could detect is stated beside its result (:func:`detectable_trends`: the
+smallest trend or offset its F-test finds with 80 % power at p < 0.001, from the noncentral F
+of the rows' own design), so that "no misfit detected" says how large a misfit went unseen.
+The checks also enter a posterior run's ``model_check`` record (:meth:`FitQuality.model_checks`;
+:mod:`brdf_infer.posterior`), beside the posterior's own checks of its leave-one-out
+predictive.
 
 Every fit also gives its 1σ scaled by √(χ²/dof) (the Birge ratio), the uncertainty the
 parameters would have if the misfit were noise the σᵢ left out. A poor fit's scaled 1σ is
@@ -60,15 +64,17 @@ from dataclasses import dataclass, field
 from typing import Any, NamedTuple
 
 import numpy as np
+from scipy.optimize import brentq
 from scipy.stats import chi2 as chi2_distribution
 from scipy.stats import f as f_distribution
+from scipy.stats import ncf
 
 POOR_CHI2_DOF = 2.0
 POOR_P_VALUE = 1e-3
 INTERVAL_LEVEL = 0.95  # of the learned repeatability's Q-profile interval
 POOR_MULTIPLE = 2.0  # σ_rep's interval wholly above this × the expected repeatability: poor
 TREND_P_VALUE = 1e-3  # the joint F-test of residual trends below this: poor
-LOO_PIT_P_VALUE = 1e-3  # a posterior's LOO-PIT uniformity (Kolmogorov–Smirnov) below this: poor
+DETECTION_POWER = 0.8  # what a check could detect is stated at this power
 TREND_GROUPS = ("theta_s", "theta_i", "series")
 
 
@@ -234,57 +240,167 @@ def residual_trends(
         name → p-value for every group and ``"joint"`` (NaN where a group adds no rank or no
         degrees of freedom are left).
     """
+    return {
+        name: p for name, (_, p) in trend_tests(residuals, covariance, absorbed, regressors).items()
+    }
+
+
+def trend_tests(
+    residuals: np.ndarray,
+    covariance: np.ndarray | LowRankNoise,
+    absorbed: np.ndarray,
+    regressors: Mapping[str, np.ndarray],
+) -> dict[str, tuple[float, float]]:
+    """:func:`residual_trends` with each test's F statistic: name → (F, p-value), NaN both
+    where a group adds no rank or no degrees of freedom are left."""
     whiten = _whitener(covariance)
     y = whiten(residuals)
     rows = len(y)
     base = whiten(np.column_stack([np.ones(len(residuals)), np.asarray(absorbed, float)]))
     base_sum, base_rank = _residual_sum(base, y)
 
-    def p_value(columns: list[np.ndarray]) -> float:
+    def test(columns: list[np.ndarray]) -> tuple[float, float]:
         full_sum, full_rank = _residual_sum(np.column_stack([base, *map(whiten, columns)]), y)
         added, left = full_rank - base_rank, rows - full_rank
         if added <= 0 or left <= 0 or full_sum <= 0:
-            return math.nan
+            return math.nan, math.nan
         statistic = ((base_sum - full_sum) / added) / (full_sum / left)
-        return float(f_distribution.sf(statistic, added, left))
+        return float(statistic), float(f_distribution.sf(statistic, added, left))
 
-    p_values = {name: p_value([columns]) for name, columns in regressors.items()}
-    p_values["joint"] = p_value(list(regressors.values())) if regressors else math.nan
-    return p_values
+    found = {name: test([columns]) for name, columns in regressors.items()}
+    found["joint"] = test(list(regressors.values())) if regressors else (math.nan, math.nan)
+    return found
 
 
-def loo_pit_check(loo_pit_ks_p: float) -> tuple[bool, str]:
-    """A posterior's LOO-PIT uniformity p-value (Kolmogorov–Smirnov, ``predictive.
-    loo_pit_ks_p`` of a run's summary) as (poor, statement): poor below
-    :data:`LOO_PIT_P_VALUE`, where the leave-one-out predictive of the full error model does
-    not describe the rows it left out."""
-    if loo_pit_ks_p < LOO_PIT_P_VALUE:
-        return True, (
-            f"poor: the LOO-PIT is not uniform (Kolmogorov–Smirnov p = {loo_pit_ks_p:.2g} < "
-            f"{LOO_PIT_P_VALUE:g}): the posterior predictive does not describe the rows it "
-            "leaves out"
-        )
-    return (
-        False,
-        f"ok: the LOO-PIT is uniform within chance (Kolmogorov–Smirnov p = {loo_pit_ks_p:.2g})",
+def detectable_trends(
+    covariance: np.ndarray | LowRankNoise,
+    absorbed: np.ndarray,
+    regressors: Mapping[str, np.ndarray],
+    level: float = TREND_P_VALUE,
+    power: float = DETECTION_POWER,
+    joint: bool = True,
+) -> dict[str, float]:
+    """The smallest misfit of each group's kind that the trend test detects with probability
+    ``power`` at ``level``, in the residuals' units (ln R for a fit's): for θs and θi the
+    difference between the ends of the measured range of a linear trend (their columns run
+    from −½ to ½), for series and sample an offset of one group against the first. The test:
+    the F-test of all ``regressors`` together (``joint``, :func:`trend_tests`' ``"joint"``),
+    else each group's own F-test at ``level`` / (number of groups) (:func:`worst_trend`).
+
+    A misfit d·x (x the group's first column) moves the whitened residuals by d·L⁻¹x; the F
+    statistic then has noncentrality λ = d² ‖P⊥ L⁻¹x‖², P⊥ the projection off the whitened
+    base columns (a constant and ``absorbed``), so d = √(λ_p / ‖P⊥ L⁻¹x‖²), λ_p the
+    noncentrality at which the noncentral F(k, n − m − k) exceeds its critical value with
+    probability ``power`` (tests/test_model_check.py measures it by simulation).
+    """
+    whiten = _whitener(covariance)
+    rows = np.shape(absorbed)[0]
+    base = _orthonormal(whiten(np.column_stack([np.ones(rows), np.asarray(absorbed, float)])))
+    columns = {name: whiten(np.asarray(g, float)) for name, g in regressors.items()}
+    if not columns:
+        return {}
+    tested = [list(columns.values())] if joint else [[c] for c in columns.values()]
+    each_level = level if joint else level / len(columns)
+    found = {}
+    for name, group in columns.items():
+        own = tested[0] if joint else [group]
+        added = _orthonormal(np.column_stack([base, *own])).shape[1] - base.shape[1]
+        left = rows - base.shape[1] - added
+        if added <= 0 or left <= 0:
+            continue
+        lam = noncentrality(added, left, each_level, power)
+        x = group[:, 0]
+        orthogonal = x - base @ (base.T @ x)
+        size = float(orthogonal @ orthogonal)
+        if size > 1e-12 * float(x @ x):
+            found[name] = math.sqrt(lam / size)
+    return found
+
+
+def noncentrality(added: int, left: int, level: float, power: float) -> float:
+    """The noncentrality λ at which the F-test of (``added``, ``left``) degrees of freedom at
+    ``level`` rejects with probability ``power`` (noncentral F)."""
+    critical = f_distribution.isf(level, added, left)
+    return float(brentq(lambda value: ncf.sf(critical, added, left, value) - power, 1e-6, 1e8))
+
+
+def worst_trend(tests: Mapping[str, tuple[float, float]]) -> tuple[str, float, float] | None:
+    """The group whose own F-test (:func:`trend_tests`) has the smallest p-value: (its name,
+    its F, that p-value × the number of groups, at most 1: Bonferroni over the groups, so that
+    one group's misfit — a series offset, a θs trend — is judged on its own degrees of freedom
+    rather than diluted among all); None where no group was tested."""
+    groups = {name: test for name, test in tests.items() if name != "joint"}
+    judged = {name: test for name, test in groups.items() if not math.isnan(test[1])}
+    if not judged:
+        return None
+    name = min(judged, key=lambda n: judged[n][1])
+    statistic, p = judged[name]
+    return name, statistic, min(1.0, p * len(groups))
+
+
+def _orthonormal(columns: np.ndarray) -> np.ndarray:
+    """An orthonormal basis of the span of ``columns`` (norm-scaled; singular values below
+    1e-9 of the largest left out)."""
+    norms = np.linalg.norm(columns, axis=0)
+    columns = columns[:, norms > 0] / norms[norms > 0]
+    if columns.shape[1] == 0:
+        return columns
+    u, s, _ = np.linalg.svd(columns, full_matrices=False)
+    return u[:, s > s[0] * 1e-9]
+
+
+def detectable_words(sizes: Mapping[str, float], scale: float = 1.0) -> str:
+    """Detectable misfits [ln R] (:func:`detectable_trends`, times ``scale``) in words, as
+    changes of the measured value in %."""
+    words = {"theta_s": "a θs trend", "theta_i": "a θi trend", "series": "a series offset"}
+    words["sample"] = "a sample offset"
+    return ", ".join(
+        f"{words[name]} of {100 * math.expm1(size * scale):.2g} %"
+        if size * scale < ABSORBED
+        else f"no {words[name].removeprefix('a ')} (the fitted parameters absorb one)"
+        for name, size in sizes.items()
     )
+
+
+ABSORBED = math.log(10.0)  # a detectable size beyond ×10: the parameters absorb such a misfit
+
+
+def detectable_scatter(dof: int, expected: float, row_variance: float) -> float:
+    """The misfit m [ln R] (an extra scatter per row beyond the expected repeatability) the
+    repeatability check finds with probability :data:`DETECTION_POWER`. The check fails
+    where Q(line) = Σ rᵢ²/(vᵢ + line²) exceeds χ²_dof's (1 + level)/2 point; with rows of
+    variance v + s², s² = expected² + m², Q(line) ≈ (v + s²)/(v + line²) · χ²_dof, so the
+    power reaches :data:`DETECTION_POWER` where (v + s²)/(v + line²) = χ²_dof,0.975 /
+    χ²_dof,0.2 (``row_variance``: v, the rows' typical variance besides σ_rep;
+    tests/test_model_check.py checks it by simulation)."""
+    line = POOR_MULTIPLE * expected
+    tail = (1.0 - INTERVAL_LEVEL) / 2
+    ratio = chi2_distribution.isf(tail, dof) / chi2_distribution.ppf(1.0 - DETECTION_POWER, dof)
+    total = (row_variance + line**2) * ratio - row_variance
+    return math.sqrt(max(total - expected**2, 0.0))
 
 
 @dataclass(frozen=True)
 class FitQuality:
-    """χ² per degree of freedom of a fit, its p-value, the checks against the data and a
-    statement in words.
+    """How well a fit describes its rows: its χ², the checks against the data (the learned
+    repeatability against the expected one, or χ² against the rows' σ; the residuals'
+    trends), what they could detect and a statement in words.
 
     Attributes:
         chi2: the weighted sum of squared residuals at the optimum.
-        dof: degrees of freedom, rows − free parameters.
-        learned_repeatability: σ_rep [ln R] when it was set so that χ²/dof = 1 (Paule–Mandel;
-            :mod:`brdf_infer.fit.lsq`), else None.
+        dof: degrees of freedom, rows − free parameters (− 1 where the repeatability is
+            learned: σ_rep is one more parameter fitted to the rows).
+        learned_repeatability: σ_rep [ln R] when it was set by the Paule–Mandel condition
+            (:mod:`brdf_infer.fit.lsq`: χ² = rows − free parameters), else None.
         repeatability: its check against ``expected_repeatability``
             (:func:`repeatability_check`; None: not judged).
         expected_repeatability: the scene's ``[errors] expected_repeatability`` [ln R].
         trend_p_values: :func:`residual_trends` of the fit (empty: not judged).
-        loo_pit_ks_p: a posterior run's LOO-PIT uniformity p-value (None: no run).
+        trend_statistic: the joint trend test's F statistic (NaN: not judged).
+        trend_detectable: :func:`detectable_trends` of the fit [ln R] (empty: not judged).
+        row_variance: the rows' typical variance besides σ_rep (the median of their value's
+            and angle terms') [ln R²], for what the repeatability check could detect
+            (:func:`detectable_scatter`; None: not stated).
     """
 
     chi2: float
@@ -293,7 +409,9 @@ class FitQuality:
     repeatability: RepeatabilityCheck | None = None
     expected_repeatability: float | None = None
     trend_p_values: Mapping[str, float] = field(default_factory=dict)
-    loo_pit_ks_p: float | None = None
+    trend_statistic: float = math.nan
+    trend_detectable: Mapping[str, float] = field(default_factory=dict)
+    row_variance: float | None = None
 
     @property
     def chi2_dof(self) -> float:
@@ -306,8 +424,11 @@ class FitQuality:
 
     @property
     def sigma_factor(self) -> float:
-        """√(χ²/dof): what the 1σ is multiplied by when scaled (1 where undefined)."""
-        return math.sqrt(self.chi2_dof) if self.dof > 0 and self.chi2 > 0 else 1.0
+        """√(χ²/dof): what the 1σ is multiplied by when scaled (1 where undefined, and where the
+        repeatability is learned: its χ² is set by construction and says nothing)."""
+        if self.learned_repeatability is not None or self.dof <= 0 or self.chi2 <= 0:
+            return 1.0
+        return math.sqrt(self.chi2_dof)
 
     @property
     def poor_line(self) -> float | None:
@@ -318,8 +439,8 @@ class FitQuality:
 
     @property
     def reasons(self) -> list[str]:
-        """What makes the fit poor: ``"repeatability"``, ``"chi2"``, ``"residual trend"``,
-        ``"loo-pit"`` (empty: ok)."""
+        """What makes the fit poor: ``"repeatability"``, ``"chi2"``, ``"residual trend"``
+        (empty: no misfit detected)."""
         if self.dof <= 0:
             return []
         reasons = []
@@ -331,8 +452,6 @@ class FitQuality:
             reasons.append("chi2")
         if self.trend_p_values.get("joint", math.nan) < TREND_P_VALUE:
             reasons.append("residual trend")
-        if self.loo_pit_ks_p is not None and loo_pit_check(self.loo_pit_ks_p)[0]:
-            reasons.append("loo-pit")
         return reasons
 
     @property
@@ -341,10 +460,10 @@ class FitQuality:
 
     @property
     def verdict(self) -> str:
-        """``ok``, ``poor`` or ``undefined`` (no degrees of freedom)."""
+        """``no misfit detected``, ``poor`` or ``undefined`` (no degrees of freedom)."""
         if self.dof <= 0:
             return "undefined"
-        return "poor" if self.poor else "ok"
+        return "poor" if self.poor else NO_MISFIT
 
     def _repeatability_text(self) -> str:
         learned = f"the learned repeatability {self.learned_repeatability:.3g} (in ln R"
@@ -368,43 +487,119 @@ class FitQuality:
         if math.isnan(joint):
             return ""
         if "residual trend" not in self.reasons:
-            return f"; the residuals show no trend in θs, θi or series (joint p = {joint:.2g})"
+            return f"the residuals show no trend in θs, θi or series (joint p = {joint:.2g})"
         worst = min(
             (name for name in TREND_GROUPS if name in self.trend_p_values),
             key=lambda name: self.trend_p_values[name],
         )
         return (
-            f"; the residuals trend with {worst.replace('theta_', 'θ')} (p = "
+            f"the residuals trend with {worst.replace('theta_', 'θ')} (p = "
             f"{self.trend_p_values[worst]:.2g}; joint p = {joint:.2g} < {TREND_P_VALUE:g}): "
             "the model's shape does not follow the data"
         )
 
     @property
+    def detectable(self) -> str:
+        """What the fit's checks could detect, in words (80 % power at p < 0.001)."""
+        parts = []
+        if self.learned_repeatability is not None and self.poor_line is not None:
+            parts.append(self._scatter_words())
+        elif self.learned_repeatability is None:
+            parts.append(
+                f"scatter beyond √{POOR_CHI2_DOF:g} × the rows' σ (χ²/dof > {POOR_CHI2_DOF:g})"
+            )
+        trends = detectable_words(self.trend_detectable)
+        if trends:
+            parts.append(trends)
+        return ", ".join(parts)
+
+    @property
     def statement(self) -> str:
-        """The quality in one line, starting with ``poor:``, ``ok:`` or ``undefined:``."""
+        """The quality in one line, starting with ``poor:``, ``no misfit detected`` or
+        ``undefined:``; a fit that learns its repeatability has χ² = rows − parameters by
+        construction, so no χ² is stated for it."""
         if self.dof <= 0:
             return "undefined: no degrees of freedom left (as many parameters as rows)"
-        p = f"p = {self.p_value:.2g}" if self.p_value > 0 else "p < 1e-300"
-        measured = f"χ²/dof = {self.chi2_dof:.3g} for {self.dof} dof ({p})"
-        trend = self._trend_text()
-        loo = "" if self.loo_pit_ks_p is None else f"; {loo_pit_check(self.loo_pit_ks_p)[1]}"
+        findings = []
         if self.learned_repeatability is not None:
-            link = "; but" if "repeatability" in self.reasons else ":"
-            learned = self._repeatability_text()
-            return f"{self.verdict}: {measured}, by construction{link} {learned}{trend}{loo}"
-        if "chi2" in self.reasons:
-            return (
-                f"poor: {measured}: the model does not describe the data within their σ; the "
-                f"unscaled 1σ understates the uncertainty by a factor {self.sigma_factor:.3g}, "
-                f"and even the scaled one belongs to a model the data reject{trend}{loo}"
+            findings.append(self._repeatability_text())
+        else:
+            p = f"p = {self.p_value:.2g}" if self.p_value > 0 else "p < 1e-300"
+            measured = f"χ²/dof = {self.chi2_dof:.3g} for {self.dof} dof ({p})"
+            if "chi2" in self.reasons:
+                measured += (
+                    ": the model does not describe the data within their σ; the unscaled 1σ "
+                    f"understates the uncertainty by a factor {self.sigma_factor:.3g}, and even "
+                    "the scaled one belongs to a model the data reject"
+                )
+            findings.append(measured)
+        trend = self._trend_text()
+        if trend:
+            findings.append(trend)
+        could = self.detectable
+        head = self.verdict if not could or self.poor else f"{NO_MISFIT} (it would see {could})"
+        return f"{head}: " + "; ".join(findings)
+
+    def _scatter_words(self) -> str:
+        """What the repeatability check could detect, in words (:func:`detectable_scatter`;
+        without the rows' variance the line it judges by)."""
+        if self.row_variance is None:
+            line = self.poor_line
+            return f"scatter whose 95 % interval clears {line:.2g} in ln R"
+        misfit = detectable_scatter(self.dof, self.expected_repeatability, self.row_variance)
+        return f"a misfit adding {100 * math.expm1(misfit):.2g} % scatter per row"
+
+    def model_checks(self) -> list[dict[str, Any]]:
+        """The fit's checks as entries of a run's ``model_check`` record
+        (:mod:`brdf_infer.posterior`): ``fit_repeatability`` or ``fit_chi2``, and
+        ``fit_residual_trend``, each with its statistic, p-value, verdict, words and what it
+        could detect. Empty without degrees of freedom."""
+        if self.dof <= 0:
+            return []
+        entries = []
+        check = self.repeatability
+        if self.learned_repeatability is not None and check is not None and self.poor_line:
+            entries.append(
+                _entry(
+                    "fit_repeatability",
+                    check.low,
+                    check.p_value,
+                    "repeatability" not in self.reasons,
+                    self._repeatability_text(),
+                    self._scatter_words(),
+                )
             )
-        return f"{self.verdict}: {measured}{trend}{loo}"
+        elif self.learned_repeatability is None:
+            entries.append(
+                _entry(
+                    "fit_chi2",
+                    self.chi2_dof,
+                    self.p_value,
+                    "chi2" not in self.reasons,
+                    f"χ²/dof = {self.chi2_dof:.3g} for {self.dof} dof (p = {self.p_value:.2g})",
+                    f"scatter beyond √{POOR_CHI2_DOF:g} × the rows' σ",
+                )
+            )
+        joint = self.trend_p_values.get("joint", math.nan)
+        if not math.isnan(joint):
+            entries.append(
+                _entry(
+                    "fit_residual_trend",
+                    self.trend_statistic,
+                    joint,
+                    "residual trend" not in self.reasons,
+                    self._trend_text(),
+                    detectable_words(self.trend_detectable) or "nothing: no degrees of freedom",
+                )
+            )
+        return entries
 
     def as_json(self) -> dict[str, Any]:
         """The keys a fit's JSON carries: ``chi2_dof``, ``dof``, ``chi2_p_value``,
         ``poor_fit``, ``verdict``, ``poor_reasons``, ``fit_quality`` (the statement),
         ``expected_repeatability``, ``repeatability_interval`` ([low, high] or None),
-        ``repeatability_poor_above`` (the line) and ``residual_trend_p_values``."""
+        ``repeatability_poor_above`` (the line), ``residual_trend_p_values``,
+        ``residual_trend_detectable`` (ln R) and ``model_checks``."""
         check = self.repeatability
         return {
             "chi2_dof": self.chi2_dof,
@@ -418,9 +613,27 @@ class FitQuality:
             "repeatability_interval": None if check is None else [check.low, check.high],
             "repeatability_poor_above": self.poor_line,
             "residual_trend_p_values": dict(self.trend_p_values),
+            "residual_trend_detectable": dict(self.trend_detectable),
+            "model_checks": self.model_checks(),
         }
 
 
-def scaled_sigma(sigma: dict[str, float], factor: float) -> dict[str, float]:
-    """Every 1σ multiplied by ``factor`` (√(χ²/dof): the covariance scaled by χ²/dof)."""
-    return {name: value * factor for name, value in sigma.items()}
+NO_MISFIT = "no misfit detected"
+
+
+def _entry(name, statistic, p, ok, words, detectable) -> dict[str, Any]:
+    """One entry of a run's ``model_check`` record (:mod:`brdf_infer.posterior`)."""
+    return {
+        "name": name,
+        "statistic": None if statistic is None or not math.isfinite(statistic) else statistic,
+        "p": None if p is None or not math.isfinite(p) else p,
+        "ok": bool(ok),
+        "words": words,
+        "detectable": detectable,
+    }
+
+
+def scaled_sigma(sigma: dict[str, float | None], factor: float) -> dict[str, float | None]:
+    """Every 1σ multiplied by ``factor`` (√(χ²/dof): the covariance scaled by χ²/dof); None
+    (a flat profile, no 1σ) stays None."""
+    return {name: None if value is None else value * factor for name, value in sigma.items()}

@@ -41,7 +41,14 @@ from brdf_infer.model._lobes import (
     harvey_shack_log_bsdf,
 )
 from brdf_infer.model._tis import log_tis
-from brdf_infer.model.params import PAPER_CONSTANTS, PARAM_NAMES, HemisphereConstants, Params
+from brdf_infer.model.params import (
+    DPHI_NAME,
+    PAPER_CONSTANTS,
+    PARAM_NAMES,
+    HemisphereConstants,
+    Params,
+    with_dphi_scale,
+)
 from brdf_infer.model.priors import Prior
 
 Physical = dict[str, jnp.ndarray]
@@ -78,6 +85,8 @@ class ModelFamily:
             (Eq. 7); None: the hemisphere's BRDF at φ = 180° (forward) or 0°.
         log_tis_draws: ln TIS(θi) of every draw at every θi in one call, (draws, angles)
             (Eq. 9 batched); None: :attr:`tis` per draw, a quadrature, over thinned draws.
+        dphi_free: ``strumik2024`` with Eq. (8)'s out-of-plane width a parameter,
+            ``dphi_scale`` (the factor on the constants' Δφ), among its physical parameters.
     """
 
     name: str
@@ -94,6 +103,7 @@ class ModelFamily:
     constants: HemisphereConstants = PAPER_CONSTANTS
     log_brdf_inplane: Callable[..., jnp.ndarray] | None = None
     log_tis_draws: Callable[..., jnp.ndarray] | None = None
+    dphi_free: bool = False
 
     @property
     def paper_parameters(self) -> bool:
@@ -121,10 +131,14 @@ class ModelFamily:
             ValueError: ``fold`` for a family without Eq. (10).
         """
         if self.paper_parameters:
-            return strumik_family(fold, self.constants)
+            return strumik_family(fold, self.constants, self.dphi_free)
         if fold:
             raise ValueError(f"{self.name} has no Eq. (10) folding")
         return self
+
+    def constants_of(self, physical: Physical) -> HemisphereConstants:
+        """Eq. (8)'s constants of the draws ``physical`` (:func:`draw_constants`)."""
+        return draw_constants(self.constants, self.dphi_free, physical)
 
     def log_brdf_signed(self, theta_i_deg, theta_s_deg, physical: Physical) -> jnp.ndarray:
         """ln BRDF in the plane of incidence at a signed θs (forward > 0, Sec. 4.1)."""
@@ -312,11 +326,26 @@ REFERENCE_FAMILY = "strumik2024"
 FAMILY_NAMES: tuple[str, ...] = (REFERENCE_FAMILY, *FAMILIES)
 
 
+def draw_constants(
+    constants: HemisphereConstants, dphi_free: bool, physical: Physical
+) -> HemisphereConstants:
+    """The constants of Eq. (8) for the draws ``physical``: with ``dphi_free`` their Δφ times
+    each draw's ``dphi_scale`` (:func:`~brdf_infer.model.params.with_dphi_scale`), else
+    ``constants``."""
+    if dphi_free:
+        return with_dphi_scale(constants, jnp.asarray(physical[DPHI_NAME], float))
+    return constants
+
+
 def strumik_family(
-    fold: bool = False, constants: HemisphereConstants = PAPER_CONSTANTS
+    fold: bool = False,
+    constants: HemisphereConstants = PAPER_CONSTANTS,
+    dphi_free: bool = False,
 ) -> ModelFamily:
     """``strumik2024``: Eqs. (7), (8) (and (10) when ``fold``, the scene's switch) with the
-    scene's constants.
+    scene's constants; with ``dphi_free`` Eq. (8)'s out-of-plane width is a seventh physical
+    parameter, ``dphi_scale``, the factor on the constants' Δφ = c1·θi + c2 (one value per
+    draw, :func:`~brdf_infer.model.params.with_dphi_scale`).
 
     Its coordinates are empty: its posterior samples the whitened coordinates of
     :mod:`brdf_infer.posterior` under the scene's ``[priors]`` (:attr:`~ModelFamily.as_params`).
@@ -325,28 +354,33 @@ def strumik_family(
     def as_params(p: Physical) -> Params:
         return Params(*(jnp.asarray(p[name], float) for name in PARAM_NAMES))
 
+    def constants_of(p: Physical) -> HemisphereConstants:
+        return draw_constants(constants, dphi_free, p)
+
+    units = {
+        "brdf0": "sr⁻¹",
+        "a1": "deg⁻²",
+        "a2": "deg^(−1−α)",
+        "a3": "deg^(−2−α)",
+        "alpha": "-",
+        "theta_s0": "deg",
+    }
     return ModelFamily(
         REFERENCE_FAMILY,
-        PARAM_NAMES,
-        {
-            "brdf0": "sr⁻¹",
-            "a1": "deg⁻²",
-            "a2": "deg^(−1−α)",
-            "a3": "deg^(−2−α)",
-            "alpha": "-",
-            "theta_s0": "deg",
-        },
+        (*PARAM_NAMES, DPHI_NAME) if dphi_free else PARAM_NAMES,
+        {**units, DPHI_NAME: "-"} if dphi_free else units,
         (),
         lambda z: z,
-        lambda ti, t, phi, p: log_brdf_hemisphere(ti, t, phi, as_params(p), fold, constants),
-        lambda ti, p: jnp.exp(log_tis(jnp.atleast_1d(ti), as_params(p), fold, constants)[0]),
+        lambda ti, t, phi, p: log_brdf_hemisphere(ti, t, phi, as_params(p), fold, constants_of(p)),
+        lambda ti, p: jnp.exp(log_tis(jnp.atleast_1d(ti), as_params(p), fold, constants_of(p))[0]),
         exact_tis=False,
         title="Eqs. (8), (10)",
         as_params=as_params,
         fold=fold,
         constants=constants,
         log_brdf_inplane=lambda ti, ts, p: log_brdf_inplane(ti, ts, as_params(p), fold, constants),
-        log_tis_draws=lambda theta, p: log_tis(theta, as_params(p), fold, constants),
+        log_tis_draws=lambda theta, p: log_tis(theta, as_params(p), fold, constants_of(p)),
+        dphi_free=dphi_free,
     )
 
 
@@ -367,13 +401,18 @@ def run_family_name(attrs) -> str:
     return str(attrs.get("model", REFERENCE_FAMILY))
 
 
-def family(name: str, fold: bool = False, constants: HemisphereConstants = PAPER_CONSTANTS):
-    """The family called ``name`` (``fold`` and ``constants`` serve ``strumik2024`` only: the
-    other families have no Eq. 10).
+def family(
+    name: str,
+    fold: bool = False,
+    constants: HemisphereConstants = PAPER_CONSTANTS,
+    dphi_free: bool = False,
+):
+    """The family called ``name`` (``fold``, ``constants`` and ``dphi_free`` serve
+    ``strumik2024`` only: the other families have no Eqs. 8 and 10).
 
     Raises:
         KeyError: no such family.
     """
     if name == REFERENCE_FAMILY:
-        return strumik_family(fold, constants)
+        return strumik_family(fold, constants, dphi_free)
     return FAMILIES[name]

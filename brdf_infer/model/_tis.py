@@ -79,13 +79,19 @@ def _log_tis_single(
 
 
 def _batched_log_tis(theta_i_deg, params, fold, constants, nodes):
+    """ln TIS over a batch: the parameters' fields and the constants' (a Δφ per draw,
+    :func:`~brdf_infer.model.params.with_dphi_scale`) broadcast to one batch shape."""
     theta_i = jnp.asarray(theta_i_deg, float)
     fields = [jnp.asarray(value, float) for value in params]
-    batch_shape = jnp.broadcast_shapes(*(field.shape for field in fields))
+    terms = [jnp.asarray(value, float) for value in constants]
+    batch_shape = jnp.broadcast_shapes(*(value.shape for value in [*fields, *terms]))
     flat = Params(*(jnp.broadcast_to(field, batch_shape).reshape(-1) for field in fields))
+    flat_constants = HemisphereConstants(
+        *(jnp.broadcast_to(term, batch_shape).reshape(-1) for term in terms)
+    )
     over_angles = jax.vmap(_log_tis_single, in_axes=(0, None, None, None, None))
-    over_params = jax.vmap(over_angles, in_axes=(None, 0, None, None, None))
-    values = over_params(theta_i.reshape(-1), flat, fold, constants, nodes)
+    over_params = jax.vmap(over_angles, in_axes=(None, 0, None, 0, None))
+    values = over_params(theta_i.reshape(-1), flat, fold, flat_constants, nodes)
     return values.reshape(batch_shape + theta_i.shape)
 
 

@@ -55,6 +55,17 @@ class HemisphereConstants(NamedTuple):
     fold_theta_sf_deg: Any
 
 
+DPHI_NAME = "dphi_scale"  # Δφ's factor on the article's c1, c2 (a parameter where uncertain)
+
+
+def with_dphi_scale(constants: HemisphereConstants, scale: Any) -> HemisphereConstants:
+    """``constants`` with Eq. (8)'s half-width Δφ = c1·θi + c2 multiplied by ``scale`` [-]
+    (c1 and c2 both: the shape of Δφ(θi) kept, its size scaled); ``scale`` may be an array
+    (one per draw), which every function taking the constants broadcasts like the parameters'
+    fields."""
+    return constants._replace(c1=constants.c1 * scale, c2_deg=constants.c2_deg * scale)
+
+
 def _load_constants() -> HemisphereConstants:
     table = read_data_toml("paper_constants.toml")
     return HemisphereConstants(

@@ -1,4 +1,4 @@
-"""Priors of the six parameters, each on its well-conditioned coordinate.
+"""Priors of the six parameters of Eq. (7) and of the out-of-plane width of Eq. (8), each on its
 
 | parameter  | coordinate the prior is on                  |
 |------------|---------------------------------------------|
@@ -8,6 +8,7 @@
 | ``a3``     | b3 = a3·90^(2+α)                            |
 | ``alpha``  | α                                           |
 | ``theta_s0`` | θs0 [deg]                                 |
+| ``dphi_scale`` | ln s, s the factor on Eq. (8)'s Δφ = c1·θi + c2 (the article's c1, c2) |
 
 Kinds (scene TOML ``[priors.NAME]``): ``normal`` (loc, scale), ``truncated_normal``
 (loc, scale, lower, upper), ``uniform`` (lower, upper), ``fixed`` (value).
@@ -20,7 +21,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from brdf_infer.errors import BadInputError
-from brdf_infer.model.params import PARAM_NAMES
+from brdf_infer.model.params import DPHI_NAME, PARAM_NAMES
+
+PRIOR_NAMES: tuple[str, ...] = (*PARAM_NAMES, DPHI_NAME)
 
 KINDS = ("normal", "truncated_normal", "uniform", "fixed")
 _KEYS = {
@@ -78,7 +81,17 @@ DEFAULT_PRIORS: dict[str, Prior] = {
     "a3": Prior("normal", loc=0.0, scale=10.0),
     "alpha": Prior("truncated_normal", loc=4.5, scale=1.5, lower=1.0, upper=10.0),
     "theta_s0": Prior("truncated_normal", loc=-12.0, scale=12.0, lower=-60.0, upper=15.0),
+    DPHI_NAME: Prior("normal", loc=0.0, scale=0.25),
 }
+# The out-of-plane width of Eq. (8) is not measured in the plane of incidence: the article took
+# c1 = −0.95, c2 = 90.5° "which gives isocontours ... similar to those presented in Fig. 7 in
+# Ref. 6" at 532 nm (Sec. 5.2), by eye, and carried them to 121.6 nm because "we have no access
+# to out-of-specular-plane measurement data" (Sec. 5.3). DEFAULT_PRIORS[DPHI_NAME] states that
+# as an uncertainty, not a constant: ln s ~ N(0, 0.25), a factor within ×0.61–×1.63 of the
+# article's Δφ with 95 % probability. 0.25 is a judgement, not a measurement: an isocontour
+# matched by eye to another instrument's figure at another wavelength. A scene states its own
+# (``[priors.dphi_scale]``, e.g. from out-of-plane measurements of a like coating), and rows
+# out of the plane of incidence teach it; ``kind = "fixed"``, ``value = 0`` is the article's.
 
 # Where an optimiser may move alpha and theta_s0 when their prior is unbounded.
 DEFAULT_BOUNDS: dict[str, tuple[float, float]] = {"alpha": (0.5, 12.0), "theta_s0": (-60.0, 30.0)}
@@ -92,9 +105,9 @@ def parse_prior(name: str, table: object, path: Path) -> Prior:
             scale ≤ 0; lower ≥ upper; loc outside the bounds.
     """
     field = f"priors.{name}"
-    if name not in PARAM_NAMES:
+    if name not in PRIOR_NAMES:
         raise BadInputError(
-            f"unknown parameter (known: {', '.join(PARAM_NAMES)})", file=path, field=field
+            f"unknown parameter (known: {', '.join(PRIOR_NAMES)})", file=path, field=field
         )
     if not isinstance(table, dict):
         raise BadInputError("expected a table", file=path, field=field)

@@ -22,10 +22,11 @@ from brdf_infer.posterior._bands import (
     tis_band,
 )
 from brdf_infer.posterior._likelihood import ModelData, build_model_data
-from brdf_infer.posterior._loo import pointwise_loo_terms
+from brdf_infer.posterior._loo import LeaveOneOut, pointwise_loo_terms, psis_loo
 from brdf_infer.posterior._loo_refit import LEFT_OUT_SIGMA, exact_loo_rows, without_row
 from brdf_infer.posterior._lowrank import cholesky, solve_lower, solve_upper_transposed
 from brdf_infer.posterior._model import LINEAR, NOISE_SITES, PosteriorModel, build_posterior_model
+from brdf_infer.posterior._model_check import model_check, posterior_checks
 from brdf_infer.posterior._nuts import (
     Cancelled,
     NutsProgram,
@@ -90,6 +91,7 @@ __all__ = [
     "Draws",
     "FlatPotential",
     "Interval",
+    "LeaveOneOut",
     "ModelData",
     "NutsProgram",
     "PosteriorModel",
@@ -113,6 +115,7 @@ __all__ = [
     "interval95",
     "load_run_family",
     "loo_terms",
+    "model_check",
     "model_name",
     "nuts_draws",
     "pad_datasets",
@@ -120,10 +123,12 @@ __all__ = [
     "padded_signature",
     "pointwise_loo_terms",
     "posterior_bands",
+    "posterior_checks",
     "posterior_settings",
     "power_scaling",
     "prior_draws",
     "programs_by_structure",
+    "psis_loo",
     "row_count",
     "run_emcee",
     "run_fingerprint",

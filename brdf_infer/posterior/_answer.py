@@ -17,7 +17,9 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-from brdf_infer.posterior._bands import draws_physical
+import numpy as np
+
+from brdf_infer.posterior._bands import FAMILY_TIS_DRAWS, draws_physical, evenly_spaced
 from brdf_infer.posterior._laplace import importance_refit, laplace_draws
 from brdf_infer.posterior._learned import learned_record
 from brdf_infer.posterior._model import PosteriorModel
@@ -105,12 +107,19 @@ def _refit(draws: Draws, seed: int, tis_angles: Sequence[float]):
         sampled, record = sample(variant)
         if isinstance(sampled, str):
             return None
-        physical = draws_physical(sampled.sites, variant.family)
-        flat = headline_draws(variant.family, physical, tis_angles)
+        physical = draws_physical(sampled.sites, variant.products)
+        flat = headline_draws(variant.products, physical, tis_angles)
         headline = {name: values.reshape(chains, count) for name, values in flat.items()}
-        return Refitted(headline, record)
+        return Refitted(headline, record, sampled.sites)
 
     return refit
+
+
+def thinned_sites(sites: dict[str, np.ndarray], count: int) -> dict[str, np.ndarray]:
+    """At most ``count`` draws of ``sites`` (chains, draws, ...), evenly spaced in each chain."""
+    chains, draws = np.shape(next(iter(sites.values())))[:2]
+    kept = np.unique(np.linspace(0, draws - 1, max(1, count // chains)).round().astype(int))
+    return {name: np.asarray(values)[:, kept] for name, values in sites.items()}
 
 
 def _importance(sampled: Draws) -> dict[str, float]:
@@ -126,6 +135,8 @@ def answer_records(
     with_tis: bool,
     seed: int,
     refit: bool = True,
+    run_elpd_i: np.ndarray | None = None,
+    reff: float = 1.0,
 ) -> dict[str, Any]:
     """``{"width", "learned", "reference"}`` of a run (module docstring).
 
@@ -138,24 +149,43 @@ def answer_records(
         seed: the run's seed (the prior draws use ``seed + 11``).
         refit: sample a variant anew where reweighting is unreliable (else it is reported
             unreliable).
+        run_elpd_i: the run's PSIS-LOO terms (of the draws :func:`loo_sites` keeps), which
+            the alternatives' are compared with (None: no Δelpd).
     """
     angles = headline_angles(model, band_angles) if with_tis else []
-    member = model.family
+    member = model.products  # the headline describes the products' BRDF ([outputs] fold)
     physical = draws_physical(draws.sites, member)
-    headline = headline_draws(member, physical, angles)
     prior = prior_draws(model, PRIOR_DRAWS, seed + 11, frozenset(draws.sites))
-    prior_headline = headline_draws(member, draws_physical(prior, member), angles)
     resample = _refit(draws, seed, angles) if refit else None
     sites, thinning = loo_sites(draws.sites, len(measurements))
+    if member.log_tis_draws is None and angles:  # a 2-D quadrature a TIS: the bands' draws
+        sites, thinning = thinned_sites(sites, FAMILY_TIS_DRAWS), 2.0
+        physical = evenly_spaced(physical, FAMILY_TIS_DRAWS)  # the TIS band's own draws
+        prior = evenly_spaced(prior, FAMILY_TIS_DRAWS)
+    headline = headline_draws(member, physical, angles)
+    prior_headline = headline_draws(member, draws_physical(prior, member), angles)
     read = headline
     if thinning > 1:
         read = headline_draws(member, draws_physical(sites, member), angles)
     log_likelihood = log_likelihood_draws(model, sites)  # once, for both records
     width = width_attribution(
-        model, measurements, sites, read, prior_headline, resample, log_likelihood, headline
+        model,
+        measurements,
+        sites,
+        read,
+        prior_headline,
+        resample,
+        log_likelihood,
+        headline,
+        run_elpd_i,
+        reff,
     )
     return {
         "width": width,
         "learned": learned_record(model, sites, prior, log_likelihood),
-        "reference": reference_record(model.scene.references, {**headline, **physical}),
+        "reference": reference_record(
+            model.scene.references,
+            {**headline, **physical},
+            np.shape(next(iter(draws.sites.values())))[0],
+        ),
     }

@@ -104,9 +104,15 @@ def tis_band(
     if family.log_tis_draws is not None:
         values = np.asarray(jnp.exp(family.log_tis_draws(theta, physical)))
         return {"theta_i_deg": theta.tolist(), **quantile_band(values)}
-    thinned = {k: jnp.asarray(v, float) for k, v in evenly_spaced(physical, draws).items()}
-    values = np.asarray(_tis_curve_program(family)(thinned, jnp.asarray(theta)))
+    values = tis_curve_draws(family, evenly_spaced(physical, draws), theta)
     return {"theta_i_deg": theta.tolist(), "draws": int(values.shape[0]), **quantile_band(values)}
+
+
+def tis_curve_draws(family: ModelFamily, physical: dict[str, np.ndarray], theta_i_deg):
+    """TIS of every draw of ``physical`` at every θi (draws, angles) by the family's own TIS
+    (a quadrature), in one compiled program."""
+    batch = {k: jnp.asarray(v, float) for k, v in physical.items()}
+    return np.asarray(_tis_curve_program(family)(batch, jnp.asarray(theta_i_deg, float)))
 
 
 def _brdf_inplane_draws(family: ModelFamily, physical: dict[str, np.ndarray], grid_i, grid_s):

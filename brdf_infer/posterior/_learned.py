@@ -28,7 +28,8 @@ from typing import Any
 
 import numpy as np
 
-from brdf_infer.posterior._model import PosteriorModel
+from brdf_infer.model.params import DPHI_NAME
+from brdf_infer.posterior._model import DPHI_SITE, PosteriorModel
 from brdf_infer.posterior._power_scaling import SENSITIVITY_THRESHOLD, power_scaling
 
 LEARNED_CONTRACTION = 0.5
@@ -49,6 +50,8 @@ def coordinates(model: PosteriorModel) -> dict[str, str]:
     member = model.family
     if member.paper_parameters:
         names = {n: PAPER_COORDINATES[n] for n in model.scene.free_parameters}
+        if member.dphi_free:
+            names[DPHI_NAME] = DPHI_SITE
     else:
         names = {c.site: c.site for c in member.coordinates}
     errors = model.errors
@@ -68,6 +71,9 @@ def prior_scale_words(model: PosteriorModel, name: str) -> str:
         return "the family's default prior"
     if prior.kind == "uniform":
         return f"uniform {prior.lower:g} to {prior.upper:g}"
+    if name == DPHI_NAME:  # a factor on the article's Δφ, its prior on the logarithm
+        low, high = np.exp(prior.loc + np.array([-1.96, 1.96]) * prior.scale)
+        return f"lognormal, sd {prior.scale:g} in ln: ×{low:.2g}–×{high:.2g} of the article's Δφ"
     return f"{prior.kind.replace('_', ' ')}, sd {prior.scale:g}"
 
 

@@ -49,11 +49,10 @@ from brdf_infer.model import (
     Physical,
     energy_log_factor,
     log_fold,
-    strumik_family,
 )
 from brdf_infer.model.coordinates import ANGLE_SCALE_DEG, from_internal
 from brdf_infer.model.error_model import NoiseScales, angle_slopes, covariance_factors
-from brdf_infer.model.params import Params
+from brdf_infer.model.params import DPHI_NAME, HemisphereConstants, Params, with_dphi_scale
 from brdf_infer.model.priors import Prior
 from brdf_infer.posterior._likelihood import (
     LikelihoodParts,
@@ -78,6 +77,7 @@ LINEAR = ("brdf0", "a1", "a2", "a3")  # priors of c = (ln BRDF0, b1, b2, b3)
 LINEAR_SITES = ("log_brdf0", "b1", "b2", "b3")
 NOISE_SITES = ("sample_sd", "repeatability")
 ENERGY_SITE = "energy_conservation"  # the physical prior's truncation (brdf_infer.model._energy)
+DPHI_SITE = "log_dphi_scale"  # ln of Eq. (8)'s Δφ factor, under [priors.dphi_scale]
 
 
 def prior_distribution(prior: Prior, scale: float = 1.0) -> dist.Distribution:
@@ -145,6 +145,15 @@ class PosteriorModel:
     def errors(self):
         return self.scene.errors
 
+    @property
+    def products(self) -> ModelFamily:
+        """The family the run's products describe: its own with the scene's products fold
+        (``[outputs] fold``, Eq. 10; default the physical BRDF), whatever the likelihood's
+        (``[model] fold``, what the instrument measured)."""
+        if not self.family.paper_parameters:
+            return self.family
+        return self.family.with_fold(self.scene.outputs.fold)
+
     def __call__(self, data: ModelData | None = None, mode: str = "fit") -> None:
         """The NumPyro model.
 
@@ -177,7 +186,13 @@ class PosteriorModel:
     def _physical(self, data: ModelData, scales: NoiseScales, whiten: bool) -> Physical:
         """The family's physical parameters of one draw, sampled (class docstring)."""
         if self.family.paper_parameters:
-            return self._parameters(data, scales, whiten)._asdict()
+            if not self.family.dphi_free:
+                return self._parameters(data, scales, whiten, self.family.constants)._asdict()
+            prior = prior_distribution(self.scene.priors[DPHI_NAME])
+            scale = numpyro.deterministic(DPHI_NAME, jnp.exp(numpyro.sample(DPHI_SITE, prior)))
+            constants = with_dphi_scale(self.family.constants, scale)
+            params = self._parameters(data, scales, whiten, constants)
+            return {**params._asdict(), DPHI_NAME: scale}
         internal = {
             c.site: numpyro.sample(c.site, prior_distribution(c.prior))
             for c in self.family.coordinates
@@ -188,7 +203,11 @@ class PosteriorModel:
                 numpyro.deterministic(name, physical[name])
         return physical
 
-    def _parameters(self, data: ModelData, scales: NoiseScales, whiten: bool) -> Params:
+    def _parameters(
+        self, data: ModelData, scales: NoiseScales, whiten: bool, constants: HemisphereConstants
+    ) -> Params:
+        """Eq. (7)'s parameters of one draw, sampled (``constants``: Eq. 8's of the draw, for
+        the physical prior's TIS)."""
         priors = self.scene.priors
 
         def parameter(name: str, site: str, scale: float = 1.0):
@@ -216,7 +235,7 @@ class PosteriorModel:
             numpyro.deterministic(name, getattr(params, name))
         # the physical prior: no mass on coatings with TIS > 1 (simulations reject such draws,
         # brdf_infer.studies.sbc.simulate)
-        numpyro.factor(ENERGY_SITE, energy_log_factor(params, self.family.constants))
+        numpyro.factor(ENERGY_SITE, energy_log_factor(params, constants))
         return params
 
     def _whitened(self, data: ModelData, scales: NoiseScales, alpha, t_s0, free: list[int]):
@@ -365,7 +384,7 @@ def build_posterior_model(
             parameters.
     """
     if member is None:
-        member = strumik_family(scene.model.fold, scene.model.constants)
+        member = scene.family()
     elif member.paper_parameters and (
         member.fold != scene.model.fold or member.constants != scene.model.constants
     ):  # the run records the scene's; the likelihood must use the same

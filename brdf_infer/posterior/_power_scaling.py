@@ -35,11 +35,12 @@ import numpyro.distributions as dist
 from brdf_infer._internal import arviz as az
 from brdf_infer.model import energy_log_factor
 from brdf_infer.model.coordinates import ANGLE_SCALE_DEG
-from brdf_infer.model.params import PARAM_NAMES, Params
+from brdf_infer.model.params import DPHI_NAME, PARAM_NAMES, Params
 from brdf_infer.posterior._blocks import factor_columns, over_draw_blocks
 from brdf_infer.posterior._likelihood import disjoint_columns
 from brdf_infer.posterior._lowrank import log_density_over_scales, low_rank_normal_log_density
 from brdf_infer.posterior._model import (
+    DPHI_SITE,
     ENERGY_SITE,
     LINEAR,
     LINEAR_SITES,
@@ -53,6 +54,7 @@ _PRIOR_SITES = {
     **{name: (site, 1.0) for name, site in zip(LINEAR, LINEAR_SITES, strict=True)},
     "alpha": ("alpha", 1.0),
     "theta_s0": ("t_s0", ANGLE_SCALE_DEG),
+    DPHI_NAME: (DPHI_SITE, 1.0),
 }
 
 
@@ -60,10 +62,14 @@ def log_prior_draws(model: PosteriorModel, sites: dict[str, np.ndarray]) -> np.n
     """ln p(θ) of every draw (shape of the draws' leading axes), from the scene's priors on
     the sampled coordinates (module docstring). One compiled program: run op by op, its ~60
     small operations each cost a program of their own (traced, loaded from the cache)."""
-    names = [name for name, prior in model.scene.priors.items() if not prior.fixed]
+    names = [
+        name
+        for name, prior in model.scene.priors.items()
+        if not prior.fixed and (name != DPHI_NAME or model.family.dphi_free)
+    ]
     needed = {_PRIOR_SITES[name][0] for name in names} | {"sample_sd", "repeatability"}
     if model.family.paper_parameters:
-        needed |= set(PARAM_NAMES)
+        needed |= set(model.family.parameters)
     used = {k: jnp.asarray(v) for k, v in sites.items() if k in needed}
     return np.asarray(jax.jit(lambda s: _log_prior(model, names, s))(used))
 
@@ -77,7 +83,7 @@ def _log_prior(model: PosteriorModel, names: list[str], sites: dict) -> jnp.ndar
         total += distribution.log_prob(sites[site])
     if model.family.paper_parameters:  # the physical prior's truncation (0 on the posterior)
         params = Params(*(sites[name] for name in PARAM_NAMES))
-        total += energy_log_factor(params, model.family.constants)
+        total += energy_log_factor(params, model.family.constants_of(sites))
     errors = model.errors
     for site in ("sample_sd", "repeatability"):
         if site in sites:

@@ -52,7 +52,7 @@ def accepted(model: PosteriorModel, draws: dict[str, np.ndarray]) -> np.ndarray:
     family = model.family
     physical = {name: jnp.asarray(draws[name]) for name in family.parameters}
     # one compiled program (op by op, each operation is a program of its own)
-    check = jax.jit(lambda p: conserves_energy(family.as_params(p), family.constants))
+    check = jax.jit(lambda p: conserves_energy(family.as_params(p), family.constants_of(p)))
     return np.asarray(check(physical))
 
 

@@ -210,7 +210,8 @@ def inference_data(
             "sampler": draws.sampler,
             "settings": json.dumps(draws.settings),
             "seed": seed,
-            "fold": int(scene.model.fold),
+            "fold": int(scene.model.fold),  # the likelihood's: what the rows measured
+            "products_fold": int(scene.outputs.fold),  # the products' (bands, exports)
             "constants": json.dumps(scene.model.constants._asdict()),
             "error_model": json.dumps(scene.errors.describe()),
             "free_parameters": json.dumps(list(scene.free_parameters)),
@@ -355,9 +356,10 @@ def _run_posterior_group(run: Path):
 
 
 def run_fold(posterior) -> bool:
-    """The fold switch of the run whose ``posterior`` group this is: its scene's
-    ``[model] fold`` (Eq. 10), which its likelihood used and its products follow."""
-    return bool(int(posterior.attrs.get("fold", 0)))
+    """The products' fold switch of the run whose ``posterior`` group this is: its scene's
+    ``[outputs] fold`` (Eq. 10 in its bands and exports; runs written before the two
+    switches had one, ``[model] fold``, for the likelihood and the products alike)."""
+    return bool(int(posterior.attrs.get("products_fold", posterior.attrs.get("fold", 0))))
 
 
 def load_run_family(
@@ -384,13 +386,13 @@ def family_draws(
     Raises:
         BadInputError: an unknown family, or a group without its parameters (naming ``path``).
     """
-    from brdf_infer.model.params import HemisphereConstants
+    from brdf_infer.model.params import DPHI_NAME, HemisphereConstants
 
     name = run_family_name(posterior.attrs)
     fold = run_fold(posterior) if fold is None else fold
     try:
         constants = HemisphereConstants(**json.loads(posterior.attrs["constants"]))
-        member = family(name, fold, constants)
+        member = family(name, fold, constants, DPHI_NAME in posterior)
     except (KeyError, TypeError, ValueError):
         raise BadInputError(f"unknown model {name!r} or constants in the run", file=path) from None
     missing = [p for p in member.parameters if p not in posterior]

@@ -19,8 +19,9 @@ from brdf_infer._internal import arviz as az
 from brdf_infer._internal.outlock import writing
 from brdf_infer._internal.precision import ensure_float64
 from brdf_infer.errors import BadInputError
-from brdf_infer.model import check_family_name, family
+from brdf_infer.model import check_family_name
 from brdf_infer.model.error_model import ERROR_MODELS
+from brdf_infer.model.params import PARAM_NAMES
 from brdf_infer.posterior._answer import answer_records
 from brdf_infer.posterior._bands import (
     draws_physical,
@@ -38,6 +39,7 @@ from brdf_infer.posterior._loo import (
 from brdf_infer.posterior._loo_refit import exact_loo_rows
 from brdf_infer.posterior._memory import check_memory
 from brdf_infer.posterior._model import NOISE_SITES, PosteriorModel, build_posterior_model
+from brdf_infer.posterior._model_check import model_check, posterior_checks
 from brdf_infer.posterior._potential import FlatPotential
 from brdf_infer.posterior._results import (
     diagnostics,
@@ -122,8 +124,7 @@ def build_model(
     """
     name = scene.model.family if name is None else name
     check_family_name(name)
-    member = family(name, scene.model.fold, scene.model.constants)
-    return build_posterior_model(scene, measurements, member)
+    return build_posterior_model(scene, measurements, scene.family(name))
 
 
 def model_name(model: PosteriorModel) -> str:
@@ -243,6 +244,7 @@ def run_posterior(
     announce: Callable[[str], None] | None = None,
     forced: Sequence[str] = (),
     refit: bool = True,
+    fit_checks: Sequence[dict[str, Any]] = (),
     **sampler_settings: Any,
 ) -> PosteriorRun:
     """Sample the scene's posterior and write posterior.nc, summary.json, bands.json.
@@ -261,6 +263,9 @@ def run_posterior(
         announce: called with the run in one line, its settings checked, before sampling.
         forced: the plausibility checks (:mod:`brdf_infer.verdict.plausibility`) the caller
             went past with ``--force``, one line each: they open the run's verdict.
+        fit_checks: the least-squares fit's checks of the model against the rows
+            (:meth:`brdf_infer.fit.quality.FitQuality.model_checks`), which join the run's own
+            in its ``model_check`` record (:mod:`._model_check`).
         refit: sample an error-model variant anew where reweighting to it is unreliable
             (:mod:`brdf_infer.posterior._width`), and a row of Pareto k > 0.7 without it for
             its exact leave-one-out term (:mod:`brdf_infer.posterior._loo_refit`); False:
@@ -299,7 +304,15 @@ def run_posterior(
             announce=announce,
         )
         return complete_run(
-            model, measurements, result, settings.seed, out, started, forced=forced, refit=refit
+            model,
+            measurements,
+            result,
+            settings.seed,
+            out,
+            started,
+            forced=forced,
+            refit=refit,
+            fit_checks=fit_checks,
         )
 
 
@@ -437,11 +450,14 @@ def complete_run(
     *,
     forced: Sequence[str] = (),
     refit: bool = True,
+    fit_checks: Sequence[dict[str, Any]] = (),
 ) -> PosteriorRun:
     """From a sampler's draws to the run: InferenceData, PSIS-LOO and LOO-PIT, bands,
-    diagnostics, the summary and its verdict (:mod:`brdf_infer.verdict`; ``forced``: the
-    plausibility checks the run went past), written to ``out`` (when given) atomically;
-    ``started``: the ``time.perf_counter()`` at the start of the run (its total time)."""
+    diagnostics, the model check (:mod:`._model_check`; ``fit_checks`` as
+    :func:`run_posterior`'s), the summary and its verdict (:mod:`brdf_infer.verdict`;
+    ``forced``: the plausibility checks the run went past), written to ``out`` (when given)
+    atomically; ``started``: the ``time.perf_counter()`` at the start of the run (its total
+    time)."""
     scene, name = model.scene, model.family.name
     clock = _StepClock()
     log_lik, cdf, thinning = _loo_terms(model, result, len(measurements))
@@ -452,10 +468,10 @@ def complete_run(
     member = model.family
     physical = draws_physical(result.sites, member)
     with_tis = scene.outputs.tis and member.hemispheric(scene.model.out_of_plane)
-    bands = posterior_bands(member, physical, theta_i_band, with_tis)
+    bands = posterior_bands(model.products, physical, theta_i_band, with_tis)
     parameters = member.parameters
     # the scene's [priors] (which may fix a parameter) are Eq. (7)'s; other families use their own
-    fixed = tuple(n for n in parameters if n not in scene.free_parameters)
+    fixed = tuple(n for n in PARAM_NAMES if n not in scene.free_parameters)
     fixed = fixed if member.paper_parameters else ()
     medians = {n: float(np.median(v)) for n, v in physical.items()}
     pi_brdf0 = None
@@ -465,11 +481,18 @@ def complete_run(
     checks = diagnostics(idata, result, parameters, fixed)
     clock.lap("diagnostics")
     # thinning raises the draws' relative efficiency by up to its factor
-    loo = psis_loo(log_lik, cdf, min(1.0, relative_efficiency(idata.posterior) * thinning))
+    reff = min(1.0, relative_efficiency(idata.posterior) * thinning)
+    loo = psis_loo(log_lik, cdf, reff)
     exact = exact_loo_rows(model, result, loo.pareto_k, loo.limit) if refit else {}
     clock.lap("loo")
-    answer = answer_records(model, measurements, result, theta_i_band, with_tis, seed, refit)
+    answer = answer_records(
+        model, measurements, result, theta_i_band, with_tis, seed, refit, loo.elpd_i, reff
+    )
     clock.lap("answer")
+    predictive = predictive_checks(loo, measurements, exact)
+    own_checks = posterior_checks(
+        model, measurements, np.asarray(predictive["loo_pit"]), result.sites
+    )
     summary = {
         "scene": scene.name,
         "model": name,
@@ -479,14 +502,16 @@ def complete_run(
         "error_model": scene.errors.describe(),
         "options": {"reparametrised": model.whiten},
         "n_points": len(measurements),
-        "fold": bands["fold"],  # Eq. (10) in the bands and TIS (the scene's [model] fold)
+        "fold": bands["fold"],  # Eq. (10) in the bands and TIS (the scene's [outputs] fold)
+        "likelihood_fold": member.fold,  # Eq. (10) in what the rows measured ([model] fold)
         "median": medians,
         "units": dict(member.units),
         "noise": {
             site: interval95(result.sites[site]) for site in NOISE_SITES if site in result.sites
         },
         "diagnostics": checks,
-        "predictive": predictive_checks(loo, measurements, exact),
+        "predictive": predictive,
+        "model_check": model_check([*fit_checks, *own_checks], scene, measurements),
         "tis_70deg": _tis_70(bands),
         "pi_brdf0": pi_brdf0,
         **answer,  # width, learned, reference

@@ -291,11 +291,55 @@ def _answer(run: RunFolder, verdict, summary, bands, scene, rows, member, figure
     return [
         _html.verdict_box(verdict),
         "<p>Thresholds: " + _html.escape(_thresholds(summary)) + "</p>",
+        model_check_table(summary.get("model_check")),
         result_box(summary, bands, tis_angles(scene, rows), member),
         fold_note(bands, scene.outputs.reference_params is not None) if "tis" in bands else "",
         *_shown(figures, "brdf_bands"),
         _studies_line(run),
     ]
+
+
+CHECK_WORDS = {
+    "fit_repeatability": "least squares: scatter beyond the rows' σ",
+    "fit_chi2": "least squares: χ² against the rows' σ",
+    "fit_residual_trend": "least squares: residual trends",
+    "loo_pit": "posterior: LOO-PIT uniformity",
+    "residual_trend": "posterior: leave-one-out residual trends",
+    "at_bound": "posterior: a parameter at a bound",
+}
+
+
+def model_check_table(record: dict | None) -> str:
+    """The model check, every check with its statistic, p-value, finding and what it could
+    detect (80 % power at p < 0.001): a passed check has shown no misfit of that size, not
+    that there is none. Nothing for a run written before the record."""
+    if record is None:
+        return ""
+    rows = [
+        [
+            CHECK_WORDS.get(entry["name"], entry["name"]),
+            "passed" if entry["ok"] else "FAILED",
+            "-" if entry["statistic"] is None else f"{entry['statistic']:.3g}",
+            "-" if entry["p"] is None else f"{entry['p']:.2g}",
+            entry["words"],
+            entry["detectable"],
+        ]
+        for entry in record["checks"]
+    ]
+    head = (
+        "The model against the data: every check passed."
+        if record["ok"]
+        else "The model against the data: the data reject the model; every band below is "
+        "conditional on it. Next: " + "; or ".join(record.get("next", []))
+    )
+    return (
+        "<h2>Model check</h2><p>"
+        + _html.escape(head)
+        + "</p>"
+        + _html.table(
+            ["check", "result", "statistic", "p", "found", "could detect (80 % power)"], rows
+        )
+    )
 
 
 def _sampler_line(summary) -> str:

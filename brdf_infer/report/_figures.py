@@ -264,7 +264,7 @@ def brdf_bands(bands: Bands, scene: Scene, rows) -> plt.Figure:
         _band(axis, theta_s, band, index)
         reference = scene.outputs.reference_params
         if reference is not None:
-            curve = brdf_inplane(angle, theta_s, PARAMETER_SETS[reference], scene.model.fold)
+            curve = brdf_inplane(angle, theta_s, PARAMETER_SETS[reference], scene.outputs.fold)
             axis.plot(theta_s, np.asarray(curve), "k--", lw=1, label=f"reference ({reference})")
         here = plane & (rows.theta_i_deg == angle)
         if here.any():

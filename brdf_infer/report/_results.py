@@ -8,38 +8,22 @@ import numpy as np
 from brdf_infer.model import ModelFamily, fold_statement
 from brdf_infer.report import _html
 from brdf_infer.runs.records import Bands, PosteriorSummary
-from brdf_infer.verdict import quantity_words, value_words
+from brdf_infer.verdict import quantity_words, value_words, width_words
 
 
 def _percent_interval(low: float, high: float) -> str:
     return f"{100 * low:.2f} – {100 * high:.2f} %"
 
 
-def width_words(width: dict | None) -> str:
-    """What carries one quantity's 95 % width, in one line: each assumption of the error model
-    with its share (1 − the width ratio without it; negative: wider without it) and the prior
-    predictive interval."""
-    if not width:
-        return "not recorded (a run written before this record)"
-    parts = []
-    for entry in sorted(width["without"].values(), key=lambda e: e["ratio"] or np.inf):
-        name = entry["words"].removeprefix("the ")
-        if entry["ratio"] is not None:
-            parts.append(f"{name} {round(100 * (1.0 - entry['ratio'])):+d} %")
-        else:
-            parts.append(f"{name}: unreliable (Pareto k {entry['pareto_k']:.2f})")
-    if "without_note" in width:
-        parts.append(width["without_note"])
-    prior = width["prior"]
-    return ", ".join(parts) + f"; prior alone {_percent_interval(prior['lo95'], prior['hi95'])}"
-
-
 WIDTH_LEGEND = (
-    "<p class='fold'>What carries the width: the share of the 95 % width each assumption of "
-    "the error model carries, 1 − (width without it) / (width), computed from the run's draws "
-    "(Pareto-smoothed importance reweighting, or a new posterior where that is unreliable); "
-    "negative where the band is wider without it (the data then put that scatter elsewhere). "
-    "<em>Prior alone</em>: the 95 % interval before the data.</p>"
+    "<p class='fold'>What carries the width: each assumption of the model with the part of "
+    "the 95 % interval's variance it carries, 1 − (width without it / width)² (independent "
+    "sources add in quadrature), ± its Monte Carlo error, and the interval without it; where "
+    "the interval is wider without it, that interval and no share (the alternative is another "
+    "model, not a part of this width). Δelpd: PSIS-LOO of the alternative less the run's, ± "
+    "its standard error (negative: the data prefer the run's model). Computed from the run's "
+    "draws (Pareto-smoothed importance reweighting, or a new posterior where that is "
+    "unreliable). <em>Prior alone</em>: the 95 % interval before the data.</p>"
 )
 
 
@@ -51,8 +35,9 @@ def reference_lines(summary: PosteriorSummary) -> str:
     items = "".join(
         f"<li>{_html.escape(quantity_words(r['quantity']))} = "
         f"{_html.escape(value_words(r['quantity'], r['value']))} "
-        f"({_html.escape(r['source'])}): posterior quantile {r['posterior_quantile']:.3f}, "
-        f"{'inside' if r['inside95'] else '<strong>outside</strong>'} the 95 % interval</li>"
+        f"({_html.escape(r['source'])}): posterior quantile {r['posterior_quantile']:.3f}"
+        + (f" ± {r['quantile_mcse']:.3f}" if "quantile_mcse" in r else "")
+        + f", {_place_html(r)} the 95 % interval</li>"
         for r in entries
     )
     return (
@@ -62,6 +47,13 @@ def reference_lines(summary: PosteriorSummary) -> str:
         "docs/instruments.md, “The answer and the article”):</p>"
         f"<ul>{items}</ul>"
     )
+
+
+def _place_html(reference: dict) -> str:
+    """Where a reference value falls, emphasised unless inside."""
+    place = reference.get("place", "inside" if reference["inside95"] else "outside")
+    words = {"inside": "inside", "outside": "outside", "at the edge": "at the edge of"}[place]
+    return words if place == "inside" else f"<strong>{words}</strong>"
 
 
 def result_box(summary: PosteriorSummary, bands: Bands, angles, member: ModelFamily) -> str:
@@ -80,7 +72,7 @@ def result_box(summary: PosteriorSummary, bands: Bands, angles, member: ModelFam
                     f"TIS(θi = {angle:g}°)",
                     f"{100 * values[0]:.2f} %",
                     _percent_interval(values[1], values[2]),
-                    width_words(widths.get(f"tis_{float(angle):g}deg")),
+                    width_words(widths.get(name := f"tis_{float(angle):g}deg"), name),
                 ]
             )
     brdf0 = summary.get("pi_brdf0")
@@ -90,7 +82,7 @@ def result_box(summary: PosteriorSummary, bands: Bands, angles, member: ModelFam
                 "π·BRDF0 (near-normal TIS, Sec. 7)",
                 f"{100 * brdf0['median']:.2f} %",
                 _percent_interval(brdf0["lo95"], brdf0["hi95"]),
-                width_words(widths.get("pi_brdf0")),
+                width_words(widths.get("pi_brdf0"), "pi_brdf0"),
             ]
         )
     return (

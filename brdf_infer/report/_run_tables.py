@@ -21,6 +21,7 @@ PRIOR_COORDINATES = {
     "a3": "b3 = a3·90^(2+α) [-]",
     "alpha": "α [-]",
     "theta_s0": "θs0 [deg]",
+    "dphi_scale": "ln s, Δφ = s·(c1·θi + c2) of Eq. (8) [-]",
 }
 
 

@@ -24,6 +24,7 @@ LABELS = {
     "a3": "a3 [deg^(−2−α)]",
     "alpha": "α [-]",
     "theta_s0": "θs0 [deg]",
+    "dphi_scale": "Δφ factor (Eq. 8) [-]",
     "tis70": "TIS(70°) [-]",
     "sample_sd": "sample sd τ [ln R]",
     "repeatability": "repeatability σ_rep [ln R]",

@@ -55,6 +55,7 @@ class Predictive(TypedDict):
 
     elpd_loo: float
     se: float
+    elpd_loo_mcse: NotRequired[float | None]  # its Monte Carlo standard error
     p_loo: float
     pareto_k_max: float
     pareto_k_high: int  # rows above pareto_k_limit, those refitted aside
@@ -70,6 +71,25 @@ class Predictive(TypedDict):
     loo_pit_ks_p: float
 
 
+class ModelCheckEntry(TypedDict):
+    """One check of the model against the rows (brdf_infer.posterior._model_check)."""
+
+    name: str  # fit_repeatability, fit_chi2, fit_residual_trend, loo_pit, residual_trend, …
+    statistic: float | None  # the test's statistic (None: no test)
+    p: float | None  # its p-value (None: no test)
+    ok: bool  # passed (p ≥ 0.001)
+    words: str  # what it found, in words
+    detectable: str  # what it could detect (80 % power at p < 0.001), in words
+
+
+class ModelCheck(TypedDict):
+    """Whether the data reject the model: every check, and what to try where one failed."""
+
+    ok: bool
+    checks: list[ModelCheckEntry]
+    next: NotRequired[list[str]]  # what helps, most specific first (where a check failed)
+
+
 class VerdictRecord(TypedDict):
     """The run's one verdict (:class:`brdf_infer.verdict.Verdict`)."""
 
@@ -80,14 +100,24 @@ class VerdictRecord(TypedDict):
 
 
 class VariantWidth(TypedDict):
-    """A headline 95 % interval with one assumption of the error model removed."""
+    """A headline 95 % interval under an alternative: one assumption of the model removed."""
 
     lo95: float | None  # None: unreliable (k̂ above its limit, no refit)
     hi95: float | None
-    ratio: float | None  # its width over the run's (1 − ratio: the share the assumption carries)
+    mcse_lo95: NotRequired[float | None]  # the ends' Monte Carlo standard errors
+    mcse_hi95: NotRequired[float | None]
+    ratio: float | None  # its width over the run's
+    # 1 − ratio² where the alternative is narrower (None: wider, or unreliable), the part of the
+    # interval's variance the assumption carries (sources adding in quadrature), and its MC error
+    variance_share: NotRequired[float | None]
+    variance_share_mcse: NotRequired[float | None]
+    # PSIS-LOO of the alternative less the run's, and its standard error (None: not computed)
+    delta_elpd: NotRequired[float | None]
+    delta_elpd_se: NotRequired[float | None]
     pareto_k: float  # of the importance weights to the variant
     method: str  # "psis" (reweighted), "refit" (sampled anew) or "unreliable"
     words: str  # the assumption in words
+    refit: NotRequired[dict[str, Any]]  # a refit's settings
 
 
 class PriorInterval(TypedDict):
@@ -103,8 +133,11 @@ class Width(TypedDict):
 
     lo95: float
     hi95: float
+    mcse_lo95: NotRequired[float]  # the ends' Monte Carlo standard errors
+    mcse_hi95: NotRequired[float]
     prior: PriorInterval
-    without: dict[str, VariantWidth]  # per assumption: calibration, sample_effect, …
+    # per assumption: calibration, sample_effect, angle_errors, out_of_plane
+    without: dict[str, VariantWidth]
     without_note: NotRequired[str]  # why no variant was computed
 
 
@@ -127,7 +160,9 @@ class Reference(TypedDict):
     value: float
     source: str
     posterior_quantile: float  # share of the draws below the value
-    inside95: bool
+    quantile_mcse: NotRequired[float]  # its Monte Carlo standard error (older runs lack it)
+    place: NotRequired[str]  # "inside", "outside" or "at the edge" (within 2 MC errors)
+    inside95: bool  # place == "inside"
 
 
 class Dropout(TypedDict):
@@ -162,12 +197,14 @@ class PosteriorSummary(TypedDict):
     error_model: dict[str, Any]  # the scene's [errors], as used
     options: dict[str, Any]  # {"reparametrised": whitened coordinates used}
     n_points: int
-    fold: bool  # Eq. (10) in the bands and the TIS
+    fold: bool  # Eq. (10) in the bands and the TIS (the products: [outputs] fold)
+    likelihood_fold: NotRequired[bool]  # Eq. (10) in what the rows measured ([model] fold)
     median: dict[str, float]  # posterior median of each physical parameter
     units: dict[str, str]
     noise: dict[str, Interval]  # learned noise scales [ln R]
     diagnostics: Diagnostics
     predictive: Predictive
+    model_check: NotRequired[ModelCheck]  # whether the data reject the model
     tis_70deg: Band | None  # TIS at θi = 70° (None: the run has no TIS band)
     pi_brdf0: Interval | None  # π·BRDF0, Eq. (7)'s near-normal TIS (None: other families)
     # tis_<θi>deg at the band angles, 70° and the references' angles; pi_brdf0

@@ -2,16 +2,19 @@
 
 from __future__ import annotations
 
+import dataclasses
+import math
 from pathlib import Path
 
 from brdf_infer.errors import BadInputError
 from brdf_infer.model.params import (
+    DPHI_NAME,
     PAPER_CONSTANTS,
-    PARAM_NAMES,
     PARAMETER_SETS,
     HemisphereConstants,
+    with_dphi_scale,
 )
-from brdf_infer.model.priors import DEFAULT_PRIORS, parse_prior
+from brdf_infer.model.priors import DEFAULT_PRIORS, PRIOR_NAMES, parse_prior
 from brdf_infer.scene._errors import parse_errors
 from brdf_infer.scene._fields import _boolean, _choice, _count, _number, _string, _table
 from brdf_infer.scene._records import (
@@ -79,14 +82,17 @@ def parse_scene(document: dict, path: Path) -> Scene:
         document,
         "outputs",
         path,
-        {"theta_i_deg", "tis", "maps", "tis_reference", "reference_params"},
+        {"theta_i_deg", "fold", "tis", "maps", "tis_reference", "reference_params"},
     )
     reference_params = _reference_params(outputs, path)
     model_settings = _model_settings(model, path, family)
     theta_i_out = _band_angles(outputs, path)
-    prior_table = _table(document, "priors", path, set(PARAM_NAMES))
+    prior_table = _table(document, "priors", path, set(PRIOR_NAMES))
     priors = dict(DEFAULT_PRIORS)
     priors.update({name: parse_prior(name, table, path) for name, table in prior_table.items()})
+    if priors[DPHI_NAME].fixed:  # Δφ fixed: its factor is in the constants, no parameter
+        scaled = with_dphi_scale(model_settings.constants, math.exp(priors[DPHI_NAME].value))
+        model_settings = dataclasses.replace(model_settings, constants=scaled)
     wavelength = document.get("wavelength_nm")
     studies = _parse_studies(document, path)
     scene = Scene(
@@ -229,6 +235,7 @@ def _output_settings(
     """The ``[outputs]`` table, its band angles and reference set already checked."""
     return OutputSettings(
         theta_i_deg=tuple(float(v) for v in theta_i_out) if theta_i_out else None,
+        fold=_boolean(outputs, "fold", path, "outputs.", False),
         tis=_boolean(outputs, "tis", path, "outputs.", True),
         maps=_boolean(outputs, "maps", path, "outputs.", True),
         tis_reference=(

@@ -10,8 +10,9 @@ from pathlib import Path
 import numpy as np
 
 from brdf_infer.errors import BadInputError
+from brdf_infer.model import ModelFamily, family
 from brdf_infer.model.error_model import ErrorSettings
-from brdf_infer.model.params import PAPER_CONSTANTS, PARAM_NAMES, HemisphereConstants
+from brdf_infer.model.params import DPHI_NAME, PAPER_CONSTANTS, PARAM_NAMES, HemisphereConstants
 from brdf_infer.model.priors import DEFAULT_PRIORS, Prior
 from brdf_infer.scene.design_target import DESIGN_BUDGET
 from brdf_infer.tables.bsdf_measurements import is_bsdf_path, measurements_from_bsdf
@@ -38,9 +39,10 @@ class ModelSettings:
     """Which model components the scene uses, and the constants of Eqs. (8), (10).
 
     Attributes:
-        fold: the one fold switch: the folding term of Eq. (10) in the likelihood's
-            predictions and in the run's products (BRDF and TIS bands, hemisphere maps,
-            exports). False (the default): the physical BRDF, conservative for stray light.
+        fold: what the instrument measured: the folding term of Eq. (10) in the likelihood's
+            predictions (a scatterometer whose forward-grazing readings fold). False (the
+            default): the rows are the physical BRDF. The products follow their own switch,
+            :attr:`OutputSettings.fold`.
         out_of_plane: the full-hemisphere extension of Eq. (8) is on; without it no
             hemisphere product (TIS, maps) is built.
         constants: out-of-plane and folding constants.
@@ -61,6 +63,11 @@ class OutputSettings:
     Attributes:
         theta_i_deg: incidence angles of the in-plane BRDF bands [deg] (None: the measured
             ones, see :meth:`Scene.band_theta_i_deg`).
+        fold: the folding term of Eq. (10) in the products (BRDF and TIS bands, hemisphere
+            maps, exports, design's targets). False (the default): the physical BRDF, the
+            conservative one for stray light, whatever the instrument measured
+            (:attr:`ModelSettings.fold`); True only to compare with a folded measurement
+            (the article's Table 3).
         tis: make the TIS band (only with the out-of-plane extension).
         maps: make the hemisphere maps (only with the out-of-plane extension).
         tis_reference: CSV of reference TIS points (theta_i_deg, tis, label), or None.
@@ -68,6 +75,7 @@ class OutputSettings:
     """
 
     theta_i_deg: tuple[float, ...] | None = None
+    fold: bool = False
     tis: bool = True
     maps: bool = True
     tis_reference: Path | None = None
@@ -272,6 +280,21 @@ class Scene:
     def free_parameters(self) -> tuple[str, ...]:
         """Names of the parameters that are not fixed, in ``Params`` order."""
         return tuple(name for name in PARAM_NAMES if not self.priors[name].fixed)
+
+    @property
+    def dphi_free(self) -> bool:
+        """Eq. (8)'s out-of-plane width is uncertain: a parameter (``dphi_scale``, the factor
+        on the article's Δφ) under ``[priors.dphi_scale]``; False where that prior is fixed
+        (its factor then in ``model.constants``) or the scene has no Eq. (8)."""
+        return self.model.out_of_plane and not self.priors[DPHI_NAME].fixed
+
+    def family(self, name: str | None = None) -> ModelFamily:
+        """The model family ``name`` (default: ``[model] family``) with the scene's fold,
+        constants and, for Eq. (7)'s, the out-of-plane width as a parameter where uncertain
+        (:attr:`dphi_free`)."""
+        return family(
+            name or self.model.family, self.model.fold, self.model.constants, self.dphi_free
+        )
 
     def band_theta_i_deg(self, measurements: Measurements) -> tuple[float, ...]:
         """Incidence angles of the in-plane BRDF bands [deg]: the scene's ``[outputs]

@@ -65,8 +65,9 @@ def check_nuts(chains: int, draws: int, warmup: int, target_accept: float) -> No
 @dataclass(frozen=True)
 class RunSettings:
     """NUTS settings of the main job, the least-squares starts, the model family (None: the
-    scene's ``[model] family``), the studies (None: the scene's ``[studies]``) and ``force``:
-    go on past failed plausibility checks (the verdict then names them)."""
+    scene's ``[model] family``; :data:`AUTO_MODEL`: the family PSIS-LOO ranks first among
+    :data:`AUTO_FAMILIES`), the studies (None: the scene's ``[studies]``) and ``force``: go on
+    past failed plausibility checks (the verdict then names them)."""
 
     chains: int = 4
     draws: int = 1000
@@ -82,7 +83,12 @@ class RunSettings:
             at_least(getattr(self, name), 1, name)
         if self.warmup < 0:
             raise BadInputError(f"must be >= 0, got {self.warmup}", field="warmup")
-        check_family_name(self.model)
+        if self.model != AUTO_MODEL:
+            check_family_name(self.model)
+
+
+AUTO_MODEL = "auto"  # RunSettings.model: the family the comparison ranks first
+AUTO_FAMILIES = ("strumik2024", "abg", "lambertian", "lambertian+abg")
 
 
 def resolved_sampler(sampler: str, rows: int) -> str:

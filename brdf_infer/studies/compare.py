@@ -38,7 +38,7 @@ from scipy.special import logsumexp
 from brdf_infer._internal import arviz as az
 from brdf_infer._internal.precision import ensure_float64
 from brdf_infer.errors import BadInputError
-from brdf_infer.model import check_family_name, family
+from brdf_infer.model import check_family_name
 from brdf_infer.posterior import (
     THRESHOLDS,
     NutsProgram,
@@ -160,7 +160,7 @@ def fit_family(
     limit."""
     started = time.perf_counter()
     model = build_model(scene, measurements, name)
-    member = family(name, scene.model.fold, scene.model.constants)
+    member = model.products  # its TIS(70°) of the products' BRDF ([outputs] fold)
     program = NutsProgram(model, warmup=settings.warmup, target_accept=settings.target_accept)
     keys = chain_keys(settings.seed, 1, settings.chains)[0]
     output = program.run(

@@ -78,7 +78,7 @@ def _bias_quantities(scene: Scene, params: Params) -> dict[str, np.ndarray]:
     return {
         "brdf0": np.asarray(params.brdf0),
         "alpha": np.asarray(params.alpha),
-        "tis_70deg": np.asarray(tis(70.0, params, scene.model.fold, scene.model.constants)),
+        "tis_70deg": np.asarray(tis(70.0, params, scene.outputs.fold, scene.model.constants)),
     }
 
 

@@ -334,15 +334,11 @@ def _summarise(
 def _power_scaling(scene: Scene, model, sites: dict[str, np.ndarray]) -> dict:
     """Power-scaling sensitivity of the free parameters (paper units), the learned noise
     scales and TIS(70°) of one posterior."""
-    import jax.numpy as jnp
-
-    from brdf_infer.model import tis
-    from brdf_infer.posterior import NOISE_SITES, draws_params, power_scaling
+    from brdf_infer.posterior import NOISE_SITES, draws_physical, power_scaling
 
     shape = np.shape(sites["alpha"])
-    values = tis(
-        jnp.array([TIS_ANGLE_DEG]), draws_params(sites), scene.model.fold, scene.model.constants
-    )
+    member = model.products  # the products' TIS, each draw's out-of-plane width
+    values = np.exp(member.log_tis_draws(np.array([TIS_ANGLE_DEG]), draws_physical(sites, member)))
     quantities = {name: sites[name] for name in scene.free_parameters}
     quantities |= {name: sites[name] for name in NOISE_SITES if name in sites}
     quantities["tis_70deg"] = np.asarray(values).reshape(shape)

@@ -223,3 +223,147 @@ class SyntheticLab:
         if rows.reflectance_err is not None:
             error = rows.reflectance_err / rows.reflectance * values
         return replace(rows, reflectance=values, reflectance_err=error)
+
+
+# A coating of another shape than Eq. (7)'s: a low-gloss black paint, a Lambertian floor
+# (ρ_d = 3 %) under a specular ABg lobe (peak 1 sr⁻¹, knee at |β − β₀| = 0.032, g = 2), in the
+# coordinates of the ``lambertian+abg`` family (brdf_infer.model); its rows are BRDF values of
+# two samples at θi 10-70° and 64 θs each in the plane of incidence (512 rows).
+PAINT_TRUTH = {
+    "log_rho_d": float(np.log(0.03)),
+    "log_peak": 0.0,
+    "log_knee": float(np.log(1e-3) / 2.0),
+    "g": 2.0,
+}
+PAINT_THETA_I_DEG = (10.0, 30.0, 50.0, 70.0)
+PAINT_THETA_S_DEG = tuple(float(t) for t in np.linspace(-85.0, 85.0, 64))
+
+
+def write_paint_scene(
+    directory: Path, *, mirrored: bool = False, seed: int = 0, relative_sd: float = 0.05
+) -> Path:
+    """A scene of the planted paint (:data:`PAINT_TRUTH`): its BRDF rows (``quantity =
+    "brdf"``, σ column ``relative_sd`` of each value) drawn from the scene's generative error
+    model under the ``lambertian+abg`` family at the truth (sample effect 3 %, repeatability
+    3 %); ``mirrored``: the file records −θs, the sign-convention slip of a lab whose forward
+    side is negative. Returns the scene file (``paint.toml`` or ``paint-mirrored.toml``)."""
+    from brdf_infer.model import family
+    from brdf_infer.scene import load_scene
+
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    name = "paint-mirrored" if mirrored else "paint"
+    rows = [
+        (sample, ti, ts)
+        for sample in ("1", "2")
+        for ti in PAINT_THETA_I_DEG
+        for ts in PAINT_THETA_S_DEG
+    ]
+    header = "series,sample,theta_i_deg,theta_s_deg,brdf,brdf_err"
+    csv = directory / f"{name}.csv"
+    csv.write_text(
+        "\n".join([header, *(f"A,{m},{ti:g},{ts:.6g},0.01,0.0005" for m, ti, ts in rows)]) + "\n"
+    )
+    scene_path = directory / f"{name}.toml"
+    scene_path.write_text(
+        f'name = "{name}"\nmeasurements = "{csv.name}"\n[series.A]\nquantity = "brdf"\n'
+    )
+    scene = load_scene(scene_path)
+    values = np.exp(
+        simulate_log_values(
+            scene, scene.load_measurements(), family("lambertian+abg"), PAINT_TRUTH, seed=seed
+        )
+    )
+    sign = -1.0 if mirrored else 1.0
+    lines = [
+        f"A,{m},{ti:g},{sign * ts:.6g},{v:.6e},{relative_sd * v:.6e}"
+        for (m, ti, ts), v in zip(rows, values, strict=True)
+    ]
+    csv.write_text("\n".join([header, *lines]) + "\n")
+    return scene_path
+
+
+def simulate_log_values(
+    scene: Scene,
+    template: Measurements,
+    member,
+    truth: dict[str, float],
+    *,
+    sample_sd: float = 0.03,
+    repeatability: float = 0.03,
+    seed: int = 0,
+) -> np.ndarray:
+    """ln of the rows of ``template`` drawn from the scene's generative error model under the
+    family ``member`` at its internal coordinates ``truth`` (by site; the learned scales set
+    to ``sample_sd`` and ``repeatability``): the model the posterior fits, in simulation."""
+    ensure_float64()
+    import jax
+    from numpyro import handlers
+    from numpyro.infer import Predictive
+
+    from brdf_infer.posterior import build_posterior_model
+
+    model = build_posterior_model(scene, template, member)
+    conditioned = handlers.condition(
+        model, data={**truth, "sample_sd": sample_sd, "repeatability": repeatability}
+    )
+    draw = Predictive(conditioned, num_samples=1)(jax.random.PRNGKey(seed), mode="simulate")
+    return np.asarray(draw["obs"][0])
+
+
+HEMISPHERE_THETA_I_DEG = (10.0, 30.0, 50.0, 70.0)
+HEMISPHERE_PHI_DEG = (165.0, 150.0, 135.0, 120.0, 105.0, 90.0)  # azimuths off the forward plane
+
+
+def write_hemisphere_scene(
+    directory: Path,
+    params: Params,
+    *,
+    dphi_scale: float,
+    seed: int = 0,
+    relative_sd: float = 0.05,
+) -> Path:
+    """A scatterometer-like scene of one sample measured over the hemisphere: at each θi of
+    :data:`HEMISPHERE_THETA_I_DEG`, in-plane BRDF rows at θs −60° … 80° and rows out of the
+    plane at polar angles 20–80° and the azimuths of :data:`HEMISPHERE_PHI_DEG` (forward plane
+    at 180°), drawn from the scene's generative error model under Eqs. (7)-(8) at ``params``
+    with Eq. (8)'s Δφ ``dphi_scale`` times the article's (sample effect 3 %, repeatability 3 %;
+    σ column ``relative_sd`` of each value). Returns the scene file (``hemisphere.toml``)."""
+    from brdf_infer.model.coordinates import INTERNAL_NAMES, to_internal
+    from brdf_infer.scene import load_scene
+
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    rows = [
+        (ti, ts, "")
+        for ti in HEMISPHERE_THETA_I_DEG
+        for ts in np.arange(-60.0, 81.0, 10.0)
+        if ts != 0.0
+    ]
+    rows += [
+        (ti, theta, f"{phi:g}")
+        for ti in HEMISPHERE_THETA_I_DEG
+        for theta in (20.0, 40.0, 60.0, 80.0)
+        for phi in HEMISPHERE_PHI_DEG
+    ]
+    header = "series,sample,theta_i_deg,theta_s_deg,phi_s_deg,brdf,brdf_err"
+    csv = directory / "hemisphere.csv"
+    placeholder = [f"A,1,{ti:g},{ts:g},{phi},0.01,0.0005" for ti, ts, phi in rows]
+    csv.write_text("\n".join([header, *placeholder]) + "\n")
+    path = directory / "hemisphere.toml"
+    path.write_text(
+        'name = "hemisphere"\nmeasurements = "hemisphere.csv"\n[series.A]\nquantity = "brdf"\n'
+    )
+    scene = load_scene(path)
+    internal = dict(zip(INTERNAL_NAMES, np.asarray(to_internal(params)), strict=True))
+    truth = {name: internal[name] for name in ("log_brdf0", "b1", "b2", "b3", "alpha", "t_s0")}
+    truth["log_dphi_scale"] = float(np.log(dphi_scale))
+    values = np.exp(
+        simulate_log_values(scene, scene.load_measurements(), scene.family(), truth, seed=seed)
+    )
+    lines = [
+        f"A,1,{ti:g},{ts:g},{phi},{v:.6e},{relative_sd * v:.6e}"
+        for (ti, ts, phi), v in zip(rows, values, strict=True)
+    ]
+    csv.write_text("\n".join([header, *lines]) + "\n")
+    return path

@@ -4,6 +4,10 @@ Written into the run's ``summary.json`` (``"verdict"``), printed by ``posterior`
 ``report`` and rendered by the report as it stands, so that stdout and the report cannot
 disagree. It lists, most serious first:
 
+0. the model check: where the data reject the model (the least-squares fit's checks, the
+   leave-one-out predictive's uniformity and trends, a parameter piled at a bound;
+   :mod:`brdf_infer.posterior`), what they found and what to try next, first: every band is
+   conditional on the model;
 1. the plausibility checks the run was forced past (``--force``,
    :mod:`brdf_infer.verdict.plausibility`): an input or a fit that looked wrong before sampling;
 2. an implausible answer: a posterior median π·BRDF0 or TIS at the scene's incidence angles
@@ -115,7 +119,8 @@ def posterior_verdict(
         theta_i_deg: the scene's incidence angles [deg], where the TIS is checked.
         forced: the plausibility checks the run was forced past, one line each.
     """
-    lines = [FORCED + line for line in forced]
+    lines = model_lines(summary.get("model_check"))
+    lines += [FORCED + line for line in forced]
     band = bands.get("tis")
     tis_medians = (
         None
@@ -147,6 +152,22 @@ def posterior_verdict(
     return Verdict(tuple(lines), tuple(answer_facts(summary)))
 
 
+MISFIT = "the model does not follow the data: "
+
+
+def model_lines(record: dict[str, Any] | None) -> list[str]:
+    """The verdict's first line where the run's model check failed (the data reject the
+    model, :mod:`brdf_infer.posterior`): the failed checks in words, that the bands are
+    conditional on the model, and what to try next; none where it passed (or a run written
+    before the record)."""
+    if record is None or record["ok"]:
+        return []
+    found = "; ".join(entry["words"] for entry in record["checks"] if not entry["ok"])
+    after = record.get("next") or []
+    step = f". Next: {'; or '.join(after)}" if after else ""
+    return [f"{MISFIT}{found}; every band is conditional on it{step}"]
+
+
 def row_words(row: dict[str, Any]) -> str:
     """One measurement row in words: series, sample, angles [deg] and its Pareto k."""
     phi = row.get("phi_s_deg")
@@ -159,24 +180,76 @@ def row_words(row: dict[str, Any]) -> str:
 
 QUANTITY_WORDS = {"pi_brdf0": "π·BRDF0", "brdf0": "BRDF0"}
 HEADLINE = ("tis_70deg", "pi_brdf0")  # the headline widths whose carriers the verdict names
-SHARE_STATED = 1.0 / 3.0  # an assumption carrying more of a headline width is named
+SHARE_STATED = 1.0 / 3.0  # an assumption carrying more of a headline variance is named
+ELPD_SE_MULTIPLE = 2.0  # |Δelpd| within this many standard errors: the data cannot tell
 
 
 def carried_shares(
     width: dict[str, Any], quantities: Sequence[str], least: float = SHARE_STATED
 ) -> list[tuple[str, str, float]]:
-    """(quantity, the assumption in words, share) for each assumption of the error model
-    that alone carries more than ``least`` of a quantity's 95 % width (share = 1 − the
-    width ratio without it, :mod:`brdf_infer.posterior._width`), largest first."""
+    """(quantity, the assumption in words, variance share) for each assumption that carries
+    more than ``least`` of a quantity's 95 % interval's variance (1 − (width without it /
+    width)², sources adding in quadrature; :mod:`brdf_infer.posterior`'s ``"width"`` record),
+    largest first. A run written before the variance share: none."""
     found = []
     for quantity in quantities:
         for entry in width.get(quantity, {}).get("without", {}).values():
-            if entry["ratio"] is None:  # unreliable: no interval without it
-                continue
-            share = 1.0 - entry["ratio"]
-            if share > least:
+            share = entry.get("variance_share")
+            if share is not None and share > least:
                 found.append((quantity, entry["words"], float(share)))
     return sorted(found, key=lambda item: -item[2])
+
+
+def elpd_words(entry: dict[str, Any]) -> str:
+    """The data's judgement of an alternative in words, from its Δelpd (alternative − run)
+    and standard error; empty where not computed."""
+    delta, se = entry.get("delta_elpd"), entry.get("delta_elpd_se")
+    if delta is None or se is None:
+        return ""
+    value = f"Δelpd {delta:+.1f} ± {se:.1f}"
+    if abs(delta) <= ELPD_SE_MULTIPLE * se:
+        return f"the data cannot tell them apart ({value})"
+    if delta < 0:
+        return f"the data prefer the run's model ({value})"
+    return f"the data prefer the alternative ({value})"
+
+
+def alternative_words(entry: dict[str, Any], quantity: str) -> str:
+    """One alternative of a headline interval in words (the ``"width"`` record's ``without``
+    entry): its variance share where it narrows the interval, else the interval without it
+    and that it is wider; with Monte Carlo errors and the data's judgement."""
+    name = entry["words"].removeprefix("the ")
+    if entry.get("lo95") is None:
+        k_hat = entry["pareto_k"]
+        return f"{name}: no interval without it (reweighting unreliable, Pareto k {k_hat:.2f})"
+    interval = f"{value_words(quantity, entry['lo95'])}–{value_words(quantity, entry['hi95'])}"
+    judged = elpd_words(entry)
+    judged = f"; {judged}" if judged else ""
+    share = entry.get("variance_share")
+    if share is not None:
+        error = entry.get("variance_share_mcse") or 0.0
+        return (
+            f"{name} {100 * share:.0f} ± {100 * error:.0f} % of the variance (without it "
+            f"{interval}{judged})"
+        )
+    return f"without {name} wider, {interval} (no share of this width{judged})"
+
+
+def width_words(width: dict[str, Any] | None, quantity: str) -> str:
+    """What carries one headline interval, in one line: each alternative
+    (:func:`alternative_words`, largest variance share first) and the prior predictive
+    interval."""
+    if not width:
+        return "not recorded (a run written before this record)"
+    entries = sorted(width["without"].values(), key=lambda e: -(e.get("variance_share") or -1.0))
+    parts = [alternative_words(entry, quantity) for entry in entries]
+    if "without_note" in width:
+        parts.append(width["without_note"])
+    prior = width["prior"]
+    parts.append(
+        f"prior alone {value_words(quantity, prior['lo95'])}–{value_words(quantity, prior['hi95'])}"
+    )
+    return "; ".join(parts)
 
 
 def quantity_words(name: str) -> str:
@@ -203,7 +276,7 @@ def answer_facts(summary: PosteriorSummary) -> list[str]:
         carried.setdefault(words, []).append(f"{100 * share:.0f} % of {quantity_words(quantity)}'s")
     facts = table_facts(summary.get("table"))
     facts += [
-        f"{words} assumption alone carries {' and '.join(parts)} 95 % width"
+        f"{words} carries {' and '.join(parts)} 95 % interval variance (in quadrature)"
         for words, parts in carried.items()
     ]
     for name in ("sample_sd", "repeatability"):
@@ -213,16 +286,15 @@ def answer_facts(summary: PosteriorSummary) -> list[str]:
                 f"the {NOISE_WORDS[name]} is {entry['words']}: the data do not contract it "
                 f"(contraction {entry['contraction']:.2f})"
             )
-    outside = [
-        f"{quantity_words(r['quantity'])} {value_words(r['quantity'], r['value'])} (posterior "
-        f"quantile {r['posterior_quantile']:.3f})"
-        for r in summary.get("reference", [])
-        if not r["inside95"]
-    ]
-    if outside:
+    places = []
+    for place, where in (("outside", "outside"), ("at the edge", "at the edge of")):
+        found = [reference_words(r) for r in summary.get("reference", []) if _place(r) == place]
+        if found:
+            places.append(f"{where} the 95 % interval: " + ", ".join(found))
+    if places:
         facts.append(
-            "reference values outside the 95 % interval: "
-            + ", ".join(outside)
+            "reference values "
+            + "; ".join(places)
             + ' (docs/instruments.md, "The answer and the article")'
         )
     refitted = summary.get("predictive", {}).get("loo_refit_rows") or []
@@ -233,6 +305,23 @@ def answer_facts(summary: PosteriorSummary) -> list[str]:
             "them: " + "; ".join(row_words(row) for row in refitted)
         )
     return facts
+
+
+def _place(reference: dict[str, Any]) -> str:
+    """A reference value's place in the 95 % interval (runs before ``place``: from
+    ``inside95``)."""
+    return reference.get("place", "inside" if reference["inside95"] else "outside")
+
+
+def reference_words(reference: dict[str, Any]) -> str:
+    """A reference value and its posterior quantile (± its Monte Carlo error) in words."""
+    quantity = reference["quantity"]
+    error = reference.get("quantile_mcse")
+    plus = "" if error is None else f" ± {error:.3f}"
+    return (
+        f"{quantity_words(quantity)} {value_words(quantity, reference['value'])} (posterior "
+        f"quantile {reference['posterior_quantile']:.3f}{plus})"
+    )
 
 
 def _loo_limit(summary: PosteriorSummary) -> float:

@@ -262,3 +262,51 @@ def measurement_warnings(measurements: Measurements) -> list[str]:
         f"the value (rows {rows}): is the σ column in other units than the "
         f"{value_field(measurements)} values [{_value_unit(measurements)}]?"
     ]
+
+
+MIRROR_RATIO = 1.5  # the brightest row against its mirrored partner: "brighter"
+MIRROR_SHARE = 2.0 / 3.0  # of the groups: "most"
+MIRROR_TOLERANCE_DEG = 2.0  # |θs| of a mirrored partner within this
+
+
+def mirrored_sign_words(measurements: Measurements) -> str | None:
+    """Where the rows look recorded with the other θs sign convention, what to check, in one
+    line; None otherwise. A black coating scatters forward: in the plane of incidence its
+    brightest direction lies at θs > 0 (the specular side, Sec. 4.1), at or beyond the
+    specular angle. Among the groups of rows of one series, sample and θi measured on both
+    sides of the normal (at least two such groups), when in most (:data:`MIRROR_SHARE`) the
+    brightest row lies at θs < 0 and is :data:`MIRROR_RATIO` times its mirrored partner (the
+    row at the same |θs| within :data:`MIRROR_TOLERANCE_DEG`), the forward side was probably
+    recorded as negative."""
+    in_plane = ~measurements.out_of_plane
+    keys = list(
+        zip(measurements.series, measurements.sample, measurements.theta_i_deg, strict=True)
+    )
+    groups: dict[tuple, list[int]] = {}
+    for row, key in enumerate(keys):
+        if in_plane[row]:
+            groups.setdefault(tuple(map(str, key)), []).append(row)
+    theta_s = np.asarray(measurements.theta_s_deg, float)
+    values = np.asarray(measurements.reflectance, float)
+    both, backward = 0, 0
+    for rows in groups.values():
+        rows = np.asarray(rows)
+        if not (np.any(theta_s[rows] > 0) and np.any(theta_s[rows] < 0)):
+            continue
+        both += 1
+        brightest = rows[np.argmax(values[rows])]
+        if theta_s[brightest] >= 0:
+            continue
+        partners = rows[np.abs(theta_s[rows] + theta_s[brightest]) <= MIRROR_TOLERANCE_DEG]
+        if partners.size and values[brightest] >= MIRROR_RATIO * np.max(values[partners]):
+            backward += 1
+    if both < 2 or backward < MIRROR_SHARE * both:
+        return None
+    return (
+        f"check the sign convention of theta_s_deg: in {backward} of {both} groups of rows "
+        "(series, sample, θi) measured on both sides of the normal the brightest row lies at "
+        f"θs < 0, at least {MIRROR_RATIO:g} times its mirrored partner, where a black coating "
+        "scatters forward: θs > 0 is the forward side, the specular direction's (Strumik et "
+        "al. 2024, Sec. 4.1); if your instrument counts the other way, change the sign of "
+        "the column"
+    )

@@ -29,18 +29,21 @@ one or several processes, are :mod:`brdf_infer.workflow.batch`.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from brdf_infer._internal.precision import ensure_float64
 from brdf_infer.runs.folder import FIT_LSQ_FILE, FIT_PAPER_FILE, RunFolder
 from brdf_infer.runs.folder import STUDIES_FILE as STUDIES_FILE  # the old name, kept
 from brdf_infer.runs.records import PosteriorSummary
 from brdf_infer.scene import Scene, Studies
-from brdf_infer.scene.settings import LSQ_STARTS, RunSettings
+from brdf_infer.scene.settings import AUTO_FAMILIES, AUTO_MODEL, LSQ_STARTS, RunSettings
 from brdf_infer.tables.measurements import Measurements
 from brdf_infer.verdict import Verdict
 from brdf_infer.verdict.plausibility import Implausible
@@ -207,13 +210,17 @@ def lsq_summary(
         progress(f"warning: {warning}")
     dof = result.n_points - len(result.free)
     learned = scene.errors.model == "generative" and scene.errors.learns_repeatability
+    learned = learned and dof > 0
     quality = FitQuality(
         result.cost,
-        dof,
-        result.repeatability if learned and dof > 0 else None,
+        dof - learned,  # σ_rep is one more parameter fitted to the rows
+        result.repeatability if learned else None,
         result.repeatability_check,
         scene.errors.expected_repeatability,
         result.residual_trend_p_values,
+        result.residual_trend_statistic,
+        result.residual_trend_detectable,
+        _row_variance(result) if learned else None,
     )
     summary = {
         "method": "lsq",
@@ -227,6 +234,12 @@ def lsq_summary(
     if member.paper_parameters:
         summary["paper_fit_cost"] = _paper_fit_cost(scene, measurements, result, paper)
     return summary | _lsq_details(result, quality, member.parameters)
+
+
+def _row_variance(result) -> float:
+    """The rows' typical variance besides the learned repeatability [ln R²]: the median of
+    each row's σ² less σ_rep²."""
+    return float(np.median(np.asarray(result.row_sigma) ** 2 - result.repeatability**2))
 
 
 def _lsq_details(result, quality, names) -> dict[str, Any]:
@@ -343,9 +356,16 @@ def _run(
 
     start = time.perf_counter()
     name = settings.model or scene.model.family
+    studies = settings.studies if settings.studies is not None else scene.studies
+    chosen = None
+    if name == AUTO_MODEL:  # the rows and studies checked first: the family decides the rest
+        _check_studies(scene, list(studies.instruments), studies.sensitivity)
+        require_plausible(measurement_checks(scene, measurements), settings.force)
+        chosen = _auto_family(scene, measurements, progress)
+        name = chosen.table[0]["name"] if chosen.table else scene.model.family
+        studies = dataclasses.replace(studies, compare=())  # the comparison is made
     # an unknown family fails before any work; the studies written for Eq. (7) need its family
     eq7 = build_model(scene, measurements, name).family.paper_parameters
-    studies = settings.studies if settings.studies is not None else scene.studies
     error_models = [m for m in studies.error_models if m != scene.errors.model]
     instruments = [m for m in studies.instruments if m != scene.instrument.model]
     instruments = instruments if eq7 else []
@@ -361,6 +381,12 @@ def _run(
     paper = _paper_fit(job, implausible)
     lsq = _least_squares(job, implausible, paper)
     forced = _write_fits(job, implausible, paper, lsq)
+    comparison = None
+    if chosen is not None:
+        from brdf_infer.report import write_comparison
+
+        write_comparison(out, chosen)
+        comparison = chosen.as_json()
     options = {
         "chains": settings.chains,
         "draws": settings.draws,
@@ -368,14 +394,15 @@ def _run(
         "seed": settings.seed,
         "model": name,
     }
-    posterior = _posterior(job, options, forced)
+    posterior = _posterior(job, options, forced, lsq)
     for error_model in error_models:
         error_model_posterior(job, error_model, options, forced)
     if instruments:
         instrument_study(job, instruments, options, posterior)
     if traces:
         _raytrace_study(job, posterior)
-    comparison = compare_study(job) if studies.compare else None
+    if studies.compare:
+        comparison = compare_study(job)
     if sensitive:
         sensitivity_study(job)
     if designed:
@@ -392,6 +419,31 @@ def _run(
         comparison=comparison,
         seconds=time.perf_counter() - start,
     )
+
+
+def _auto_family(scene: Scene, measurements: Measurements, progress: Callable[[str], None]):
+    """``--model auto``: the families of :data:`AUTO_FAMILIES` ranked by PSIS-LOO
+    (:func:`brdf_infer.studies.compare.compare_families`), the first whose sampler
+    diagnostics pass chosen (its ``table`` put in that order: the chosen family first)."""
+    from brdf_infer.studies.compare import compare_families
+
+    progress(f"model auto: comparing {', '.join(AUTO_FAMILIES)} by PSIS-LOO")
+    result = compare_families(scene, measurements, list(AUTO_FAMILIES))
+    usable = [row for row in result.table if not result.families[row["name"]].sampler_failures]
+    if usable:
+        first = usable[0]
+        result.table = [first, *(row for row in result.table if row is not first)]
+        progress(
+            f"model auto: {first['name']} first (elpd_loo {first['elpd_loo']:.1f} ± "
+            f"{first['se']:.1f}; the next by {_gap(result.table):.1f} ± "
+            f"{result.table[1]['dse'] if len(result.table) > 1 else 0.0:.1f})"
+        )
+    return result
+
+
+def _gap(table: list[dict[str, Any]]) -> float:
+    """elpd_loo of the first row less the second's (0 with one row)."""
+    return table[0]["elpd_loo"] - table[1]["elpd_loo"] if len(table) > 1 else 0.0
 
 
 def _paper_fit(job: Job, implausible: list[Implausible]) -> dict[str, Any] | None:
@@ -452,13 +504,21 @@ def _write_fits(
     return forced
 
 
-def _posterior(job: Job, options: dict[str, Any], forced: list[str]):
-    """Step 3: the scene's NUTS posterior into the run folder."""
+def _posterior(job: Job, options: dict[str, Any], forced: list[str], lsq: dict[str, Any]):
+    """Step 3: the scene's NUTS posterior into the run folder, its model check joined by the
+    least-squares fit's (``lsq``)."""
     from brdf_infer.posterior import run_posterior
 
     settings = job.settings
     job.step(f"NUTS posterior ({settings.chains} chains x {settings.draws})")
-    return run_posterior(job.scene, job.measurements, out=job.out, forced=forced, **options)
+    return run_posterior(
+        job.scene,
+        job.measurements,
+        out=job.out,
+        forced=forced,
+        fit_checks=lsq.get("model_checks", []),
+        **options,
+    )
 
 
 def _raytrace_study(job: Job, posterior) -> None:

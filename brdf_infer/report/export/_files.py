@@ -169,20 +169,27 @@ def export_abg(
     else:
         count = source.count
         median = Params(*(float(np.median(v)) for v in source.params))
+        # Eq. (8)'s constants of the median and of each draw: its own out-of-plane width
+        middle = source.family.constants_of(
+            {name: float(np.median(v)) for name, v in source.physical.items()}
+        )
         progress("fitting ABg to the posterior median parameters")
         centre = fit_abg(
             theta_i,
             median,
-            np.asarray(tis(theta_i, median, source.fold, source.constants)),
+            np.asarray(tis(theta_i, median, source.fold, middle)),
             source.fold,
-            source.constants,
+            middle,
         )
         fits = []
         for k, index in enumerate(draw_indices(count, draws)):
             progress(f"fitting ABg to draw {k + 1} of {draws}")
             one = Params(*(float(np.asarray(v)[index]) for v in source.params))
-            model_tis = np.asarray(tis(theta_i, one, source.fold, source.constants))
-            fits.append(fit_abg(theta_i, one, model_tis, source.fold, source.constants, centre))
+            own = source.family.constants_of(
+                {name: float(np.asarray(v)[index]) for name, v in source.physical.items()}
+            )
+            model_tis = np.asarray(tis(theta_i, one, source.fold, own))
+            fits.append(fit_abg(theta_i, one, model_tis, source.fold, own, centre))
         rows = _abg_band_rows(fits, theta_i)
         details = {"draws": len(fits), "of_draws": count}
     content = {

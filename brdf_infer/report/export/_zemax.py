@@ -405,11 +405,11 @@ def _table_program(member: ModelFamily):
     """The compiled BRDF table of ``member`` at one θi (angle, parameters and Eq. (10)'s
     constants arguments: one compilation per shape serves every draw and angle of an
     export)."""
-    name, fold = member.name, member.fold
+    name, fold, dphi_free = member.name, member.fold, member.dphi_free
 
     @jax.jit
     def one_angle(theta_i_deg, psi, r, batch, constants):
-        inner = family(name, fold, constants)
+        inner = family(name, fold, constants, dphi_free)  # each draw's own Δφ where free
         theta, phi, z = specular_frame_to_model(theta_i_deg, psi, r)
         return jnp.where(z > 0.0, jnp.exp(inner.log_brdf(theta_i_deg, theta, phi, batch)), 0.0)
 
