@@ -19,10 +19,14 @@ from brdf_infer.model._aperture import (
     solid_angle,
 )
 from brdf_infer.model._energy import (
+    BOUND_GAP,
+    ENERGY_MAP_SOFTNESS,
     ENERGY_MARGIN,
     ENERGY_THETA_I_DEG,
+    below_bound,
     conserves_energy,
     energy_log_factor,
+    log_brdf0_bound,
     max_log_tis,
 )
 from brdf_infer.model._families import (
@@ -66,7 +70,9 @@ from brdf_infer.model._lobes import (
 from brdf_infer.model._tis import TIS_NODES, log_tis, tis, tis_with_error
 
 __all__ = [
+    "BOUND_GAP",
     "CHECK_QUADRATURE",
+    "ENERGY_MAP_SOFTNESS",
     "ENERGY_MARGIN",
     "ENERGY_THETA_I_DEG",
     "FAMILIES",
@@ -84,6 +90,7 @@ __all__ = [
     "azimuthal_half_width",
     "azimuthal_weight",
     "azimuthal_weight_integral",
+    "below_bound",
     "beta_distance",
     "brdf_hemisphere",
     "brdf_inplane",
@@ -97,6 +104,7 @@ __all__ = [
     "harvey_shack_integral",
     "harvey_shack_log_bsdf",
     "log_aperture_factor",
+    "log_brdf0_bound",
     "log_brdf_hemisphere",
     "log_brdf_inplane",
     "log_fold",

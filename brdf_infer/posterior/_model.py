@@ -29,6 +29,13 @@ stays exactly the scene's posterior; but u is close to N(0, I) and nearly indepe
 on the data covering three incidence angles above every θs0 the prior allows. Coefficients
 the scene fixes stay fixed; ``reparametrise=False`` samples the c directly.
 
+Energy conservation. The physical prior truncates the priors to coatings with TIS ≤ 1 −
+margin (:mod:`brdf_infer.model._energy`), which is an upper bound on ln BRDF0 given the other
+parameters. Where ln BRDF0 is a free whitened coefficient, its value from the whitening is
+mapped below that bound by a smooth bijection onto (−∞, bound), its log-Jacobian added to the
+whitening's: every point the sampler reaches conserves energy, the target is still exactly the
+truncated posterior, and NUTS meets no wall. Elsewhere the truncation is a factor, −∞ beyond.
+
 The likelihood's pieces are in :mod:`._likelihood`, the whitening's in :mod:`._whitening`.
 """
 
@@ -45,9 +52,13 @@ import numpyro.distributions as dist
 
 from brdf_infer.errors import BadInputError
 from brdf_infer.model import (
+    BOUND_GAP,
+    ENERGY_MAP_SOFTNESS,
     ModelFamily,
     Physical,
+    below_bound,
     energy_log_factor,
+    log_brdf0_bound,
     log_fold,
 )
 from brdf_infer.model.coordinates import ANGLE_SCALE_DEG, from_internal
@@ -126,9 +137,10 @@ class PosteriorModel:
         row_series: index of each row's series (in order of appearance).
         sigma_scale: multiplies the likelihood's σ when fitting (1; other values only for a
             planted fault in simulation-based calibration, whose simulations keep 1).
-        drop_log_jacobian: leave the whitening's log-Jacobian −Σ ln Lᵢᵢ out of the density
-            (False; True only for a planted fault in simulation-based calibration, which must
-            then fail: the target is no longer the scene's posterior).
+        drop_log_jacobian: leave the whitening's log-Jacobian −Σ ln Lᵢᵢ (with the energy
+            map's, module docstring) out of the density (False; True only for a planted fault
+            in simulation-based calibration, which must then fail: the target is no longer the
+            scene's posterior).
     """
 
     scene: Scene
@@ -221,8 +233,9 @@ class PosteriorModel:
             numpyro.deterministic("alpha", alpha)
         t_s0 = parameter("theta_s0", "t_s0", ANGLE_SCALE_DEG)
         free = [k for k, name in enumerate(LINEAR) if not priors[name].fixed]
+        bound = None  # of ln BRDF0, where the whitened coordinates map it below its bound
         if whiten and free:
-            coefficients = self._whitened(data, scales, alpha, t_s0, free)
+            coefficients, bound = self._whitened(data, scales, alpha, t_s0, free, constants)
         else:
             coefficients = [
                 parameter(name, site) for name, site in zip(LINEAR, LINEAR_SITES, strict=True)
@@ -234,19 +247,35 @@ class PosteriorModel:
         for name in ("brdf0", "a1", "a2", "a3", "theta_s0"):
             numpyro.deterministic(name, getattr(params, name))
         # the physical prior: no mass on coatings with TIS > 1 (simulations reject such draws,
-        # brdf_infer.studies.sbc.simulate)
-        numpyro.factor(ENERGY_SITE, energy_log_factor(params, constants))
+        # brdf_infer.studies.sbc.simulate); where the whitened coordinates map ln BRDF0 below
+        # its bound, the same check from that bound (0 at every point they reach, no second TIS)
+        if bound is None:
+            energy = energy_log_factor(params, constants)
+        else:
+            energy = jnp.where(jax.lax.stop_gradient(log_brdf0 <= bound), 0.0, -jnp.inf)
+        numpyro.factor(ENERGY_SITE, energy)
         return params
 
-    def _whitened(self, data: ModelData, scales: NoiseScales, alpha, t_s0, free: list[int]):
-        """The coefficients c from whitened coordinates u (module docstring)."""
+    def _whitened(
+        self,
+        data: ModelData,
+        scales: NoiseScales,
+        alpha,
+        t_s0,
+        free: list[int],
+        constants: HemisphereConstants,
+    ):
+        """The coefficients c from whitened coordinates u (module docstring), and the bound
+        of ln BRDF0 (:func:`brdf_infer.model.log_brdf0_bound`, at the draw's Eq. 8
+        ``constants``: its own out-of-plane width) where it is free and mapped below it, else
+        None."""
         priors = self.scene.priors
         rows, noise = data.rows, data.noise
         fixed_values = jnp.array(
             [priors[name].value if priors[name].fixed else 0.0 for name in LINEAR]
         )
         design = linear_design(rows, alpha, t_s0)
-        fold, constants = self.family.fold, self.family.constants
+        fold = self.family.fold
         offset = rows.log_aperture + design @ fixed_values
         if fold:
             offset = offset + jnp.where(
@@ -263,16 +292,29 @@ class PosteriorModel:
         standard = numpyro.sample(
             "linear_std", dist.ImproperUniform(dist.constraints.real, (), (len(free),))
         )
-        values, log_jacobian = whitened_coefficients(
-            jnp.where(regression[:, None], design[:, free], 0.0),
-            jnp.where(regression, rows.log_reflectance - offset, 0.0),
-            factor * self.sigma_scale,
-            diagonal * self.sigma_scale**2,
-            jnp.asarray(moments[:, 0]),
-            jnp.asarray(moments[:, 1]),
-            standard,
-            disjoint_columns(data),
-        )
+
+        def solve(u):
+            return whitened_coefficients(
+                jnp.where(regression[:, None], design[:, free], 0.0),
+                jnp.where(regression, rows.log_reflectance - offset, 0.0),
+                factor * self.sigma_scale,
+                diagonal * self.sigma_scale**2,
+                jnp.asarray(moments[:, 0]),
+                jnp.asarray(moments[:, 1]),
+                u,
+                disjoint_columns(data),
+            )
+
+        # c is affine in u: ∂c₀/∂u₀ = 1/L₀₀, the regression's sd of ln BRDF0 given b1–b3
+        first = jnp.zeros(len(free)).at[0].set(1.0)
+        (values, log_jacobian), (slope, _) = jax.jvp(solve, (standard,), (first,))
+        bound = None
+        if free[0] == 0:  # ln BRDF0 free: mapped below its energy bound (module docstring)
+            bound = self._log_brdf0_bound(values, fixed_values, free, alpha, t_s0, constants)
+            scale = ENERGY_MAP_SOFTNESS * slope[0]
+            mapped, log_slope = below_bound(values[0], bound - BOUND_GAP, scale)
+            values = values.at[0].set(mapped)
+            log_jacobian = log_jacobian + log_slope
         log_prior = sum(
             prior_distribution(priors[LINEAR[k]]).log_prob(values[position])
             for position, k in enumerate(free)
@@ -283,7 +325,15 @@ class PosteriorModel:
         coefficients = list(fixed_values)
         for position, k in enumerate(free):
             coefficients[k] = numpyro.deterministic(LINEAR_SITES[k], values[position])
-        return coefficients
+        return coefficients, bound
+
+    def _log_brdf0_bound(self, values, fixed_values, free: list[int], alpha, t_s0, constants):
+        """The largest ln BRDF0 that conserves energy with the other parameters of a draw
+        (:func:`brdf_infer.model.log_brdf0_bound`): ``values`` the free coefficients of c,
+        ``fixed_values`` the fixed ones."""
+        b = [values[free.index(k)] if k in free else fixed_values[k] for k in (1, 2, 3)]
+        unit = from_internal(jnp.stack([jnp.zeros(()), *b, alpha, t_s0]))  # BRDF0 = 1
+        return log_brdf0_bound(unit, constants)
 
     def _latent_angles(self, data: ModelData, scales: NoiseScales):
         """Perturbed angles (θi + ε, θs + s ε + η) with ε per rotation setting, η per row and
