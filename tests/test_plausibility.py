@@ -238,4 +238,3 @@ def test_answer_checks_and_the_refusal(lya):
 def recorded_summary(out):
     """The run's summary.json."""
     return json.loads((out / "summary.json").read_text())
-
