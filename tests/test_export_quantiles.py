@@ -101,7 +101,10 @@ def test_tis_quantile_tables_integrate_to_their_tis_within_the_stated_grid_error
     payload, _ = export(capsys, nuts_run.out, tmp_path, *COARSE)
     files = by_kind(payload)
     stated = np.asarray(files["tis_q500"]["grid_quadrature_error"])
-    assert np.all(stated < 0.05) and stated[-1] > 1e-3  # 85°: a real error, stated
+    # 85°: a real error, stated. The 2.5 % TIS draw there has the narrowest out-of-plane width
+    # (Δφ × 0.6 on the bundled run), which the coarse 15° azimuth step resolves worst: 8–9 %
+    # measured (under 5 % while Δφ was fixed at the article's)
+    assert np.all(stated < 0.15) and stated[-1] > 1e-3
     for kind in (*QUANTILE_FILES, "upper95"):
         read = oracle.read_bsdf(files[kind]["path"])
         for k, aoi in enumerate(read["angle_of_incidence"]):

@@ -118,6 +118,42 @@ def folded_family(member, requested: bool | None):
         raise BadInputError(f"a run of {member.name} has no Eq. (10)", field="--fold") from None
 
 
+def add_fold_switches(parser: argparse.ArgumentParser) -> None:
+    """A run's two Eq. (10) switches, each overriding its scene key: ``--fold``/``--no-fold``
+    the products' (``[outputs] fold``: bands, TIS, maps, exports) and
+    ``--likelihood-fold``/``--no-likelihood-fold`` what the instrument measured (``[model]
+    fold``: the likelihood's predictions)."""
+    add_fold_arguments(parser, "the scene's [outputs] fold, false unless set")
+    group = parser.add_mutually_exclusive_group()
+    group.add_argument(
+        "--likelihood-fold",
+        dest="likelihood_fold",
+        action="store_const",
+        const=True,
+        default=None,
+        help="the instrument's readings fold at forward grazing angles: Eq. (10) in the "
+        "likelihood (default: the scene's [model] fold)",
+    )
+    group.add_argument(
+        "--no-likelihood-fold",
+        dest="likelihood_fold",
+        action="store_const",
+        const=False,
+        help="Eq. (10) left out of the likelihood",
+    )
+
+
+def with_fold_switches(scene, args: argparse.Namespace):
+    """``scene`` with :func:`add_fold_switches`' options applied (None leaves a key as is)."""
+    from dataclasses import replace
+
+    if args.fold is not None:
+        scene = replace(scene, outputs=replace(scene.outputs, fold=args.fold))
+    if args.likelihood_fold is not None:
+        scene = replace(scene, model=replace(scene.model, fold=args.likelihood_fold))
+    return scene
+
+
 def checked_instrument(name: str | None) -> None:
     """``--instrument``: a known instrument model (checked before the scene is read)."""
     from brdf_infer.instrument import INSTRUMENT_MODELS

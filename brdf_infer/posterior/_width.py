@@ -467,9 +467,14 @@ class _Found:
             extra = {"refit": self.refitted.settings}
         elif self.usable:
             values = self.values[name]
-            low, high = weighted_interval(values, self.log_weights)
+            # equal weights (an alternative of the same likelihood): the run's own quantiles,
+            # so that a quantity the assumption does not touch keeps its interval exactly
+            weights = None if np.ptp(self.log_weights) == 0.0 else self.log_weights
+            low, high = (
+                _interval(values) if weights is None else weighted_interval(values, weights)
+            )
             ess = kish_ess(self.log_weights)
-            mcse_low, mcse_high = (quantile_se(values, p, ess, self.log_weights) for p in LEVEL)
+            mcse_low, mcse_high = (quantile_se(values, p, ess, weights) for p in LEVEL)
         share = share_error = None
         width = own[1] - own[0]
         if low is not None and width > 0:
