@@ -470,9 +470,7 @@ class _Found:
             # equal weights (an alternative of the same likelihood): the run's own quantiles,
             # so that a quantity the assumption does not touch keeps its interval exactly
             weights = None if np.ptp(self.log_weights) == 0.0 else self.log_weights
-            low, high = (
-                _interval(values) if weights is None else weighted_interval(values, weights)
-            )
+            low, high = _interval(values) if weights is None else weighted_interval(values, weights)
             ess = kish_ess(self.log_weights)
             mcse_low, mcse_high = (quantile_se(values, p, ess, weights) for p in LEVEL)
         share = share_error = None
