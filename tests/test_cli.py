@@ -11,6 +11,7 @@ import pytest
 
 from brdf_infer.model.params import PARAM_NAMES
 from tests.helpers import run_cli, run_cli_process
+from tests.test_docs_numbers import width_quote_errors
 
 
 def json_of(capsys, *argv):
@@ -177,6 +178,8 @@ def test_run_is_the_main_job_and_its_verdict_passes(tmp_path, capsys, settings):
     angle = without["angle_errors"]
     assert angle["variance_share"] is None and angle["delta_elpd"] < -2 * angle["delta_elpd_se"]
     assert summary["model_check"]["ok"] and "Model check" in (out_dir / "report.html").read_text()
+    # the docs' quotes of the width record, the refitted alternative's among them
+    assert not width_quote_errors(summary)
     text = verdict.removeprefix("verdict: ")
     assert summary["verdict"]["text"] == text
     report = (out_dir / "report.html").read_text()

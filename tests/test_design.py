@@ -229,6 +229,8 @@ def _dense_conditional(run, candidates, draws, series):
     fields = ("series", "sample", "theta_i_deg", "theta_s_deg", "reflectance", "reflectance_err")
     joined = {f: np.concatenate([getattr(measured, f), getattr(new, f)]) for f in fields}
     joined["series"] = np.concatenate([measured.series, np.full(len(new), series)])
+    if new.phi_s_deg is not None:  # out-of-plane candidates; the measured rows in the plane
+        joined["phi_s_deg"] = np.concatenate([np.full(len(measured), np.nan), new.phi_s_deg])
     scene = replace(run.scene, series={**run.scene.series, series: run.scene.series["II"]})
     model = build_posterior_model(scene, Measurements(path=measured.path, **joined))
     parts = model.draw_parts(draws)
@@ -264,6 +266,34 @@ def test_a_sessions_predictive_is_the_dense_conditional_of_rows_appended_to_the_
     draws = {name: values[keep] for name, values in run.sites.items()}
     got = predictive(run, candidates, draws)
     mean, covariance = _dense_conditional(run, candidates, draws, appended_as)
+    np.testing.assert_allclose(got.mean, mean, rtol=1e-6, atol=1e-9)
+    shared = np.einsum("scq,sdq->scd", got.loading, got.loading)
+    own = np.stack([np.diag(d) for d in np.asarray(got.own)])
+    np.testing.assert_allclose(shared + own, covariance, rtol=1e-6, atol=1e-12)
+
+
+def test_an_out_of_plane_rows_predictive_carries_each_draws_out_of_plane_width(nuts_run):
+    """Out of the plane of incidence, near the specular lobe (φs 165° and 150°, forward at
+    180°), a candidate's predictive is each draw's own: its BRDF at that draw's Eq. (8) width
+    Δφ, as the dense conditional of the rows appended to the data computes it. (Design once
+    predicted every draw at the article's Δφ, so an out-of-plane row could teach nothing of
+    the width that carries most of TIS(70°)'s interval: its best expected sd was 0.97 of
+    today's, against 0.52 with each draw's width.)"""
+    from brdf_infer.design import Candidates, predictive
+
+    run = load_design_run(nuts_run.out)
+    candidates = Candidates(
+        series=np.array(["II"] * 3),
+        theta_i_deg=np.array([45.0, 70.0, 30.0]),
+        theta_s_deg=np.array([45.0, 70.0, -60.0]),
+        phi_s_deg=np.array([150.0, 165.0, np.nan]),
+        session=np.array(["new"] * 3),
+    )
+    keep = np.arange(0, len(run.sites["brdf0"]), len(run.sites["brdf0"]) // 4)[:4]
+    draws = {name: values[keep] for name, values in run.sites.items()}
+    assert np.ptp(draws["dphi_scale"]) > 0.05  # the draws differ in their width
+    got = predictive(run, candidates, draws)
+    mean, covariance = _dense_conditional(run, candidates, draws, "III")
     np.testing.assert_allclose(got.mean, mean, rtol=1e-6, atol=1e-9)
     shared = np.einsum("scq,sdq->scd", got.loading, got.loading)
     own = np.stack([np.diag(d) for d in np.asarray(got.own)])

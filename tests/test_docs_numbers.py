@@ -15,6 +15,7 @@ import json
 import math
 import re
 
+import numpy as np
 import pytest
 from scipy import stats
 
@@ -24,20 +25,111 @@ from tests.helpers import REPO
 # holds). Quantities: a key of summary.json ("tis_70deg", "pi_brdf0"), "tis_85deg" (bands.json)
 # or "tis_70deg_fold" / "tis_85deg_fold" (`brdf-infer tis --run DIR --fold`).
 BUNDLED_RUN_QUOTES = [
-    ("docs/paper.md", "| 6.65 (95 %: 5.95–7.42) |", "tis_70deg", "median lo95 hi95"),
-    ("docs/paper.md", "| 8.83 (7.79–10.02) |", "tis_85deg", "median lo95 hi95"),
-    ("docs/paper.md", "| 6.55 (5.86–7.31) |", "tis_70deg_fold", "median lo95 hi95"),
-    ("docs/paper.md", "| 8.45 (7.48–9.58) |", "tis_85deg_fold", "median lo95 hi95"),
-    ("docs/posterior.md", "TIS(70°) =\n6.65 % (95 %: 5.95–7.42 %", "tis_70deg", "median lo95 hi95"),
-    ("docs/posterior.md", "π·BRDF0 = 4.05 % (3.61–4.56 %)", "pi_brdf0", "median lo95 hi95"),
-    ("docs/instruments.md", "| 6.65 % (5.95–7.42 %) |", "tis_70deg", "median lo95 hi95"),
-    ("docs/instruments.md", "| 4.05 % (3.61–4.56 %) |", "pi_brdf0", "median lo95 hi95"),
-    ("docs/instruments.md", "TIS(70°) 6.65 % (5.95–7.42 %)", "tis_70deg", "median lo95 hi95"),
-    ("docs/error-model.md", "| `lya`, TIS(70°) | 5.95–7.42 % |", "tis_70deg", "lo95 hi95"),
-    ("docs/error-model.md", "| `lya`, π·BRDF0 | 3.61–4.56 % |", "pi_brdf0", "lo95 hi95"),
-    # the sensitivity study's baseline (`brdf-infer sensitivity lya`) is the same posterior
-    ("docs/error-model.md", "| **6.62 (5.95–7.43)** |", "tis_70deg", "median lo95 hi95"),
-    ("docs/error-model.md", "| **4.04 (3.59–4.55)** |", "pi_brdf0", "median lo95 hi95"),
+    ("docs/paper.md", "| 6.65 (95 %: 5.40–8.48) |", "tis_70deg", "median lo95 hi95"),
+    ("docs/paper.md", "| 8.82 (6.77–12.13) |", "tis_85deg", "median lo95 hi95"),
+    ("docs/paper.md", "| 6.55 (5.35–8.34) |", "tis_70deg_fold", "median lo95 hi95"),
+    ("docs/paper.md", "| 8.45 (6.54–11.49) |", "tis_85deg_fold", "median lo95 hi95"),
+    ("docs/posterior.md", "TIS(70°) =\n6.65 % (95 %: 5.40–8.48 %", "tis_70deg", "median lo95 hi95"),
+    ("docs/posterior.md", "π·BRDF0 = 4.05 % (3.59–4.57 %)", "pi_brdf0", "median lo95 hi95"),
+    ("docs/instruments.md", "| 6.65 % (5.40–8.48 %) |", "tis_70deg", "median lo95 hi95"),
+    ("docs/instruments.md", "| 4.05 % (3.59–4.57 %) |", "pi_brdf0", "median lo95 hi95"),
+    ("docs/instruments.md", "1.29 × 10⁻² (1.14–1.45 × 10⁻²)", "brdf0", "median lo95 hi95"),
+    ("docs/instruments.md", "TIS(70°) 6.65 % (5.40–8.48 %)", "tis_70deg", "median lo95 hi95"),
+    ("docs/error-model.md", "| TIS(70°) 5.40–8.48 % without", "tis_70deg", "lo95 hi95"),
+    ("docs/error-model.md", "| π·BRDF0 3.59–4.57 % without", "pi_brdf0", "lo95 hi95"),
+    # the sensitivity study's default posterior (4 × 500 draws)
+    ("docs/error-model.md", "| **6.69 (5.44–8.52)** |", "tis_70deg", "median lo95 hi95"),
+    ("docs/error-model.md", "| **4.04 (3.62–4.55)** |", "pi_brdf0", "median lo95 hi95"),
+]
+# Quotes of the bundled run's width record (file, text [%], quantity, assumption, kind): the
+# 95 % interval under the alternative (``interval``), the variance share it carries
+# (``share``), or a row of docs/error-model.md's tables (``row``: "| words | lo–hi | share ± e %
+# or none | Δelpd ± se |"); see :func:`width_quote_errors`
+WIDTH_QUOTES = [
+    ("docs/paper.md", "| 5.95–7.46 |", "tis_70deg", "out_of_plane", "interval"),
+    ("docs/posterior.md", "it is 5.95–7.46 %", "tis_70deg", "out_of_plane", "interval"),
+    ("docs/run.md", "carries 76 % of TIS(70°)'s", "tis_70deg", "out_of_plane", "share"),
+    ("docs/run.md", "carries 61 % of π·BRDF0's", "pi_brdf0", "calibration", "share"),
+    *[
+        ("docs/error-model.md", row, quantity, assumption, "row")
+        for quantity, rows in {
+            "tis_70deg": {
+                "out_of_plane": "| 5.95–7.46 | 76 ± 1 % | +0.0 ± 0.0 |",
+                "calibration": "| 5.75–8.44 | 24 ± 5 % | −0.3 ± 0.7 |",
+                "sample_effect": "| 5.40–8.38 | 6 ± 6 % | −1.0 ± 1.2 |",
+                "angle_errors": "| 5.30–8.65 | none (wider) | −11.5 ± 3.3 |",
+            },
+            "pi_brdf0": {
+                "out_of_plane": "| 3.59–4.57 | 0 ± 0 % | +0.0 ± 0.0 |",
+                "calibration": "| 3.90–4.51 | 61 ± 3 % | −0.3 ± 0.7 |",
+                "sample_effect": "| 3.58–4.53 | 5 ± 4 % | −1.0 ± 1.2 |",
+                "angle_errors": "| 3.36–4.60 | none (wider) | −11.5 ± 3.3 |",
+            },
+        }.items()
+        for assumption, row in rows.items()
+    ],
+]
+ROW = re.compile(
+    r"\| (?P<lo95>[\d.]+)–(?P<hi95>[\d.]+) \| (?:(?P<share>\d+) ± \d+ %|none \(wider\)) \| "
+    r"(?P<elpd>[+−-][\d.]+) ± (?P<se>[\d.]+) \|"
+)
+
+
+def width_quote_errors(summary: dict, quotes=WIDTH_QUOTES) -> list[str]:
+    """What of ``quotes`` (:data:`WIDTH_QUOTES`) disagrees with a run's ``summary``: each
+    interval end and variance share within the two runs' Monte Carlo errors (the record's
+    own, taken alike for both runs) plus half the last printed unit; a Δelpd, whose Monte Carlo
+    error the record does not hold, within half its standard error (what the docs read from it:
+    the data's judgement against that se); "none (wider)" where the record has no share. A
+    quote of an alternative the run could not compute (a refit left out) is passed over."""
+    errors = []
+    for path, text, quantity, assumption, kind in quotes:
+        if text not in (REPO / path).read_text():
+            errors.append(f"{path} no longer quotes {text!r}: update WIDTH_QUOTES")
+            continue
+        entry = summary["width"][quantity]["without"][assumption]
+        if entry["method"] == "unreliable":
+            continue
+        found = {}
+        if kind == "interval":
+            found = dict(zip(("lo95", "hi95"), re.findall(r"\d+\.\d+", text), strict=True))
+        elif kind == "share":
+            found = {"share": re.search(r"(\d+) %", text)[1]}
+        else:
+            found = {k: v for k, v in ROW.search(text).groupdict().items() if k != "se"}
+            if found["share"] is None:
+                found.pop("share")
+                if entry["variance_share"] is not None:
+                    errors.append(f"{path}: {assumption} of {quantity} has a share now")
+        for key, number in found.items():
+            value = float(number.replace("−", "-"))
+            if key == "elpd":
+                run, tolerance = entry["delta_elpd"], 0.5 * entry["delta_elpd_se"] + 0.05
+            elif key == "share":
+                run = 100 * entry["variance_share"]
+                mcse = 100 * entry["variance_share_mcse"]
+                tolerance = two_runs_tolerance(mcse, mcse, printed_unit(number))
+            else:
+                run, mcse = 100 * entry[key], 100 * entry[f"mcse_{key}"]
+                tolerance = two_runs_tolerance(mcse, mcse, printed_unit(number))
+            if abs(value - run) > tolerance:
+                errors.append(
+                    f"{path}: {quantity} {assumption} {key} {number} against {run:.3f} from a "
+                    f"run (tolerance {tolerance:.3f})"
+                )
+    return errors
+
+
+# Quotes of where the article's values fall (file, text, quantity): the posterior quantile
+# of the reference value, within its Monte Carlo error (as above)
+REFERENCE_QUOTES = [
+    ("docs/posterior.md", "(posterior quantile 0.10)", "tis_70deg"),
+    ("docs/posterior.md", "(0.028 ± 0.003)", "pi_brdf0"),
+    ("docs/run.md", "π·BRDF0 3.6 % (posterior quantile 0.028 ± 0.003)", "pi_brdf0"),
+    ("docs/run.md", "BRDF0 0.0114 sr⁻¹\n(posterior quantile 0.023 ± 0.003)", "brdf0"),
+    ("docs/instruments.md", "| 0.10 (inside) |", "tis_70deg"),
+    ("docs/instruments.md", "| 0.028 ± 0.003 (at the edge) |", "pi_brdf0"),
+    ("docs/instruments.md", "| 0.023 ± 0.003 (at the edge) |", "brdf0"),
 ]
 # The docs' quotes of the speed report: (file, pattern with the groups cold and warm [s]),
 # the report's row (command), one quote per line of the table
@@ -81,6 +173,13 @@ def bundled_quantities(nuts_run):
         "tis_70deg": summary["tis_70deg"],
         "pi_brdf0": summary["pi_brdf0"],
         "tis_85deg": {key: bands["tis"][key][at] for key in ("median", "lo95", "hi95")},
+        "brdf0": dict(
+            zip(
+                ("median", "lo95", "hi95"),
+                np.quantile(np.asarray(nuts_run.idata.posterior["brdf0"]), [0.5, 0.025, 0.975]),
+                strict=True,
+            )
+        ),
     }
     return quantities
 
@@ -206,3 +305,83 @@ def test_the_docs_quote_the_cost_curve_as_the_benchmark_measured_it(path, rows, 
         f"{seconds} s for {rows} rows" in quoted
         or f"{seconds} s for the full grid of {rows} rows" in quoted
     )
+
+
+def two_runs_tolerance(mcse_a: float, mcse_b: float, digit: float) -> float:
+    """How far two runs' Monte Carlo estimates may lie apart: 4 standard errors of their
+    difference (each run's own), plus half the docs' last printed unit ``digit``."""
+    return 4 * math.hypot(mcse_a, mcse_b) + 0.5 * digit
+
+
+def printed_unit(number: str) -> float:
+    """The unit of the last printed digit of ``number`` ("0.028" → 0.001, "76" → 1)."""
+    return 10.0 ** -len(number.split(".")[1]) if "." in number else 1.0
+
+
+def test_the_docs_quote_of_what_carries_the_width_agrees_with_a_run(nuts_run):
+    """Every quote of the width record against the suite's run (its refits left out: the
+    angle errors' rows are checked against the main job's run, tests/test_cli.py)."""
+    assert not width_quote_errors(nuts_run.summary)
+
+
+@pytest.mark.parametrize(
+    ("path", "text", "quantity"), REFERENCE_QUOTES, ids=[f"{p}:{q}" for p, _, q in REFERENCE_QUOTES]
+)
+def test_the_docs_quote_of_where_the_article_lies_agrees_with_a_run(nuts_run, path, text, quantity):
+    content = (REPO / path).read_text()
+    assert text in content, f"{path} no longer quotes {text!r}: update REFERENCE_QUOTES"
+    entry = next(r for r in nuts_run.summary["reference"] if r["quantity"] == quantity)
+    quoted = re.search(r"(?:quantile |\(|\| )(0\.\d+)", text)[1]
+    tolerance = two_runs_tolerance(
+        entry["quantile_mcse"], entry["quantile_mcse"], printed_unit(quoted)
+    )
+    assert abs(float(quoted) - entry["posterior_quantile"]) <= tolerance, (
+        path,
+        quoted,
+        entry["posterior_quantile"],
+        tolerance,
+    )
+
+
+def test_the_docs_quote_of_the_prior_predictive_interval_agrees_with_a_run(nuts_run):
+    """docs/error-model.md's TIS(70°) prior predictive interval (4000 draws of the physical
+    prior): each end within 4 Monte Carlo standard errors of two runs' difference, on ln TIS,
+    where a normal quantile's error is √(q(1 − q)/n)/φ(z_q) × sd: the sd of ln TIS from the
+    interval itself (sd ≈ 1.7, so the ends may differ by about ×1.5)."""
+    quote = "is 0.071–60 % for\nTIS(70°)"
+    assert quote in (REPO / "docs" / "error-model.md").read_text()
+    prior = nuts_run.summary["width"]["tis_70deg"]["prior"]
+    low, high = (float(n) / 100 for n in re.findall(r"\d+(?:\.\d+)?", quote)[:2])
+    sd = math.log(high / low) / (2 * stats.norm.ppf(0.975))
+    error = math.sqrt(0.025 * 0.975 / 4000) / stats.norm.pdf(stats.norm.ppf(0.975)) * sd
+    for quoted, run in ((low, prior["lo95"]), (high, prior["hi95"])):
+        assert abs(math.log(quoted / run)) <= 4 * math.sqrt(2) * error, (quoted, run)
+
+
+def _table_rows(text: str, heading: str) -> list[list[str]]:
+    """The cells of every row of the first table after ``heading`` in ``text``."""
+    section = text[text.index(heading) :]
+    lines = section.splitlines()
+    start = next(i for i, line in enumerate(lines) if line.startswith("|"))
+    rows = []
+    for line in lines[start + 2 :]:
+        if not line.startswith("|"):
+            break
+        rows.append([cell.strip() for cell in line.strip("|").split("|")])
+    return rows
+
+
+def test_the_docs_quote_the_model_check_power_as_the_benchmark_measured_it():
+    """docs/benchmarks.md's table of the model check's power is the report's "any check"
+    column, row by row (the fault "none" quoted as "none (false alarms)")."""
+    heading = "## Model check: power"
+    report = (REPO / "reports" / "benchmarks.md").read_text()
+    header = next(
+        line for line in report[report.index(heading) :].splitlines() if line.startswith("| fault")
+    )
+    column = [cell.strip() for cell in header.strip("|").split("|")].index("any check")
+    measured = {(row[0], row[1]): row[column] for row in _table_rows(report, heading)}
+    quoted = _table_rows((REPO / "docs" / "benchmarks.md").read_text(), heading)
+    assert len(quoted) == len(measured)
+    for fault, size, share in quoted:
+        assert measured[(fault.removesuffix(" (false alarms)"), size)] == share, (fault, size)

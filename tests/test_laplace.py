@@ -2,6 +2,7 @@
 implementations, its posterior against NUTS's on the bundled data, and planted faults (a
 proposal too narrow, a second mode) that it must refuse, the run then falling back to NUTS."""
 
+import jax.numpy as jnp
 import numpy as np
 import pytest
 from scipy import stats
@@ -91,12 +92,15 @@ def disagreements(run, reference) -> list[str]:
 
 
 def headline_tis(posterior) -> np.ndarray:
-    """TIS(70°) of every draw, (chains, draws), Eq. (9) as the runs' bands."""
+    """TIS(70°) of every draw, (chains, draws), Eq. (9) as the runs' bands: each draw at its
+    own out-of-plane width Δφ (Eq. (8) scaled by the draw's ``dphi_scale``)."""
     from brdf_infer.model import tis
+    from brdf_infer.model.params import PAPER_CONSTANTS, with_dphi_scale
 
     params = draws_params(posterior)
     shape = (posterior.sizes["chain"], posterior.sizes["draw"])
-    return np.asarray(tis(np.array([70.0]), params))[:, 0].reshape(shape)
+    widths = with_dphi_scale(PAPER_CONSTANTS, jnp.asarray(posterior["dphi_scale"].values.ravel()))
+    return np.asarray(tis(np.array([70.0]), params, False, widths))[:, 0].reshape(shape)
 
 
 def test_laplace_on_the_bundled_data_agrees_with_nuts(laplace_run, nuts_run):

@@ -246,12 +246,16 @@ def predictive(run: DesignRun, candidates: Candidates, draws: dict) -> RowPredic
         repeatability = jnp.full(count, fixed)
     calibration = float(layout.calibration_sd)
     angles = errors.angles_on
+    # each draw's own out-of-plane width (Eq. 8 scaled): an out-of-plane candidate's
+    # prediction then carries Δφ's uncertainty, and its outcome can teach it
+    dphi_scale = jnp.asarray(draws.get(DPHI_NAME, np.ones(count)))
 
-    def one(p, tau, rep, res, factor, diagonal):
-        mean = predicted_log_reflectance(p, rows, fold, constants)
+    def one(p, scale, tau, rep, res, factor, diagonal):
+        widths = with_dphi_scale(constants, scale)
+        mean = predicted_log_reflectance(p, rows, fold, widths)
         if angles:
             g_rot, g_cam = angle_slopes(
-                lambda ti, ts: log_reflectance_at(ti, ts, p, fold, constants, rows),
+                lambda ti, ts: log_reflectance_at(ti, ts, p, fold, widths, rows),
                 rows.theta_i_deg,
                 rows.theta_s_deg,
                 layout.theta_s_per_rotation,
@@ -277,7 +281,9 @@ def predictive(run: DesignRun, candidates: Candidates, draws: dict) -> RowPredic
         return given._replace(loading=shared)
 
     program = jax.jit(jax.vmap(one))
-    return program(params, sample_sd, repeatability, residual, parts.factor, parts.diagonal)
+    return program(
+        params, dphi_scale, sample_sd, repeatability, residual, parts.factor, parts.diagonal
+    )
 
 
 @dataclass(frozen=True)
