@@ -49,6 +49,7 @@ from brdf_infer.fit.quality import (
     detectable_trends,
     repeatability_check,
     trend_regressors,
+    trend_repeatability,
     trend_tests,
 )
 from brdf_infer.model import FAMILY_NAMES, ModelFamily, family
@@ -423,8 +424,12 @@ def _residual_trends(
     the rows whitened by the error model's covariance as least squares knows it: each row's
     σ² of the last solve, with its rotation term shared by the rows of one rotation setting,
     and the scene's calibration factors (the sample effect, whose scale the scene does not
-    state, left out); ``absorbed``: a basis of what the fitted parameters absorb, in
-    σ-weighted residuals."""
+    state, left out); a learned repeatability is learned again for the tests, beside the
+    trend columns and with the calibration factors in the covariance
+    (:func:`~brdf_infer.fit.quality.trend_repeatability`: the fit's own σ_rep, learned with
+    the rows independent, holds the calibration scatter and the misfit too, and the F-test's
+    free scale would shrink the stated calibration with it); ``absorbed``: a basis of what the
+    fitted parameters absorb, in σ-weighted residuals."""
     if reweight.dof <= 0:
         return {
             "residual_trend_p_values": {},
@@ -450,6 +455,10 @@ def _residual_trends(
         measurements.theta_i_deg, measurements.theta_s_deg, np.asarray(measurements.series)
     )
     base = sigma[:, None] * absorbed
+    if reweight.learned:  # the repeatability re-learned beside the trends and calibration
+        without = noise._replace(diagonal=noise.diagonal - reweight.repeatability**2)
+        own = trend_repeatability(residuals, without, base, regressors)
+        noise = without._replace(diagonal=without.diagonal + own**2)
     tests = trend_tests(residuals, noise, base, regressors)
     return {
         "residual_trend_p_values": {name: p for name, (_, p) in tests.items()},
