@@ -104,7 +104,9 @@ def test_a_padded_scene_samples_its_own_posterior_and_reports_its_own_rows(
     assert idata.log_likelihood["obs"].shape[-1] == 23
     assert idata.observed_data["obs"].shape == (23,)
     assert idata.posterior_predictive["obs"].shape[-1] == 23
-    assert summary["diagnostics"]["divergences"] == 0
+    # a divergence is chance here: over sampler seeds 0–39 (these settings, c's rows alone)
+    # 2 runs had one each, 38 none; three or more in a run, P ≈ 2e-5, is a padding fault
+    assert summary["diagnostics"]["divergences"] <= 2
     single = tmp_path / "single"
     code, _, err = run_cli(
         "posterior", str(folder / "c.toml"), *SMALL, "--out", str(single), capsys=capsys
@@ -324,7 +326,9 @@ def test_vmapped_batch_of_one_scene(tmp_path, capsys):
     )
     assert code == 0, err
     entry = json.loads((out / "batch.json").read_text())["scenes"][0]
-    assert entry["error"] is None and entry["divergences"] == 0
+    # the bundled rows at these settings: no divergence in 40 runs (seeds 0–39); ≤ 2 as for
+    # the padded scene above, so that one by chance on another CPU does not fail it
+    assert entry["error"] is None and entry["divergences"] <= 2
     assert np.isfinite(entry["r_hat_max"]) and len(entry["tis"]["median"]) > 0
 
 
