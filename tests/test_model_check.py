@@ -188,6 +188,18 @@ def test_the_residual_trend_check_stays_quiet_on_its_own_noise_and_finds_a_serie
     assert not entry["ok"] and "series" in entry["words"], entry
 
 
+def test_draws_that_are_all_alike_leave_the_residual_trend_check_nothing_absorbed(
+    lya, lya_point
+):
+    """A posterior whose draws are one point (a degenerate resampling) moves no parameter, so
+    no parameter absorbs a trend: the check tests every trend column instead of failing to
+    stack an empty basis."""
+    model, sites, _, _ = lya_point
+    alike = {name: np.repeat(values[:, :1], 2, axis=1) for name, values in sites.items()}
+    entry = residual_trend_check(model, lya[1], alike)
+    assert entry["name"] == "residual_trend" and np.isfinite(entry["p"])
+
+
 def test_the_detectable_trend_is_detected_at_the_stated_power(lya):
     """The noncentral-F sizes (:func:`detectable_trends`) against a simulation: a θs trend and
     a series offset of the stated size in noise of the stated covariance are found by the

@@ -179,7 +179,11 @@ def residual_trend_check(
     free = [name for name in member.parameters if np.ptp(np.asarray(sites[name])) > 0]
     physical = {name: jnp.asarray(point[name][0]) for name in member.parameters}
     columns = jax.jacfwd(lambda p: log_reflectance(member, p, data.rows))(physical)
-    absorbed = np.column_stack([np.asarray(columns[name], float) for name in free])
+    absorbed = (  # draws all alike (no parameter moved): nothing is absorbed
+        np.column_stack([np.asarray(columns[name], float) for name in free])
+        if free
+        else np.zeros((len(residuals), 0))
+    )
     groups = row_groups(measurements)
     tests = trend_tests(residuals, noise, absorbed, groups) if groups else {}
     worst = worst_trend(tests)
