@@ -188,9 +188,7 @@ def test_the_residual_trend_check_stays_quiet_on_its_own_noise_and_finds_a_serie
     assert not entry["ok"] and "series" in entry["words"], entry
 
 
-def test_draws_that_are_all_alike_leave_the_residual_trend_check_nothing_absorbed(
-    lya, lya_point
-):
+def test_draws_that_are_all_alike_leave_the_residual_trend_check_nothing_absorbed(lya, lya_point):
     """A posterior whose draws are one point (a degenerate resampling) moves no parameter, so
     no parameter absorbs a trend: the check tests every trend column instead of failing to
     stack an empty basis."""
