@@ -198,11 +198,10 @@ def test_draws_that_are_all_alike_leave_the_residual_trend_check_nothing_absorbe
     assert entry["name"] == "residual_trend" and np.isfinite(entry["p"])
 
 
-def test_the_detectable_trend_is_detected_at_the_stated_power(lya):
-    """The noncentral-F sizes (:func:`detectable_trends`) against a simulation: a θs trend and
-    a series offset of the stated size in noise of the stated covariance are found by the
-    joint F-test in 80 % of 400 data sets (binomial sd 2 %); a third of the size rarely."""
-    measurements = lya[1]
+def _trend_setting(measurements):
+    """The trend tests' setting on ``measurements``' layout: the row count, the trend
+    columns, a noise of each row's σ (5–15 %) and a 6.5 % calibration factor per series, and
+    what a fitted level and θi slope absorb."""
     rows = len(measurements)
     groups = trend_regressors(
         measurements.theta_i_deg, measurements.theta_s_deg, np.asarray(measurements.series)
@@ -211,6 +210,14 @@ def test_the_detectable_trend_is_detected_at_the_stated_power(lya):
     calibration = np.stack([np.asarray(measurements.series) == s for s in ("I", "II")], 1)
     noise = LowRankNoise(sigma**2, 0.065 * calibration.astype(float))
     absorbed = np.column_stack([np.ones(rows), measurements.theta_i_deg])
+    return rows, groups, noise, absorbed
+
+
+def test_the_detectable_trend_is_detected_at_the_stated_power(lya):
+    """The noncentral-F sizes (:func:`detectable_trends`) against a simulation: a θs trend and
+    a series offset of the stated size in noise of the stated covariance are found by the
+    joint F-test in 80 % of 400 data sets (binomial sd 2 %); a third of the size rarely."""
+    rows, groups, noise, absorbed = _trend_setting(lya[1])
     sizes = detectable_trends(noise, absorbed, groups)
     rng = np.random.default_rng(3)
     factor = np.linalg.cholesky(noise.dense())
@@ -241,16 +248,8 @@ def test_a_learned_repeatability_keeps_the_trend_test_at_its_stated_power(lya, p
     98 % here; in the model-check power benchmark, series II × 1.3, a third of the stated
     size there, was found in 50 % of the replicates before the repeatability was learned
     beside the trends)."""
-    measurements = lya[1]
-    rows = len(measurements)
-    groups = trend_regressors(
-        measurements.theta_i_deg, measurements.theta_s_deg, np.asarray(measurements.series)
-    )
-    sigma = np.linspace(0.05, 0.15, rows)
-    calibration = np.stack([np.asarray(measurements.series) == s for s in ("I", "II")], 1)
-    without = LowRankNoise(sigma**2, 0.065 * calibration.astype(float))
-    truth = LowRankNoise(sigma**2 + 0.03**2, without.factor)
-    absorbed = np.column_stack([np.ones(rows), measurements.theta_i_deg])
+    rows, groups, without, absorbed = _trend_setting(lya[1])
+    truth = without._replace(diagonal=without.diagonal + 0.03**2)
     size = detectable_trends(truth, absorbed, groups)["series"]
     rng = np.random.default_rng(11)
     factor = np.linalg.cholesky(truth.dense())
