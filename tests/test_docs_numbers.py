@@ -37,6 +37,20 @@ BUNDLED_RUN_QUOTES = [
     ("docs/instruments.md", "TIS(70°) 6.65 % (5.40–8.48 %)", "tis_70deg", "median lo95 hi95"),
     ("docs/error-model.md", "| TIS(70°) 5.40–8.48 % without", "tis_70deg", "lo95 hi95"),
     ("docs/error-model.md", "| π·BRDF0 3.59–4.57 % without", "pi_brdf0", "lo95 hi95"),
+    # which coating (docs/posterior.md, "Which coating"): a new part, the samples measured, τ
+    (
+        "docs/posterior.md",
+        "a new part's is\n6.65 % (5.36–8.60 %)",
+        "new_part_tis_70deg",
+        "median lo95 hi95",
+    ),
+    (
+        "docs/posterior.md",
+        "on average,\n6.65 % (5.43–8.47 %)",
+        "measured_tis_70deg",
+        "median lo95 hi95",
+    ),
+    ("docs/posterior.md", "τ learned: 3.0 %, 95 %\n0.19–9.2 %", "sample_sd", "median lo95 hi95"),
     # the sensitivity study's default posterior (4 × 500 draws)
     ("docs/error-model.md", "| **6.69 (5.44–8.52)** |", "tis_70deg", "median lo95 hi95"),
     ("docs/error-model.md", "| **4.04 (3.62–4.55)** |", "pi_brdf0", "median lo95 hi95"),
@@ -173,6 +187,9 @@ def bundled_quantities(nuts_run):
         "tis_70deg": summary["tis_70deg"],
         "pi_brdf0": summary["pi_brdf0"],
         "tis_85deg": {key: bands["tis"][key][at] for key in ("median", "lo95", "hi95")},
+        "new_part_tis_70deg": summary["targets"]["new_part"]["tis_70deg"],
+        "measured_tis_70deg": summary["targets"]["measured"]["tis_70deg"],
+        "sample_sd": summary["noise"]["sample_sd"],
         "brdf0": dict(
             zip(
                 ("median", "lo95", "hi95"),
@@ -385,3 +402,89 @@ def test_the_docs_quote_the_model_check_power_as_the_benchmark_measured_it():
     assert len(quoted) == len(measured)
     for fault, size, share in quoted:
         assert measured[(fault.removesuffix(" (false alarms)"), size)] == share, (fault, size)
+
+
+# docs/posterior.md's table of series II alone (row label → where summary.json holds it)
+SERIES_II_TABLE = "| series II alone, TIS(70°), 95 %"
+SERIES_II_ROWS = {
+    "the sample measured": ("targets", "measured"),
+    "the coating": ("targets", "coating"),
+    "a new part": ("targets", "new_part"),
+    "without the sample effect": ("width", "sample_effect"),
+}
+
+
+def _series_ii_scene(folder, errors: str):
+    """Series II of the bundled rows as a scene of its own (one sample) with ``errors``."""
+    import numpy as np
+
+    from brdf_infer.scene import load_scene
+
+    lya = load_scene("lya")
+    rows = lya.load_measurements()
+    lines = ["series,sample,theta_i_deg,theta_s_deg,reflectance,reflectance_err"]
+    for k in np.flatnonzero(rows.series == "II"):
+        lines.append(
+            f"II,{rows.sample[k]},{rows.theta_i_deg[k]:g},{rows.theta_s_deg[k]:g},"
+            f"{rows.reflectance[k]:.6e},{rows.reflectance_err[k]:.6e}"
+        )
+    (folder / "rows.csv").write_text("\n".join(lines) + "\n")
+    geometry = lya.series["II"]
+    (folder / "scene.toml").write_text(
+        'name = "series-ii"\nmeasurements = "rows.csv"\n[series.II]\n'
+        f"aperture_diameter_mm = {geometry.aperture_diameter_mm}\n"
+        f"aperture_distance_mm = {geometry.aperture_distance_mm}\n[errors]\n{errors}\n"
+    )
+    return load_scene(folder / "scene.toml")
+
+
+@pytest.mark.slow
+def test_the_docs_table_of_series_ii_alone_agrees_with_its_runs(nuts_run, tmp_path):
+    """Each interval of the table (τ's default prior; τ from a run of the bundled scene, here
+    the suite's) against a run of the same scene: the one-sample answer for the sample
+    measured, the coating, a new part, without the sample effect, and τ, each end within
+    :func:`two_runs_tolerance` of its Monte Carlo error (from the run's own draws: the
+    one-sample posterior's upper tail is long, which an error from the interval's width as a
+    normal's understates)."""
+    import numpy as np
+
+    from brdf_infer.posterior import load_run_target, run_posterior
+    from tests.helpers import mcmc_quantile_se
+
+    text = (REPO / "docs" / "posterior.md").read_text()
+    rows = {row[0]: row[1:] for row in _table_rows(text, SERIES_II_TABLE)}
+    errors = ("", f'sample_sd_from = "{nuts_run.out}"')
+    levels = {"median": 0.5, "lo95": 0.025, "hi95": 0.975}
+    for column, lines in enumerate(errors):
+        folder = tmp_path / f"column{column}"
+        folder.mkdir()
+        scene = _series_ii_scene(folder, lines)
+        run = run_posterior(  # the docs' settings: `posterior --draws 4000`
+            scene, scene.load_measurements(), out=folder / "run", progress=False, draws=4000
+        )
+        chains = run.summary["settings"]["chains"]
+        found, draws = {}, {}
+        for label, (record, key) in SERIES_II_ROWS.items():
+            if record == "targets":
+                found[label] = run.summary["targets"][key]["tis_70deg"]
+                member, physical, _ = load_run_target(folder / "run", key)
+                values = np.exp(np.asarray(member.log_tis_draws(np.array([70.0]), physical)))
+                draws[label] = values.reshape(chains, -1)
+            else:
+                found[label] = run.summary["width"]["tis_70deg"]["without"][key]
+        found["τ (median and 95 %)"] = run.summary["noise"]["sample_sd"]
+        draws["τ (median and 95 %)"] = np.asarray(run.idata.posterior["sample_sd"])
+        for label, entry in found.items():
+            numbers = re.findall(r"\d+\.\d+", rows[label][column])
+            keys = ("median", "lo95", "hi95") if len(numbers) == 3 else ("lo95", "hi95")
+            for key, number in zip(keys, numbers, strict=True):
+                if label in draws:
+                    error = 100 * mcmc_quantile_se(draws[label], levels[key])
+                else:
+                    error = 100 * entry[f"mcse_{key}"]
+                tolerance = two_runs_tolerance(error, error, printed_unit(number))
+                run_value = 100 * entry[key]
+                assert abs(float(number) - run_value) <= tolerance, (
+                    f"series II column {column}, {label} {key}: {number} % against "
+                    f"{run_value:.3f} % (tolerance {tolerance:.3f})"
+                )

@@ -221,16 +221,20 @@ def print_posterior_summary(summary: PosteriorSummary, out: Path) -> None:
     print(table(headers, rows))
     tis70 = summary["tis_70deg"]
     if tis70 is not None:
+        from brdf_infer.verdict import TARGET_WORDS
+
         print(
             f"TIS(70 deg) = {100 * tis70['median']:.2f} % "
             f"(95 %: {100 * tis70['lo95']:.2f}-{100 * tis70['hi95']:.2f} %; "
-            f"{'with' if summary['fold'] else 'without'} Eq. (10) folding)"
+            f"{'with' if summary['fold'] else 'without'} Eq. (10) folding) for "
+            f"{TARGET_WORDS[summary.get('target', 'coating')]}"
         )
         width = summary.get("width", {}).get("tis_70deg")
         if width and width.get("without"):
             from brdf_infer.verdict import width_words
 
-            print(f"  what carries its width: {width_words(width, 'tis_70deg')}")
+            whose = "its" if summary.get("target", "coating") == "coating" else "the coating's"
+            print(f"  what carries {whose} width: {width_words(width, 'tis_70deg')}")
     seconds = summary["seconds"]
     print(
         f"posterior: {seconds['total']:.1f} s from building the model to its files, "

@@ -118,11 +118,51 @@ def folded_family(member, requested: bool | None):
         raise BadInputError(f"a run of {member.name} has no Eq. (10)", field="--fold") from None
 
 
-def add_fold_switches(parser: argparse.ArgumentParser) -> None:
-    """A run's two Eq. (10) switches, each overriding its scene key: ``--fold``/``--no-fold``
+def add_target_argument(parser: argparse.ArgumentParser, default: str) -> None:
+    """``--target``: which coating the bands and products describe (``default`` says in the
+    help what leaving it out means)."""
+    from brdf_infer.scene import TARGETS
+
+    parser.add_argument(
+        "--target",
+        choices=TARGETS,
+        default=None,
+        help="the sample(s) measured, the coating (their population mean) or a new, "
+        f"unmeasured part (default: {default})",
+    )
+
+
+def add_run_target_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--target`` and ``--sample`` of a command that reads a posterior run (``--run``)."""
+    add_target_argument(parser, "a run: the target of its bands")
+    parser.add_argument(
+        "--sample", help="with --target measured: one measured sample, by name (a run)"
+    )
+
+
+def checked_run_target(args: argparse.Namespace) -> None:
+    """``--target``/``--sample`` name what a posterior run describes: they need ``--run``,
+    and ``--sample`` the measured target.
+
+    Raises:
+        BadInputError: either without ``--run``, or ``--sample`` with another target.
+    """
+    if args.run is None and (args.target is not None or args.sample is not None):
+        field = "--target" if args.target is not None else "--sample"
+        raise BadInputError("a target is of a posterior run (--run)", field=field)
+    if args.sample is not None and args.target not in (None, "measured"):
+        raise BadInputError("a sample is named for the measured target only", field="--sample")
+
+
+def add_product_switches(parser: argparse.ArgumentParser) -> None:
+    """A run's switches of what its products describe, each overriding its scene key:
+    ``--target`` (``[outputs] target``), and the two Eq. (10) switches, ``--fold``/``--no-fold``
     the products' (``[outputs] fold``: bands, TIS, maps, exports) and
     ``--likelihood-fold``/``--no-likelihood-fold`` what the instrument measured (``[model]
     fold``: the likelihood's predictions)."""
+    add_target_argument(
+        parser, "the scene's [outputs] target; auto: measured for one sample, else coating"
+    )
     add_fold_arguments(parser, "the scene's [outputs] fold, false unless set")
     group = parser.add_mutually_exclusive_group()
     group.add_argument(
@@ -143,10 +183,13 @@ def add_fold_switches(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def with_fold_switches(scene, args: argparse.Namespace):
-    """``scene`` with :func:`add_fold_switches`' options applied (None leaves a key as is)."""
+def with_product_switches(scene, args: argparse.Namespace):
+    """``scene`` with :func:`add_product_switches`' options applied (None leaves a key as
+    is)."""
     from dataclasses import replace
 
+    if args.target is not None:
+        scene = replace(scene, outputs=replace(scene.outputs, target=args.target))
     if args.fold is not None:
         scene = replace(scene, outputs=replace(scene.outputs, fold=args.fold))
     if args.likelihood_fold is not None:

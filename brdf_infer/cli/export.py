@@ -12,7 +12,14 @@ import numpy as np
 
 from brdf_infer._internal.outlock import writing
 from brdf_infer.cli._common import emit_json, progress, scene_command_parser, table
-from brdf_infer.cli._options import add_fold_arguments, angles, chosen_fold, folded_family
+from brdf_infer.cli._options import (
+    add_fold_arguments,
+    add_run_target_arguments,
+    angles,
+    checked_run_target,
+    chosen_fold,
+    folded_family,
+)
 from brdf_infer.cli._outdir import check_output_dir
 from brdf_infer.errors import BadInputError
 
@@ -54,6 +61,7 @@ def add_parser(commands) -> argparse.ArgumentParser:
         "each block the draw at its own angle's quantile)",
     )
     add_fold_arguments(parser, "the scene's or the run's [model] fold, false unless set")
+    add_run_target_arguments(parser)
     parser.add_argument("--force", action="store_true", help="overwrite existing output files")
     parser.set_defaults(handler=main)
     return parser
@@ -82,13 +90,13 @@ def _checked_options(args: argparse.Namespace) -> None:
 def _source(args: argparse.Namespace, scene_name: str):
     from brdf_infer.model import strumik_family
     from brdf_infer.model.params import params_to_dict, resolve_params
-    from brdf_infer.posterior import load_run_family
+    from brdf_infer.posterior import load_run_target
     from brdf_infer.report.export import Source
     from brdf_infer.runs.folder import RunFolder
 
     if args.run is not None:
         run = Path(args.run)
-        member, physical = load_run_family(run)
+        member, physical, target = load_run_target(run, args.target, args.sample)
         member = folded_family(member, args.fold)
         with contextlib.suppress(OSError, ValueError, KeyError):
             scene_name = RunFolder(run).summary()["scene"]
@@ -98,7 +106,8 @@ def _source(args: argparse.Namespace, scene_name: str):
                 f"{member.name} (export it with --format zemax-bsdf)",
                 field="--format",
             )
-        return Source(str(run), member, physical, True, scene_name)
+        which = f"sample {args.sample}" if args.sample else target
+        return Source(str(run), member, physical, True, scene_name, which)
     from brdf_infer.scene import load_scene
 
     scene = load_scene(scene_name)
@@ -121,6 +130,7 @@ def main(args: argparse.Namespace) -> int:
         _check_file(Path(args.check), args.json)
         return 0
     _checked_options(args)
+    checked_run_target(args)
     theta_i = (
         DEFAULT_THETA_I_DEG
         if args.theta_i is None

@@ -19,13 +19,13 @@ from brdf_infer.cli._common import (
     scene_command_parser,
 )
 from brdf_infer.cli._options import (
-    add_fold_switches,
     add_force_argument,
     add_instrument_argument,
     add_model_argument,
+    add_product_switches,
     forced,
     scene_and_measurements,
-    with_fold_switches,
+    with_product_switches,
 )
 from brdf_infer.scene.settings import (
     EMCEE_BURN_IN,
@@ -81,7 +81,7 @@ def add_parser(commands) -> argparse.ArgumentParser:
     add_model_argument(parser)
     add_instrument_argument(parser)
     add_force_argument(parser)
-    add_fold_switches(parser)
+    add_product_switches(parser)
     add_strict_model_argument(parser)
     parser.set_defaults(handler=main)
     return parser
@@ -94,7 +94,7 @@ def main(args: argparse.Namespace) -> int:
     check_family_name(args.model)
     settings = record_from_args(PosteriorSettings, args)  # every setting checked first
     scene, measurements = scene_and_measurements(args.scene, args.instrument, args.force)
-    scene = with_fold_switches(scene, args)
+    scene = with_product_switches(scene, args)
     passed = forced(scene, measurements)
     out = claimed_output_dir(
         args,

@@ -23,13 +23,13 @@ from brdf_infer.cli._options import (
     ERROR_MODEL_REGISTRY,
     FAMILY_REGISTRY,
     INSTRUMENT_REGISTRY,
-    add_fold_switches,
     add_force_argument,
     add_instrument_argument,
     add_model_argument,
+    add_product_switches,
     scene_and_measurements,
-    with_fold_switches,
     with_known_names,
+    with_product_switches,
 )
 from brdf_infer.errors import BadInputError
 from brdf_infer.scene.settings import AUTO_MODEL, RunSettings, check_family_name
@@ -84,7 +84,7 @@ def add_parser(commands) -> argparse.ArgumentParser:
     add_model_argument(parser, auto=True)
     add_instrument_argument(parser)
     add_force_argument(parser)
-    add_fold_switches(parser)
+    add_product_switches(parser)
     add_strict_model_argument(parser)
     parser.set_defaults(handler=main)
     return parser
@@ -99,7 +99,7 @@ def main(args: argparse.Namespace) -> int:
         check_family_name(args.model)
     # the input checks stop here, the fits' in run(); run() reports what it is forced past
     scene, measurements = scene_and_measurements(args.scene, args.instrument, args.force)
-    scene = with_fold_switches(scene, args)
+    scene = with_product_switches(scene, args)
     settings = record_from_args(RunSettings, args, studies=requested_studies(args, scene))
     out = claimed_output_dir(args, args.out or Path("reports") / scene.name, "run")
     result = run(

@@ -10,7 +10,14 @@ from pathlib import Path
 import numpy as np
 
 from brdf_infer.cli._common import add_json_argument, command_parser, emit_json, progress, table
-from brdf_infer.cli._options import add_fold_arguments, angles, chosen_fold, folded_family
+from brdf_infer.cli._options import (
+    add_fold_arguments,
+    add_run_target_arguments,
+    angles,
+    checked_run_target,
+    chosen_fold,
+    folded_family,
+)
 
 
 def add_parser(commands) -> argparse.ArgumentParser:
@@ -25,6 +32,7 @@ def add_parser(commands) -> argparse.ArgumentParser:
         "--theta-i", type=float, nargs="+", default=[0, 5, 30, 50, 70], help="θi [deg]"
     )
     add_fold_arguments(parser, "a parameter set: no folding; a run: its scene's [outputs] fold")
+    add_run_target_arguments(parser)
     add_json_argument(parser)
     parser.set_defaults(handler=main)
     return parser
@@ -36,6 +44,7 @@ def main(args: argparse.Namespace) -> int:
     from brdf_infer.model.params import resolve_params
 
     theta_i = angles(args.theta_i, "--theta-i", 0.0, 90.0, upper_open=True)
+    checked_run_target(args)
     if args.run is not None:
         _tis_from_run(args, theta_i)
         return 0
@@ -95,10 +104,10 @@ def _tis_warnings(theta_i: np.ndarray, values: np.ndarray) -> list[str]:
 
 def _tis_from_run(args: argparse.Namespace, theta_i: np.ndarray) -> None:
     from brdf_infer.model import fold_statement
-    from brdf_infer.posterior import FAMILY_TIS_DRAWS, load_run_family, tis_band
+    from brdf_infer.posterior import FAMILY_TIS_DRAWS, QUESTIONS, load_run_target, tis_band
 
     start = time.perf_counter()
-    member, physical = load_run_family(Path(args.run))
+    member, physical, target = load_run_target(Path(args.run), args.target, args.sample)
     member = folded_family(member, args.fold)
     fold = member.fold
     # the run's own draws: a lobe family's band over the same evenly spaced draws as the run's
@@ -108,9 +117,20 @@ def _tis_from_run(args: argparse.Namespace, theta_i: np.ndarray) -> None:
     what = "Eq. (9)" if member.paper_parameters else member.name
     seconds = time.perf_counter() - start
     if args.json:
-        emit_json({**band, "model": member.name, "fold": fold, "seconds": seconds})
+        emit_json(
+            {
+                **band,
+                "model": member.name,
+                "fold": fold,
+                "target": target,
+                "sample": args.sample,
+                "seconds": seconds,
+            }
+        )
         return
     print(f"TIS, {what}, over {band['draws']} posterior draws of {args.run}")
+    which = f"sample {args.sample}" if args.sample else target
+    print(f"target: {which}, {QUESTIONS[target]}")
     print(fold_statement(fold))
     rows = [
         [f"{t:g}", *(f"{100 * band[k][i]:.3f}" for k in ("median", "lo68", "hi68", "lo95", "hi95"))]

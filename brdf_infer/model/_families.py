@@ -27,6 +27,7 @@ from pathlib import Path
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from brdf_infer._internal.units import DEG
 from brdf_infer.errors import BadInputError
@@ -87,6 +88,10 @@ class ModelFamily:
             (Eq. 9 batched); None: :attr:`tis` per draw, a quadrature, over thinned draws.
         dphi_free: ``strumik2024`` with Eq. (8)'s out-of-plane width a parameter,
             ``dphi_scale`` (the factor on the constants' Δφ), among its physical parameters.
+        amplitudes: the parameters the BRDF is proportional to, jointly: multiplying each of
+            them by f multiplies the BRDF everywhere, and so the TIS, by f (Eq. 7's BRDF0;
+            ABg's A; a sum of lobes: every lobe's). A sample effect u (a shift of every ln R
+            of one physical sample) is the factor f = eᵘ (:meth:`scaled`).
     """
 
     name: str
@@ -104,6 +109,16 @@ class ModelFamily:
     log_brdf_inplane: Callable[..., jnp.ndarray] | None = None
     log_tis_draws: Callable[..., jnp.ndarray] | None = None
     dphi_free: bool = False
+    amplitudes: tuple[str, ...] = ()
+
+    def scaled(self, physical: Physical, log_factor) -> Physical:
+        """The parameters of the BRDF ``physical`` times e^``log_factor`` (broadcast against
+        the draws): every :attr:`amplitudes` parameter times that factor, the rest unchanged."""
+        factor = np.exp(np.asarray(log_factor, float))
+        return {
+            name: np.asarray(values) * factor if name in self.amplitudes else values
+            for name, values in physical.items()
+        }
 
     @property
     def paper_parameters(self) -> bool:
@@ -287,6 +302,7 @@ FAMILIES: dict[str, ModelFamily] = {
         _abg_tis,
         exact_tis=False,
         title="abg",
+        amplitudes=("A",),
     ),
     "harvey-shack": ModelFamily(
         "harvey-shack",
@@ -298,6 +314,7 @@ FAMILIES: dict[str, ModelFamily] = {
         _hs_tis,
         exact_tis=False,
         title="harvey-shack",
+        amplitudes=("b0",),
     ),
     "lambertian": ModelFamily(
         "lambertian",
@@ -309,6 +326,7 @@ FAMILIES: dict[str, ModelFamily] = {
         _lambert_tis,
         exact_tis=True,
         title="lambertian",
+        amplitudes=("tis",),
     ),
     "lambertian+abg": ModelFamily(
         "lambertian+abg",
@@ -320,6 +338,7 @@ FAMILIES: dict[str, ModelFamily] = {
         _lambert_abg_tis,
         exact_tis=False,
         title="lambertian+abg",
+        amplitudes=("rho_d", "A"),
     ),
 }
 REFERENCE_FAMILY = "strumik2024"
@@ -381,6 +400,7 @@ def strumik_family(
         log_brdf_inplane=lambda ti, ts, p: log_brdf_inplane(ti, ts, as_params(p), fold, constants),
         log_tis_draws=lambda theta, p: log_tis(theta, as_params(p), fold, constants_of(p)),
         dphi_free=dphi_free,
+        amplitudes=("brdf0",),
     )
 
 

@@ -119,8 +119,17 @@ class ErrorSettings:
         camera_deg: 1σ of the camera position of one row [deg].
         propagate_angles: include the angle errors.
         angle_method: ``linearised`` (first order through ln R) or ``latent``.
-        hierarchical: include the per-sample random effect (learned scale).
-        sample_sd_prior: scale of the half-normal prior of τ [-].
+        hierarchical: include the per-sample random effect.
+        sample_sd: ``"learned"`` (τ sampled under its prior) or a stated τ [ln R], which
+            needs ``sample_sd_source``.
+        sample_sd_source: where a stated τ comes from, in words (kept with the run).
+        sample_sd_prior: scale of the half-normal prior of τ [-] (the default prior).
+        sample_sd_from: a posterior run of the same coating whose τ posterior is this
+            scene's prior of τ (the folder as the scene names it); its draws are summarised
+            as ``sample_sd_log_kde``.
+        sample_sd_log_kde: (centres, widths) of the kernels of a Gaussian kernel density of
+            ln τ over that run's draws: τ's prior is that density carried to τ (None: the
+            half-normal of ``sample_sd_prior``).
         repeatability: ``"learned"`` or a fixed 1σ of the per-row repeatability [-].
         repeatability_sd_prior: scale of the half-normal prior of σ_rep [-].
         expected_repeatability: the per-row scatter beyond each row's own σ and the angle
@@ -142,21 +151,43 @@ class ErrorSettings:
     propagate_angles: bool = True
     angle_method: str = "linearised"
     hierarchical: bool = True
+    sample_sd: float | str = LEARNED
+    sample_sd_source: str = ""
     sample_sd_prior: float = 0.2
+    sample_sd_from: str = ""
+    sample_sd_log_kde: tuple[tuple[float, ...], tuple[float, ...]] | None = None
     repeatability: float | str = LEARNED
     repeatability_sd_prior: float = 0.1
     expected_repeatability: float = 0.065
 
-    def noise_prior_scale(self, site: str) -> float:
-        """The half-normal prior scale of a learned noise scale (``sample_sd`` or
-        ``repeatability``) [ln R]."""
-        return {"sample_sd": self.sample_sd_prior, "repeatability": self.repeatability_sd_prior}[
-            site
-        ]
-
     @property
     def learns_repeatability(self) -> bool:
         return self.repeatability == LEARNED
+
+    @property
+    def sample_effects(self) -> bool:
+        """The rows carry a per-sample effect u_j (``generative`` with ``hierarchical``)."""
+        return self.model == "generative" and self.hierarchical
+
+    @property
+    def learns_sample_sd(self) -> bool:
+        """τ is a sampled site (a sample effect, τ not stated)."""
+        return self.sample_effects and self.sample_sd == LEARNED
+
+    @property
+    def stated_sample_sd(self) -> float:
+        """τ where it is not sampled: the stated value, or 0 without sample effects."""
+        return float(self.sample_sd) if self.sample_effects and not self.learns_sample_sd else 0.0
+
+    def sample_sd_prior_words(self) -> str:
+        """τ's prior in words (the learned record's "set by its prior (…)")."""
+        if self.sample_sd_log_kde is None:
+            return f"half-normal, scale {self.sample_sd_prior:g}"
+        low, median, high = np.exp(np.quantile(self.sample_sd_log_kde[0], [0.025, 0.5, 0.975]))
+        return (
+            f"run {self.sample_sd_from}'s τ posterior: median {median:.3g}, "
+            f"95 % {low:.3g}–{high:.3g}"
+        )
 
     @property
     def calibration_sd(self) -> float:

@@ -63,6 +63,13 @@ from brdf_infer.posterior._run import (
     run_scene,
 )
 from brdf_infer.posterior._samplers import Draws, nuts_draws, run_emcee, run_nuts
+from brdf_infer.posterior._targets import (
+    QUESTIONS,
+    chosen_target,
+    load_run_target,
+    sample_effect_draws,
+    target_log_factor,
+)
 from brdf_infer.runs.records import (
     Band,
     Bands,
@@ -82,6 +89,7 @@ __all__ = [
     "NOISE_SITES",
     "POSTERIOR_FILE",
     "QUANTILES",
+    "QUESTIONS",
     "SUMMARY_FILE",
     "THRESHOLDS",
     "Band",
@@ -104,6 +112,7 @@ __all__ = [
     "build_posterior_model",
     "chain_keys",
     "cholesky",
+    "chosen_target",
     "complete_run",
     "diagnostics",
     "draws_params",
@@ -114,6 +123,7 @@ __all__ = [
     "inference_data",
     "interval95",
     "load_run_family",
+    "load_run_target",
     "loo_terms",
     "model_check",
     "model_name",
@@ -136,9 +146,11 @@ __all__ = [
     "run_nuts",
     "run_posterior",
     "run_scene",
+    "sample_effect_draws",
     "solve_lower",
     "solve_upper_transposed",
     "stack_data",
+    "target_log_factor",
     "tis_band",
     "without_row",
 ]

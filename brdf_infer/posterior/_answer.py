@@ -2,7 +2,9 @@
 
 * ``"width"``: what carries each headline interval's width (:mod:`._width`);
 * ``"learned"``: which parameters and noise scales the data taught (:mod:`._learned`);
-* ``"reference"``: where the scene's published values fall in the posterior (:mod:`._reference`).
+* ``"reference"``: where the scene's published values fall in the posterior (:mod:`._reference`);
+* ``"targets"``: the headline for the sample(s) measured, the coating and a new part, and
+  where τ comes from (:mod:`._targets`). The width record describes the coating's interval.
 
 All three compare the posterior with the physical prior, drawn once here
 (:data:`PRIOR_DRAWS` draws, :func:`brdf_infer.posterior.prior_draws`). The width record's
@@ -28,6 +30,12 @@ from brdf_infer.posterior._prior import prior_draws
 from brdf_infer.posterior._reference import reference_record
 from brdf_infer.posterior._results import loo_sites
 from brdf_infer.posterior._samplers import Draws, run_nuts
+from brdf_infer.posterior._targets import (
+    NEW_PART_EFFECT,
+    SAMPLE_EFFECT,
+    targets_record,
+    tau_source,
+)
 from brdf_infer.posterior._width import (
     HEADLINE_TIS_DEG,
     Refitted,
@@ -137,8 +145,10 @@ def answer_records(
     refit: bool = True,
     run_elpd_i: np.ndarray | None = None,
     reff: float = 1.0,
+    effects: dict[str, np.ndarray] | None = None,
+    target: str = "coating",
 ) -> dict[str, Any]:
-    """``{"width", "learned", "reference"}`` of a run (module docstring).
+    """``{"width", "learned", "reference", "targets"}`` of a run (module docstring).
 
     Args:
         model: the run's posterior model.
@@ -151,6 +161,11 @@ def answer_records(
             unreliable).
         run_elpd_i: the run's PSIS-LOO terms (of the draws :func:`loo_sites` keeps), which
             the alternatives' are compared with (None: no Δelpd).
+        reff: the draws' relative efficiency (PSIS).
+        effects: each draw's sample effects, ``{"sample_effect": (draws, samples),
+            "new_part_effect": (draws,)}`` (:mod:`._targets`; None: none, every target the
+            coating's).
+        target: the target the run's bands describe.
     """
     angles = headline_angles(model, band_angles) if with_tis else []
     member = model.products  # the headline describes the products' BRDF ([outputs] fold)
@@ -158,10 +173,15 @@ def answer_records(
     prior = prior_draws(model, PRIOR_DRAWS, seed + 11, frozenset(draws.sites))
     resample = _refit(draws, seed, angles) if refit else None
     sites, thinning = loo_sites(draws.sites, len(measurements))
+    count = next(iter(physical.values())).size
+    if effects is None:
+        samples = len(model.sample_names)
+        effects = {SAMPLE_EFFECT: np.zeros((count, samples)), NEW_PART_EFFECT: np.zeros(count)}
     if member.log_tis_draws is None and angles:  # a 2-D quadrature a TIS: the bands' draws
         sites, thinning = thinned_sites(sites, FAMILY_TIS_DRAWS), 2.0
         physical = evenly_spaced(physical, FAMILY_TIS_DRAWS)  # the TIS band's own draws
         prior = evenly_spaced(prior, FAMILY_TIS_DRAWS)
+        effects = evenly_spaced(effects, FAMILY_TIS_DRAWS)
     headline = headline_draws(member, physical, angles)
     prior_headline = headline_draws(member, draws_physical(prior, member), angles)
     read = headline
@@ -180,9 +200,19 @@ def answer_records(
         run_elpd_i,
         reff,
     )
+    learned = learned_record(model, sites, prior, log_likelihood)
+    targets = targets_record(
+        headline,
+        effects[SAMPLE_EFFECT],
+        effects[NEW_PART_EFFECT],
+        model.sample_names,
+        target,
+        tau_source(model, learned),
+    )
     return {
         "width": width,
-        "learned": learned_record(model, sites, prior, log_likelihood),
+        "learned": learned,
+        "targets": targets,
         "reference": reference_record(
             model.scene.references,
             {**headline, **physical},

@@ -55,7 +55,7 @@ def coordinates(model: PosteriorModel) -> dict[str, str]:
     else:
         names = {c.site: c.site for c in member.coordinates}
     errors = model.errors
-    if errors.model == "generative" and errors.hierarchical:
+    if errors.learns_sample_sd:
         names["sample_sd"] = "sample_sd"
     if errors.model == "generative" and errors.learns_repeatability:
         names["repeatability"] = "repeatability"
@@ -64,8 +64,10 @@ def coordinates(model: PosteriorModel) -> dict[str, str]:
 
 def prior_scale_words(model: PosteriorModel, name: str) -> str:
     """The scale of ``name``'s prior in words (for "set by its prior (scale …)")."""
-    if name in ("sample_sd", "repeatability"):
-        return f"half-normal, scale {model.errors.noise_prior_scale(name):g}"
+    if name == "sample_sd":
+        return model.errors.sample_sd_prior_words()
+    if name == "repeatability":
+        return f"half-normal, scale {model.errors.repeatability_sd_prior:g}"
     prior = model.scene.priors.get(name) if model.family.paper_parameters else None
     if prior is None:
         return "the family's default prior"

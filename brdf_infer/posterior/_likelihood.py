@@ -119,18 +119,32 @@ class LowRankNormal(dist.Distribution):
         )
 
 
-def sample_noise_scales(errors: ErrorSettings, noise: NoiseLayout) -> NoiseScales:
-    """The noise scales of the error model: NumPyro sites where they are learned; the
-    calibration's from the data (``noise``)."""
-    generative = errors.model == "generative"
-    if generative and errors.hierarchical:
-        sample_sd = numpyro.sample("sample_sd", dist.HalfNormal(errors.sample_sd_prior))
-    else:
-        sample_sd = jnp.zeros(())
-    if generative and errors.learns_repeatability:
-        repeatability = numpyro.sample(
-            "repeatability", dist.HalfNormal(errors.repeatability_sd_prior)
+def noise_prior(errors: ErrorSettings, site: str) -> dist.Distribution:
+    """The prior of a learned noise scale: ``repeatability`` half-normal; τ (``sample_sd``)
+    half-normal, or another run's τ posterior (``errors.sample_sd_from``): the Gaussian kernel
+    density of its ln τ (``errors.sample_sd_log_kde``) carried to τ."""
+    if site == "repeatability":
+        return dist.HalfNormal(errors.repeatability_sd_prior)
+    if errors.sample_sd_log_kde is not None:
+        centres, widths = (jnp.asarray(v, float) for v in errors.sample_sd_log_kde)
+        kernels = dist.MixtureSameFamily(
+            dist.Categorical(probs=jnp.full(centres.shape, 1.0 / centres.size)),
+            dist.Normal(centres, widths),
         )
+        return dist.TransformedDistribution(kernels, dist.transforms.ExpTransform())
+    return dist.HalfNormal(errors.sample_sd_prior)
+
+
+def sample_noise_scales(errors: ErrorSettings, noise: NoiseLayout) -> NoiseScales:
+    """The noise scales of the error model: NumPyro sites where they are learned (stated ones
+    as stated); the calibration's from the data (``noise``)."""
+    generative = errors.model == "generative"
+    if errors.learns_sample_sd:
+        sample_sd = numpyro.sample("sample_sd", noise_prior(errors, "sample_sd"))
+    else:
+        sample_sd = jnp.asarray(errors.stated_sample_sd)
+    if generative and errors.learns_repeatability:
+        repeatability = numpyro.sample("repeatability", noise_prior(errors, "repeatability"))
     else:
         repeatability = jnp.asarray(0.0 if not generative else float(errors.repeatability))
     return NoiseScales(
@@ -149,7 +163,7 @@ def drawn_noise_scales(
     calibration's from the data, ``noise``)."""
     generative = errors.model == "generative"
     return NoiseScales(
-        sample_sd=jnp.asarray(sites.get("sample_sd", jnp.zeros(count))),
+        sample_sd=jnp.asarray(sites.get("sample_sd", jnp.full(count, errors.stated_sample_sd))),
         repeatability=jnp.asarray(
             sites["repeatability"]
             if "repeatability" in sites

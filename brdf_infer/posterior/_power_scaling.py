@@ -30,14 +30,13 @@ import warnings
 import jax
 import jax.numpy as jnp
 import numpy as np
-import numpyro.distributions as dist
 
 from brdf_infer._internal import arviz as az
 from brdf_infer.model import energy_log_factor
 from brdf_infer.model.coordinates import ANGLE_SCALE_DEG
 from brdf_infer.model.params import DPHI_NAME, PARAM_NAMES, Params
 from brdf_infer.posterior._blocks import factor_columns, over_draw_blocks
-from brdf_infer.posterior._likelihood import disjoint_columns
+from brdf_infer.posterior._likelihood import disjoint_columns, noise_prior
 from brdf_infer.posterior._lowrank import log_density_over_scales, low_rank_normal_log_density
 from brdf_infer.posterior._model import (
     DPHI_SITE,
@@ -87,8 +86,7 @@ def _log_prior(model: PosteriorModel, names: list[str], sites: dict) -> jnp.ndar
     errors = model.errors
     for site in ("sample_sd", "repeatability"):
         if site in sites:
-            prior_scale = errors.noise_prior_scale(site)
-            total += dist.HalfNormal(prior_scale).log_prob(sites[site])
+            total += noise_prior(errors, site).log_prob(sites[site])
     return total
 
 

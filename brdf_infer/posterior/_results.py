@@ -344,7 +344,7 @@ def write_results(
     folder.write_summary(summary)
 
 
-def _run_posterior_group(run: Path):
+def run_posterior_group(run: Path):
     require_complete(run)
     path = RunFolder(run).posterior_file
     if not path.is_file():
@@ -372,7 +372,7 @@ def load_run_family(
     Raises:
         BadInputError: no readable posterior.nc in ``run``, or one without its parameters.
     """
-    posterior, path = _run_posterior_group(run)
+    posterior, path = run_posterior_group(run)
     return family_draws(posterior, fold, path)
 
 

@@ -56,6 +56,15 @@ from brdf_infer.posterior._samplers import (
     run_emcee,
     run_nuts,
 )
+from brdf_infer.posterior._targets import (
+    NEW_PART_EFFECT,
+    SAMPLE_EFFECT,
+    chosen_target,
+    new_part_draws,
+    sample_effect_draws,
+    store_effects,
+    target_log_factor,
+)
 from brdf_infer.runs.folder import CHECKPOINT_FILE
 from brdf_infer.runs.records import Bands, PosteriorSummary
 from brdf_infer.scene import Scene, check_instrument, load_scene, parse_scene
@@ -457,7 +466,8 @@ def complete_run(
     :func:`run_posterior`'s), the summary and its verdict (:mod:`brdf_infer.verdict`;
     ``forced``: the plausibility checks the run went past), written to ``out`` (when given)
     atomically; ``started``: the ``time.perf_counter()`` at the start of the run (its total
-    time)."""
+    time). The bands, ``tis_70deg`` and ``pi_brdf0`` describe the scene's ``[outputs]
+    target`` (:mod:`._targets`); ``targets`` holds all three."""
     scene, name = model.scene, model.family.name
     clock = _StepClock()
     log_lik, cdf, thinning = _loo_terms(model, result, len(measurements))
@@ -468,7 +478,16 @@ def complete_run(
     member = model.family
     physical = draws_physical(result.sites, member)
     with_tis = scene.outputs.tis and member.hemispheric(scene.model.out_of_plane)
-    bands = posterior_bands(model.products, physical, theta_i_band, with_tis)
+    target = chosen_target(scene.outputs.target, len(model.sample_names))
+    effects = {
+        SAMPLE_EFFECT: sample_effect_draws(model, result.sites, seed + 23),
+        NEW_PART_EFFECT: new_part_draws(model, result.sites, seed + 29),
+    }
+    store_effects(idata, effects, model.sample_names, target)
+    factor = target_log_factor(target, *effects.values(), model.sample_names)
+    products = model.products  # the same parameters as the family's
+    bands = posterior_bands(products, products.scaled(physical, factor), theta_i_band, with_tis)
+    bands["target"] = target
     parameters = member.parameters
     # the scene's [priors] (which may fix a parameter) are Eq. (7)'s; other families use their own
     fixed = tuple(n for n in PARAM_NAMES if n not in scene.free_parameters)
@@ -486,7 +505,17 @@ def complete_run(
     exact = exact_loo_rows(model, result, loo.pareto_k, loo.limit) if refit else {}
     clock.lap("loo")
     answer = answer_records(
-        model, measurements, result, theta_i_band, with_tis, seed, refit, loo.elpd_i, reff
+        model,
+        measurements,
+        result,
+        theta_i_band,
+        with_tis,
+        seed,
+        refit,
+        loo.elpd_i,
+        reff,
+        effects,
+        target,
     )
     clock.lap("answer")
     predictive = predictive_checks(loo, measurements, exact)
@@ -512,6 +541,7 @@ def complete_run(
         "diagnostics": checks,
         "predictive": predictive,
         "model_check": model_check([*fit_checks, *own_checks], scene, measurements),
+        "target": target,  # what tis_70deg, pi_brdf0 and the bands describe
         "tis_70deg": _tis_70(bands),
         "pi_brdf0": pi_brdf0,
         **answer,  # width, learned, reference

@@ -55,14 +55,14 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy.special import erf, logsumexp
-from scipy.stats import norm
+from scipy.special import logsumexp
 
 from brdf_infer._internal import arviz as az
 from brdf_infer.model import ModelFamily, energy_log_factor
 from brdf_infer.model.params import DPHI_NAME, Params
 from brdf_infer.model.priors import Prior
 from brdf_infer.posterior._bands import draws_physical, tis_curve_draws
+from brdf_infer.posterior._likelihood import noise_prior
 from brdf_infer.posterior._loo import psis_loo
 from brdf_infer.posterior._model import DPHI_SITE, PosteriorModel, build_posterior_model
 from brdf_infer.posterior._power_scaling import log_likelihood_draws, sample_scale_likelihoods
@@ -118,7 +118,7 @@ ASSUMPTIONS = (
     Assumption(
         "sample_effect",
         "the sample-to-sample effect",
-        lambda scene: scene.errors.model == "generative" and scene.errors.hierarchical,
+        lambda scene: scene.errors.sample_effects,
         _errors(hierarchical=False),
         ("sample_sd",),
     ),
@@ -245,9 +245,9 @@ def smoothed_log_weights(log_ratio: np.ndarray) -> tuple[np.ndarray, float]:
 
 def _scale_marginal(model: PosteriorModel, flat: dict[str, np.ndarray], site: str) -> np.ndarray:
     """ln ∫ p(y | θ, τ) p(τ) dτ of every draw's θ, τ the learned scale ``site`` under its
-    half-normal prior (module docstring)."""
+    prior (module docstring)."""
     draws = np.asarray(flat[site], float)
-    prior_scale = model.errors.noise_prior_scale(site)
+    prior = noise_prior(model.errors, site)
     # the draws' central 99 %, widened fourfold each side: the extreme draws of a half-normal
     # reach 1e-6, and nodes spread to there left too few where the mass is (0.008 in ln)
     low = np.log(max(np.quantile(draws, 0.005), 1e-12) / 4.0)
@@ -255,8 +255,8 @@ def _scale_marginal(model: PosteriorModel, flat: dict[str, np.ndarray], site: st
     x, w = np.polynomial.legendre.leggauss(TAU_NODES)
     log_tau = low + 0.5 * (high - low) * (x + 1.0)
     tau = np.exp(log_tau)
-    # p(τ) dτ = p(τ) τ d ln τ, half-normal p(τ)
-    log_prior = np.log(2.0) + norm.logpdf(tau, 0.0, prior_scale) + log_tau
+    # p(τ) dτ = p(τ) τ d ln τ
+    log_prior = np.asarray(prior.log_prob(tau)) + log_tau
     log_step = np.log(0.5 * (high - low) * w)
     floor = np.exp(low)
     scales = np.append(tau, floor)
@@ -268,9 +268,9 @@ def _scale_marginal(model: PosteriorModel, flat: dict[str, np.ndarray], site: st
         )
     inside = logsumexp(terms[:, :-1].T + (log_prior + log_step)[:, None], axis=0)
     # τ in (0, e^low): the likelihood there is its value at e^low to O(τ²) (τ enters the
-    # covariance as τ²), times the prior's mass below, erf(e^low / (s √2))
+    # covariance as τ²), times the prior's mass below, its CDF at e^low
     below = terms[:, -1]
-    return np.logaddexp(inside, below + np.log(erf(floor / (prior_scale * np.sqrt(2.0)))))
+    return np.logaddexp(inside, below + np.log(float(prior.cdf(floor))))
 
 
 def variant_model(
@@ -504,7 +504,8 @@ def _alternative(model, variant, assumption, flat, base, headline, refit) -> _Fo
     unreliable where none is allowed)."""
     unused = set(assumption.unused_sites)
     used = {k: v for k, v in flat.items() if k not in unused}
-    proposal = _scale_marginal(model, flat, "sample_sd") if "sample_sd" in unused else base
+    marginal = "sample_sd" in unused and "sample_sd" in flat  # else τ is stated: no integral
+    proposal = _scale_marginal(model, flat, "sample_sd") if marginal else base
     log_ratio = log_likelihood_draws(variant, used) - proposal
     log_ratio = log_ratio + _prior_ratio(model, variant, flat)
     log_weights, k_hat = smoothed_log_weights(log_ratio)

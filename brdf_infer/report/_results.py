@@ -8,7 +8,7 @@ import numpy as np
 from brdf_infer.model import ModelFamily, fold_statement
 from brdf_infer.report import _html
 from brdf_infer.runs.records import Bands, PosteriorSummary
-from brdf_infer.verdict import quantity_words, value_words, width_words
+from brdf_infer.verdict import TARGET_WORDS, quantity_words, value_words, width_words
 
 
 def _percent_interval(low: float, high: float) -> str:
@@ -85,17 +85,48 @@ def result_box(summary: PosteriorSummary, bands: Bands, angles, member: ModelFam
                 width_words(widths.get("pi_brdf0"), "pi_brdf0"),
             ]
         )
+    target = summary.get("target", "coating")
+    carrier = (
+        "what carries the width" if target == "coating" else "what carries the coating's width"
+    )
     return (
         '<div class="result"><h2>Result'
         + ("" if member.paper_parameters else f" ({_html.escape(member.name)})")
-        + "</h2>"
-        + _html.table(
-            ["quantity", "posterior median", "95 % credible interval", "what carries the width"],
-            rows,
-        )
+        + f" for {_html.escape(TARGET_WORDS[target])}</h2>"
+        + _html.table(["quantity", "posterior median", "95 % credible interval", carrier], rows)
+        + targets_table(summary.get("targets"))
         + (WIDTH_LEGEND if widths else "")
         + reference_lines(summary)
         + "</div>"
+    )
+
+
+def targets_table(targets: dict | None) -> str:
+    """The three answers side by side (:mod:`brdf_infer.posterior._targets`): each target's
+    question, TIS(70°) and π·BRDF0 with 95 % intervals, the one the bands describe first, and
+    where τ comes from; empty for a run written before the record."""
+    if not targets:
+        return ""
+    chosen = targets["chosen"]
+    order = [chosen, *(name for name in TARGET_WORDS if name != chosen)]
+    rows = []
+    for name in order:
+        entry = targets[name]
+        cells = [
+            "–"
+            if entry.get(quantity) is None
+            else f"{100 * entry[quantity]['median']:.2f} % "
+            f"({_percent_interval(entry[quantity]['lo95'], entry[quantity]['hi95'])})"
+            for quantity in ("tis_70deg", "pi_brdf0")
+        ]
+        label = TARGET_WORDS[name] + (" (the bands)" if name == chosen else "")
+        rows.append([label, entry["question"], *cells])
+    return (
+        "<h3>Which coating: the sample(s) measured, the coating, a new part</h3>"
+        + _html.table(["for", "answers", "TIS(70°), 95 %", "π·BRDF0, 95 %"], rows)
+        + f"<p class='fold'>τ, the spread between parts: {_html.escape(targets['tau_source'])}. "
+        "A new part's band draws a new sample effect with τ: the one for a flight part's "
+        "budget.</p>"
     )
 
 

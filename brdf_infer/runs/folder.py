@@ -35,6 +35,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from brdf_infer._internal.atomic import atomic_write_bytes, atomic_write_json
 from brdf_infer._internal.outlock import ADDING_LOCK_FILE, LOCK_FILE
 from brdf_infer.errors import BadInputError
@@ -191,6 +193,28 @@ class RunFolder:
             BadInputError: absent, unreadable or no JSON object.
         """
         return self._record(BANDS_FILE)
+
+    def posterior_draws(self, name: str) -> np.ndarray:
+        """Every draw of the posterior variable ``name`` (chains and draws flattened), read
+        from ``posterior.nc`` without the rest of the run.
+
+        Raises:
+            BadInputError: no readable posterior.nc, or none with ``name``.
+        """
+        import xarray
+
+        path = self.posterior_file
+        if not path.is_file():
+            raise BadInputError(
+                "no posterior.nc here (run 'brdf-infer posterior' first)", file=self.path
+            )
+        try:
+            with xarray.open_dataset(path, group="posterior") as posterior:
+                if name not in posterior:
+                    raise BadInputError(f"its posterior has no {name}", file=path)
+                return np.asarray(posterior[name]).reshape(-1)
+        except (OSError, ValueError) as error:
+            raise BadInputError(f"cannot read: {error}", file=path) from None
 
     def _record(self, name: str) -> Any:
         content = self.read_json(name)

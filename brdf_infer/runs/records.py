@@ -165,6 +165,25 @@ class Reference(TypedDict):
     inside95: bool  # place == "inside"
 
 
+class TargetAnswer(TypedDict):
+    """One target's headline (:mod:`brdf_infer.posterior._targets`): 95 % intervals."""
+
+    question: str  # the question it answers, in words
+    tis_70deg: Interval | None  # None: the run has no TIS
+    pi_brdf0: Interval | None  # None: not Eq. (7)'s family
+    per_sample: NotRequired[dict[str, dict[str, Interval | None]]]  # measured, several samples
+
+
+class Targets(TypedDict):
+    """Which coating the answer is for: the sample(s) measured, the coating, a new part."""
+
+    chosen: str  # the target of the bands, tis_70deg and pi_brdf0
+    tau_source: str  # where the spread between parts, τ, comes from
+    measured: TargetAnswer
+    coating: TargetAnswer
+    new_part: TargetAnswer
+
+
 class Dropout(TypedDict):
     """One dropout of a .BSDF table, left out (:mod:`brdf_infer.tables.screening`)."""
 
@@ -205,12 +224,14 @@ class PosteriorSummary(TypedDict):
     diagnostics: Diagnostics
     predictive: Predictive
     model_check: NotRequired[ModelCheck]  # whether the data reject the model
+    target: NotRequired[str]  # what tis_70deg, pi_brdf0 and the bands describe (older: coating)
     tis_70deg: Band | None  # TIS at θi = 70° (None: the run has no TIS band)
     pi_brdf0: Interval | None  # π·BRDF0, Eq. (7)'s near-normal TIS (None: other families)
     # tis_<θi>deg at the band angles, 70° and the references' angles; pi_brdf0
     width: NotRequired[dict[str, Width]]
     learned: NotRequired[dict[str, Learned]]  # per free parameter and learned noise scale
     reference: NotRequired[list[Reference]]  # the scene's [reference] values
+    targets: NotRequired[Targets]  # the three targets' headline and τ's source
     seconds: dict[str, Any]  # sampling, compile, after_sampling (per step), total
     forced: list[str]  # plausibility checks the run went past
     # a .BSDF table's zero cells and dropouts left out, by rule (brdf_infer.tables.screening)
@@ -247,6 +268,7 @@ class Bands(TypedDict):
     """``bands.json``: the bands of a run."""
 
     fold: bool
+    target: NotRequired[str]  # measured, coating or new_part (older runs: coating)
     brdf_inplane: BrdfBand
     tis: NotRequired[TisBand]  # where the run makes a TIS
     pi_brdf0: NotRequired[Band]  # Eq. (7)'s family

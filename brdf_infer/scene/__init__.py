@@ -27,8 +27,12 @@ Schema (keys other than these are errors; defaults in brackets)::
     camera_deg = 1.0                         # [angle_deg] camera position per row [deg]
     propagate_angles = true                  # [true] angle errors through ln R
     angle_method = "linearised"              # ["linearised"] or "latent" (errors in variables)
-    hierarchical = true                      # [true] per-sample random effect, learned scale
-    sample_sd_prior = 0.2                    # [0.2] half-normal scale of its prior [ln R]
+    hierarchical = true                      # [true] per-sample random effect u_j ~ N(0, τ)
+    sample_sd = "learned"                    # ["learned"] or a stated τ [ln R], which needs
+    sample_sd_source = "..."                 #   its source in words
+    sample_sd_prior = 0.2                    # [0.2] half-normal scale of τ's prior [ln R]
+    sample_sd_from = "reports/lya"           # [none] a run of the same coating: its τ
+                                             #   posterior (a kernel density) is τ's prior
     repeatability = "learned"                # ["learned"] or a fixed per-row 1σ [ln R]
     repeatability_sd_prior = 0.1             # [0.1] half-normal scale of its prior [ln R]
     [model]
@@ -50,6 +54,10 @@ Schema (keys other than these are errors; defaults in brackets)::
     maps = true                              # [true] hemisphere maps (needs out_of_plane)
     tis_reference = "reference.csv"          # [none] theta_i_deg,tis,label points to compare
     reference_params = "uv-paper"            # [none] parameter set drawn beside the bands
+    target = "auto"                          # ["auto"] what the bands describe: "measured"
+                                             #   (the samples measured), "coating" (their
+                                             #   population), "new_part" (an unmeasured part);
+                                             #   auto: measured for one sample, else coating
     [priors.NAME]                            # NAME in brdf0, a1, a2, a3, alpha, theta_s0
     kind = "normal"                          # [model.priors.DEFAULT_PRIORS] see priors.py
     loc = 0.0
@@ -107,6 +115,7 @@ from brdf_infer.scene._errors import parse_errors
 from brdf_infer.scene._load import BUILTIN_SCENES, DEFAULT_SCENE, load_scene, scene_file
 from brdf_infer.scene._parse import parse_scene
 from brdf_infer.scene._records import (
+    TARGETS,
     TIS_ANGLE_DEG,
     DesignSettings,
     InstrumentSettings,
@@ -125,6 +134,7 @@ from brdf_infer.scene._setups import check_instrument
 __all__ = [
     "BUILTIN_SCENES",
     "DEFAULT_SCENE",
+    "TARGETS",
     "TIS_ANGLE_DEG",
     "DesignSettings",
     "InstrumentSettings",

@@ -18,6 +18,7 @@ from brdf_infer.model.priors import DEFAULT_PRIORS, PRIOR_NAMES, parse_prior
 from brdf_infer.scene._errors import parse_errors
 from brdf_infer.scene._fields import _boolean, _choice, _count, _number, _string, _table
 from brdf_infer.scene._records import (
+    TARGET_CHOICES,
     ModelSettings,
     OutputSettings,
     PaperFitSettings,
@@ -82,7 +83,7 @@ def parse_scene(document: dict, path: Path) -> Scene:
         document,
         "outputs",
         path,
-        {"theta_i_deg", "fold", "tis", "maps", "tis_reference", "reference_params"},
+        {"theta_i_deg", "fold", "tis", "maps", "tis_reference", "reference_params", "target"},
     )
     reference_params = _reference_params(outputs, path)
     model_settings = _model_settings(model, path, family)
@@ -244,4 +245,5 @@ def _output_settings(
             else path.parent / _string(outputs, "tis_reference", path)
         ),
         reference_params=reference_params,
+        target=_choice(outputs, "target", path, TARGET_CHOICES, "auto", prefix="outputs."),
     )

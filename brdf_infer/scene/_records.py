@@ -56,6 +56,11 @@ class ModelSettings:
     family: str = "strumik2024"
 
 
+# what a band describes (brdf_infer.posterior._targets); "auto" picks by the samples measured
+TARGETS = ("measured", "coating", "new_part")
+TARGET_CHOICES = ("auto", *TARGETS)
+
+
 @dataclass(frozen=True)
 class OutputSettings:
     """Which products a run makes.
@@ -72,6 +77,9 @@ class OutputSettings:
         maps: make the hemisphere maps (only with the out-of-plane extension).
         tis_reference: CSV of reference TIS points (theta_i_deg, tis, label), or None.
         reference_params: a named parameter set drawn beside the BRDF bands, or None.
+        target: what the bands and products describe (:mod:`brdf_infer.posterior._targets`):
+            ``measured``, ``coating``, ``new_part`` or ``auto`` (measured for one physical
+            sample, else coating).
     """
 
     theta_i_deg: tuple[float, ...] | None = None
@@ -80,6 +88,7 @@ class OutputSettings:
     maps: bool = True
     tis_reference: Path | None = None
     reference_params: str | None = None
+    target: str = "auto"
 
 
 @dataclass(frozen=True)

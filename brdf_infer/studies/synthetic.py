@@ -322,30 +322,45 @@ def write_hemisphere_scene(
     dphi_scale: float,
     seed: int = 0,
     relative_sd: float = 0.05,
+    sample_sd: float = 0.03,
+    errors: str = "",
+    full: bool = False,
 ) -> Path:
     """A scatterometer-like scene of one sample measured over the hemisphere: at each θi of
     :data:`HEMISPHERE_THETA_I_DEG`, in-plane BRDF rows at θs −60° … 80° and rows out of the
     plane at polar angles 20–80° and the azimuths of :data:`HEMISPHERE_PHI_DEG` (forward plane
-    at 180°), drawn from the scene's generative error model under Eqs. (7)-(8) at ``params``
-    with Eq. (8)'s Δφ ``dphi_scale`` times the article's (sample effect 3 %, repeatability 3 %;
-    σ column ``relative_sd`` of each value). Returns the scene file (``hemisphere.toml``)."""
+    at 180°) — or, ``full``, a scatterometer's whole grid: at θi 10°, 30°, 50°, 70° and 80°
+    every polar angle 5°–85° (5° steps) at every azimuth 0°–350° (10° steps), 3060 rows —
+    drawn from the scene's generative error model under Eqs. (7)-(8) at ``params``
+    with Eq. (8)'s Δφ ``dphi_scale`` times the article's (sample effect drawn with τ =
+    ``sample_sd``, repeatability 3 %; σ column ``relative_sd`` of each value; ``errors``: lines
+    of the scene's ``[errors]`` table, which the simulation follows too). Returns the scene file
+    (``hemisphere.toml``)."""
     from brdf_infer.model.coordinates import INTERNAL_NAMES, to_internal
     from brdf_infer.scene import load_scene
 
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
-    rows = [
-        (ti, ts, "")
-        for ti in HEMISPHERE_THETA_I_DEG
-        for ts in np.arange(-60.0, 81.0, 10.0)
-        if ts != 0.0
-    ]
-    rows += [
-        (ti, theta, f"{phi:g}")
-        for ti in HEMISPHERE_THETA_I_DEG
-        for theta in (20.0, 40.0, 60.0, 80.0)
-        for phi in HEMISPHERE_PHI_DEG
-    ]
+    if full:
+        rows = [
+            (ti, theta, f"{phi:g}")
+            for ti in (10.0, 30.0, 50.0, 70.0, 80.0)
+            for theta in np.arange(5.0, 86.0, 5.0)
+            for phi in np.arange(0.0, 351.0, 10.0)
+        ]
+    else:
+        rows = [
+            (ti, ts, "")
+            for ti in HEMISPHERE_THETA_I_DEG
+            for ts in np.arange(-60.0, 81.0, 10.0)
+            if ts != 0.0
+        ]
+        rows += [
+            (ti, theta, f"{phi:g}")
+            for ti in HEMISPHERE_THETA_I_DEG
+            for theta in (20.0, 40.0, 60.0, 80.0)
+            for phi in HEMISPHERE_PHI_DEG
+        ]
     header = "series,sample,theta_i_deg,theta_s_deg,phi_s_deg,brdf,brdf_err"
     csv = directory / "hemisphere.csv"
     placeholder = [f"A,1,{ti:g},{ts:g},{phi},0.01,0.0005" for ti, ts, phi in rows]
@@ -353,13 +368,16 @@ def write_hemisphere_scene(
     path = directory / "hemisphere.toml"
     path.write_text(
         'name = "hemisphere"\nmeasurements = "hemisphere.csv"\n[series.A]\nquantity = "brdf"\n'
+        + (f"[errors]\n{errors}\n" if errors else "")
     )
     scene = load_scene(path)
     internal = dict(zip(INTERNAL_NAMES, np.asarray(to_internal(params)), strict=True))
     truth = {name: internal[name] for name in ("log_brdf0", "b1", "b2", "b3", "alpha", "t_s0")}
     truth["log_dphi_scale"] = float(np.log(dphi_scale))
     values = np.exp(
-        simulate_log_values(scene, scene.load_measurements(), scene.family(), truth, seed=seed)
+        simulate_log_values(
+            scene, scene.load_measurements(), scene.family(), truth, sample_sd=sample_sd, seed=seed
+        )
     )
     lines = [
         f"A,1,{ti:g},{ts:g},{phi},{v:.6e},{relative_sd * v:.6e}"

@@ -185,15 +185,21 @@ ELPD_SE_MULTIPLE = 2.0  # |Δelpd| within this many standard errors: the data ca
 
 
 def carried_shares(
-    width: dict[str, Any], quantities: Sequence[str], least: float = SHARE_STATED
+    width: dict[str, Any],
+    quantities: Sequence[str],
+    least: float = SHARE_STATED,
+    skip: Sequence[str] = (),
 ) -> list[tuple[str, str, float]]:
     """(quantity, the assumption in words, variance share) for each assumption that carries
     more than ``least`` of a quantity's 95 % interval's variance (1 − (width without it /
     width)², sources adding in quadrature; :mod:`brdf_infer.posterior`'s ``"width"`` record),
-    largest first. A run written before the variance share: none."""
+    largest first; ``skip``: assumptions (the record's names) left out. A run written before
+    the variance share: none."""
     found = []
     for quantity in quantities:
-        for entry in width.get(quantity, {}).get("without", {}).values():
+        for name, entry in width.get(quantity, {}).get("without", {}).items():
+            if name in skip:
+                continue
             share = entry.get("variance_share")
             if share is not None and share > least:
                 found.append((quantity, entry["words"], float(share)))
@@ -271,10 +277,17 @@ def value_words(name: str, value: float) -> str:
 def answer_facts(summary: PosteriorSummary) -> list[str]:
     """The facts of the verdict (module docstring) from the run's ``table``, ``width``,
     ``learned`` and ``reference`` records (a run written before they existed has none)."""
+    target = summary.get("target", "coating")
     carried: dict[str, list[str]] = {}
-    for quantity, words, share in carried_shares(summary.get("width", {}), HEADLINE):
-        carried.setdefault(words, []).append(f"{100 * share:.0f} % of {quantity_words(quantity)}'s")
+    whose = "" if target == "coating" else "the coating's "
+    # the measured samples' bands are conditional on their own effects: not their width
+    skip = ("sample_effect",) if target == "measured" else ()
+    for quantity, words, share in carried_shares(summary.get("width", {}), HEADLINE, skip=skip):
+        carried.setdefault(words, []).append(
+            f"{100 * share:.0f} % of {whose}{quantity_words(quantity)}'s"
+        )
     facts = table_facts(summary.get("table"))
+    facts += target_facts(summary.get("targets"))
     facts += [
         f"{words} carries {' and '.join(parts)} 95 % interval variance (in quadrature)"
         for words, parts in carried.items()
@@ -282,9 +295,14 @@ def answer_facts(summary: PosteriorSummary) -> list[str]:
     for name in ("sample_sd", "repeatability"):
         entry = summary.get("learned", {}).get(name)
         if entry is not None and not entry["learned"]:
+            where = (
+                " (it sets the coating's and a new part's bands, not the measured sample's)"
+                if name == "sample_sd" and target == "measured"
+                else ""
+            )
             facts.append(
                 f"the {NOISE_WORDS[name]} is {entry['words']}: the data do not contract it "
-                f"(contraction {entry['contraction']:.2f})"
+                f"(contraction {entry['contraction']:.2f}){where}"
             )
     places = []
     for place, where in (("outside", "outside"), ("at the edge", "at the edge of")):
@@ -305,6 +323,36 @@ def answer_facts(summary: PosteriorSummary) -> list[str]:
             "them: " + "; ".join(row_words(row) for row in refitted)
         )
     return facts
+
+
+TARGET_WORDS = {
+    "measured": "the sample(s) measured",
+    "coating": "the coating (population mean)",
+    "new_part": "a new part",
+}
+
+
+def target_facts(targets: dict[str, Any] | None) -> list[str]:
+    """Which coating the headline is for (the summary's ``targets``), beside the other two
+    targets' TIS(70°) and where τ comes from; none for a run written before the record."""
+    if not targets:
+        return []
+    chosen = targets["chosen"]
+    quantity = "tis_70deg" if targets[chosen].get("tis_70deg") else "pi_brdf0"
+    if targets[chosen].get(quantity) is None:
+        return []
+
+    def interval(name: str) -> str:
+        entry = targets[name][quantity]
+        return f"{value_words(quantity, entry['lo95'])}–{value_words(quantity, entry['hi95'])}"
+
+    others = ", ".join(
+        f"{TARGET_WORDS[name]} {interval(name)}" for name in TARGET_WORDS if name != chosen
+    )
+    return [
+        f"the answer is for {TARGET_WORDS[chosen]}: {quantity_words(quantity)} "
+        f"{interval(chosen)} (95 %; {others}; τ: {targets['tau_source']})"
+    ]
 
 
 def _place(reference: dict[str, Any]) -> str:

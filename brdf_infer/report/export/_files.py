@@ -198,6 +198,7 @@ def export_abg(
         "folding": fold_statement(source.fold),
         "scene": source.scene,
         "source": source.label,
+        "target": source.target or None,
         **details,
         "rows": rows,
     }
@@ -225,6 +226,7 @@ def run_export(
         return {
             "format": export_format,
             "fold": source.fold,
+            **({"target": source.target} if source.from_run else {}),
             "files": files,
             "rows": rows,
             "seconds": time.perf_counter() - start,
@@ -233,6 +235,7 @@ def run_export(
     return {
         "format": export_format,
         "fold": source.fold,
+        **({"target": source.target} if source.from_run else {}),
         **({"tis_quantile_at_deg": tis_quantile_at} if source.from_run else {}),
         "files": files,
         "seconds": time.perf_counter() - start,
@@ -252,6 +255,7 @@ def _record_export(run: Path, result: dict) -> Path:
     entry = {
         "format": result["format"],
         "fold": result["fold"],
+        **({"target": result["target"]} if "target" in result else {}),
         "folder": folder,
         "files": [
             {"path": str(Path(f["path"]).resolve()), "kind": f["kind"]} for f in result["files"]

@@ -28,6 +28,9 @@ class Source:
             (every posterior draw).
         from_run: ``physical`` holds posterior draws.
         scene: the scene's name, for the file comments.
+        target: which coating a run's draws describe (``measured``, ``sample NAME``,
+            ``coating`` or ``new_part``; :mod:`brdf_infer.posterior._targets`); empty for a
+            parameter set.
     """
 
     label: str
@@ -35,6 +38,7 @@ class Source:
     physical: dict[str, np.ndarray]
     from_run: bool
     scene: str
+    target: str = ""
 
     @property
     def fold(self) -> bool:

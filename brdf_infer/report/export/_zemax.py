@@ -63,7 +63,8 @@ def _comments(
     lines = [
         f"brdf_infer {__version__} export, {dt.datetime.now(dt.UTC).isoformat(timespec='seconds')}",
         f"scene: {source.scene}",
-        f"source: {'posterior run ' if source.from_run else 'parameter set '}{source.label}",
+        f"source: {'posterior run ' if source.from_run else 'parameter set '}{source.label}"
+        + (f", target {source.target}" if source.target else ""),
         f"file: {kind}: "
         + (meaning if member.paper_parameters else meaning.replace("exact Eq. (9)", member.name)),
         (
