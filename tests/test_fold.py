@@ -208,16 +208,16 @@ def test_a_runs_two_fold_switches_each_override_their_own_scene_key(command):
     """``--fold`` sets the products' switch ([outputs] fold) alone, ``--likelihood-fold`` the
     instrument's ([model] fold) alone; neither leaves the scene's keys as they are."""
     from brdf_infer.cli import build_parser
-    from brdf_infer.cli._options import with_fold_switches
+    from brdf_infer.cli._options import with_product_switches
     from brdf_infer.scene import load_scene
 
     scene = load_scene("lya")
     assert (scene.model.fold, scene.outputs.fold) == (False, False)
     parse = build_parser().parse_args
-    products = with_fold_switches(scene, parse([command, "lya", "--fold"]))
+    products = with_product_switches(scene, parse([command, "lya", "--fold"]))
     assert (products.model.fold, products.outputs.fold) == (False, True)
-    likelihood = with_fold_switches(scene, parse([command, "lya", "--likelihood-fold"]))
+    likelihood = with_product_switches(scene, parse([command, "lya", "--likelihood-fold"]))
     assert (likelihood.model.fold, likelihood.outputs.fold) == (True, False)
-    assert with_fold_switches(scene, parse([command, "lya"])) == scene
+    assert with_product_switches(scene, parse([command, "lya"])) == scene
     with pytest.raises(SystemExit):
         parse([command, "lya", "--fold", "--no-fold"])

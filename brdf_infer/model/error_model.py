@@ -80,6 +80,8 @@ ROTATION_COUPLINGS = ("camera_follows", "camera_fixed")
 # s = ∂θs/∂ε, the change of θs per unit sample-rotation error (module docstring)
 THETA_S_PER_ROTATION = {"camera_follows": 1.0, "camera_fixed": -1.0}
 ANGLE_METHODS = ("linearised", "latent")
+# settings a scene's [errors] does not hold: loading derives them from its keys
+DERIVED = ("sample_sd_log_kde",)
 LEARNED = "learned"
 # the options that are data of the compiled likelihood (NoiseLayout), not model structure
 DATA_OPTIONS = (
@@ -212,6 +214,11 @@ class ErrorSettings:
             name: dict(value) if isinstance(value, dict) else value
             for name, value in ((n, getattr(self, n)) for n in self.__dataclass_fields__)
         }
+
+    def as_table(self) -> dict:
+        """:meth:`describe` as a scene's ``[errors]`` table: without what loading derives from
+        it (:data:`DERIVED`), so that it parses back to these settings."""
+        return {k: v for k, v in self.describe().items() if k not in DERIVED}
 
     def structure(self) -> dict:
         """:meth:`describe` without :data:`DATA_OPTIONS` and ``expected_repeatability`` (which

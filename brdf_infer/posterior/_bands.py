@@ -48,8 +48,8 @@ def draws_physical(sites: dict[str, np.ndarray], family: ModelFamily) -> dict[st
 
 
 def evenly_spaced(physical: dict[str, np.ndarray], count: int) -> dict[str, np.ndarray]:
-    """At most ``count`` evenly spaced draws of every parameter."""
-    total = next(iter(physical.values())).size
+    """At most ``count`` evenly spaced draws (the leading axis) of every parameter."""
+    total = len(next(iter(physical.values())))
     if total <= count:
         return physical
     index = np.linspace(0, total - 1, count).round().astype(int)

@@ -157,7 +157,7 @@ def target_log_factor(
         BadInputError: ``sample`` with another target, or a sample the run did not measure.
     """
     if sample is not None and target != "measured":
-        raise BadInputError("a sample is named for the measured target only", field="--sample")
+        raise BadInputError("a sample is named for the measured target only", field="sample")
     if target == "coating":
         return np.zeros(len(new_part))
     if target == "new_part":
@@ -167,7 +167,7 @@ def target_log_factor(
         if sample not in sample_names:
             raise BadInputError(
                 f"no sample {sample!r} in the run (samples: {', '.join(sample_names)})",
-                field="--sample",
+                field="sample",
             )
         return effects[:, list(sample_names).index(sample)]
     peak = np.max(effects, axis=1, keepdims=True)
@@ -274,7 +274,7 @@ def run_log_factor(
             raise BadInputError(
                 "this run was written before the measured and new-part targets: rerun "
                 "'brdf-infer posterior' for them",
-                field="--target",
+                field="target",
             )
         return target, np.zeros(count)
     effects = np.asarray(posterior[SAMPLE_EFFECT]).reshape(count, -1)

@@ -109,6 +109,8 @@ def targets_table(targets: dict | None) -> str:
         return ""
     chosen = targets["chosen"]
     order = [chosen, *(name for name in TARGET_WORDS if name != chosen)]
+    heads = {"tis_70deg": "TIS(70°), 95 %", "pi_brdf0": "π·BRDF0, 95 %"}
+    shown = [q for q in heads if any(targets[name].get(q) is not None for name in order)]
     rows = []
     for name in order:
         entry = targets[name]
@@ -117,13 +119,13 @@ def targets_table(targets: dict | None) -> str:
             if entry.get(quantity) is None
             else f"{100 * entry[quantity]['median']:.2f} % "
             f"({_percent_interval(entry[quantity]['lo95'], entry[quantity]['hi95'])})"
-            for quantity in ("tis_70deg", "pi_brdf0")
+            for quantity in shown
         ]
         label = TARGET_WORDS[name] + (" (the bands)" if name == chosen else "")
         rows.append([label, entry["question"], *cells])
     return (
         "<h3>Which coating: the sample(s) measured, the coating, a new part</h3>"
-        + _html.table(["for", "answers", "TIS(70°), 95 %", "π·BRDF0, 95 %"], rows)
+        + _html.table(["for", "answers", *(heads[q] for q in shown)], rows)
         + f"<p class='fold'>τ, the spread between parts: {_html.escape(targets['tau_source'])}. "
         "A new part's band draws a new sample effect with τ: the one for a flight part's "
         "budget.</p>"

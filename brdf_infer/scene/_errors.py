@@ -10,6 +10,7 @@ from brdf_infer.errors import BadInputError
 from brdf_infer.model.error_model import (
     ANGLE_METHODS,
     CALIBRATIONS,
+    DERIVED,
     ERROR_MODELS,
     LEARNED,
     ROTATION_COUPLINGS,
@@ -125,7 +126,7 @@ def parse_errors(table: dict, path: Path, series: tuple[str, ...]) -> ErrorSetti
     for key, replacement in _REPLACED_ERROR_KEYS.items():
         if key in table:
             raise BadInputError(replacement, file=path, field="errors." + key)
-    keys = set(ErrorSettings.__dataclass_fields__) - {"sample_sd_log_kde"}  # derived
+    keys = set(ErrorSettings.__dataclass_fields__) - set(DERIVED)
     table = _table({"errors": table}, "errors", path, keys)
 
     def number(key: str, default: float, *, positive: bool = False) -> float:

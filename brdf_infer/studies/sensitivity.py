@@ -124,7 +124,7 @@ def variant_scene(scene: Scene, changed: Variant, field_name: str = "variants") 
     Raises:
         BadInputError: an unknown key or a value out of range (naming the variant).
     """
-    table = {**scene.errors.describe(), **changed.changes}
+    table = {**scene.errors.as_table(), **changed.changes}
     try:
         errors = parse_errors(table, scene.path, tuple(scene.series))
     except BadInputError as error:
