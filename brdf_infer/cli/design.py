@@ -39,6 +39,19 @@ def add_parser(commands) -> argparse.ArgumentParser:
         "theta_s0), brdf:THETA_I,THETA_S or all (expected information gain)",
     )
     parser.add_argument(
+        "--for",
+        dest="coating",
+        choices=("measured", "coating", "new_part"),
+        help="whose target: the sample(s) measured, the coating or a new, unmeasured part "
+        "(default: the run's target; a parameter is the coating's)",
+    )
+    parser.add_argument(
+        "--new-sample",
+        action="store_true",
+        help="the new rows go on one physical sample not yet measured (is another sample "
+        "worth more than another angle?)",
+    )
+    parser.add_argument(
         "--candidates",
         default="grid",
         help="grid (the scene's [design] range) or a CSV of settings "
@@ -91,6 +104,7 @@ def main(args: argparse.Namespace) -> int:
         DESIGN_HEADERS,
         current_words,
         design,
+        design_coating,
         design_rows,
         design_series,
         load_design_run,
@@ -100,6 +114,8 @@ def main(args: argparse.Namespace) -> int:
         session_scene,
         write_design,
     )
+    from brdf_infer.errors import BadInputError
+    from brdf_infer.verdict import TARGET_WORDS
 
     target = parse_target(args.target)
     out = check_output_dir(args.out or args.run_dir, option="--out")
@@ -111,6 +127,10 @@ def main(args: argparse.Namespace) -> int:
         budget=args.budget if args.budget is not None else scene.design.budget,
         seed=args.seed,
     )
+    try:
+        coating = design_coating(target, run, args.coating)
+    except BadInputError as error:
+        raise BadInputError(error.problem, file=error.file, field="--for") from None
     aperture = _aperture(args.aperture)
     same_session = args.same_session or scene.design.same_session
     series = design_series(scene, run.measurements, args.series, same_session, aperture)
@@ -120,10 +140,13 @@ def main(args: argparse.Namespace) -> int:
         candidates = read_candidates(args.candidates, scene_, run.measurements, series)
     session = "new sessions" if same_session is None else f"series {same_session}'s session"
     progress(
-        f"where to measure next for {target.label}, scene '{scene.name}', series {series}, "
+        f"where to measure next for {target.label} of {TARGET_WORDS[coating]}, scene "
+        f"'{scene.name}', series {series}{', a new sample' if args.new_sample else ''}, "
         f"{session}, budget {options.budget} ..."
     )
-    result = design(run, target, candidates, options, series, same_session, aperture)
+    result = design(
+        run, target, candidates, options, series, same_session, aperture, coating, args.new_sample
+    )
     # into the run folder: added to a finished run (its own lock, the run stays complete);
     # elsewhere: one writer per folder
     adds = Path(out).resolve() == Path(args.run_dir).resolve()
@@ -135,7 +158,7 @@ def main(args: argparse.Namespace) -> int:
         return 0
     current = current_words(payload)
     if current is not None:  # in the table's unit: TIS and π·BRDF0 in per cent
-        print(f"{target.label} today: {current}")
+        print(f"{target.label} of {TARGET_WORDS[coating]} today: {current}")
     print(f"chosen together (budget {options.budget}):")
     print(table(DESIGN_HEADERS, design_rows(payload)))
     print(reach_line(payload))

@@ -31,6 +31,8 @@ from brdf_infer.errors import BadInputError
 from brdf_infer.scene import DesignSettings, Scene, SeriesGeometry
 from brdf_infer.tables.measurements import Measurements
 
+NEW_SAMPLE = "new sample"  # the name of a physical sample not yet measured (design --new-sample)
+
 
 @dataclass(frozen=True)
 class Candidates:
@@ -121,10 +123,13 @@ class Candidates:
         session = np.where(self.series == same_session, self.series, "new").astype(str)
         return replace(self, session=session)
 
-    def as_measurements(self, measurements: Measurements) -> Measurements:
+    def as_measurements(self, measurements: Measurements, new_sample: bool = False) -> Measurements:
         """The candidates as measurement rows (value 1: only their geometry is used), each on
-        its series' sample with the most rows in ``measurements``."""
-        samples = np.array([design_sample(measurements, name) for name in self.series])
+        its series' sample with the most rows in ``measurements`` (``new_sample``: every one on
+        one sample not yet measured, :data:`NEW_SAMPLE`)."""
+        samples = np.array(
+            [NEW_SAMPLE if new_sample else design_sample(measurements, n) for n in self.series]
+        )
         out_of_plane = np.isfinite(self.phi_s_deg)
         return Measurements(
             path=measurements.path,
@@ -219,10 +224,13 @@ def design_sample(measurements: Measurements, series: str) -> str:
     return str(samples[int(np.argmax(counts))])
 
 
-def candidate_measurements(candidates: Candidates, measurements: Measurements) -> Measurements:
+def candidate_measurements(
+    candidates: Candidates, measurements: Measurements, new_sample: bool = False
+) -> Measurements:
     """The candidates as rows whose σ is the median relative σ of their series' rows (for a
-    new series, the largest such median of the measured series: its noise is not known)."""
-    rows = candidates.as_measurements(measurements)
+    new series, the largest such median of the measured series: its noise is not known), on
+    their series' sample with the most rows, or all on one new sample (``new_sample``)."""
+    rows = candidates.as_measurements(measurements, new_sample)
     if measurements.reflectance_err is None:
         return rows
     relative = measurements.reflectance_err / measurements.reflectance

@@ -31,6 +31,7 @@ import numpy as np
 
 from brdf_infer._internal.precision import ensure_float64
 from brdf_infer.design._candidates import (
+    NEW_SAMPLE,
     REACH_LIMITS,
     Candidates,
     candidate_measurements,
@@ -61,7 +62,14 @@ from brdf_infer.model.error_model import (
     noise_layout,
 )
 from brdf_infer.model.params import DPHI_NAME, PARAM_NAMES, Params, with_dphi_scale
-from brdf_infer.posterior import build_posterior_model, interval95, run_scene
+from brdf_infer.posterior import (
+    NEW_PART_EFFECT,
+    SAMPLE_EFFECT,
+    build_posterior_model,
+    interval95,
+    run_scene,
+    target_log_factor,
+)
 from brdf_infer.predict.observations import (
     build_observation_model,
     log_reflectance_at,
@@ -80,14 +88,20 @@ class DesignRun:
 
     Attributes:
         scene, measurements: the scene of the run and its rows.
-        sites: every draw of the run's sites needed by the likelihood (flattened).
+        sites: every draw of the run's sites needed by the likelihood (flattened), and each
+            draw's sample effects (``sample_effect``, (draws, samples); ``new_part_effect``)
+            where the run has them (:mod:`brdf_infer.posterior._targets`).
         path: the run's posterior.nc.
+        target: the target of the run's bands (``coating`` for a run before the targets).
+        sample_names: the measured samples, in ``sample_effect``'s order.
     """
 
     scene: Scene
     measurements: Measurements
     sites: dict[str, np.ndarray]
     path: Path
+    target: str = "coating"
+    sample_names: tuple[str, ...] = ()
 
 
 def load_design_run(run: str | Path, scene: Scene | str | None = None) -> DesignRun:
@@ -127,19 +141,36 @@ def load_design_run(run: str | Path, scene: Scene | str | None = None) -> Design
         observed, np.log(measurements.reflectance)
     ):
         raise BadInputError(f"a run on other rows than scene '{scene.name}' has now", file=path)
-    names = [*PARAM_NAMES, DPHI_NAME, "sample_sd", "repeatability"]
-    sites = {
-        name: np.asarray(idata.posterior[name]).reshape(-1)
-        for name in names
-        if name in idata.posterior
-    }
-    return DesignRun(scene, measurements, sites, path)
+    names = [*PARAM_NAMES, DPHI_NAME, "sample_sd", "repeatability", NEW_PART_EFFECT]
+    posterior = idata.posterior
+    sites = {name: np.asarray(posterior[name]).reshape(-1) for name in names if name in posterior}
+    samples: tuple[str, ...] = ()
+    if SAMPLE_EFFECT in posterior:
+        samples = tuple(str(name) for name in np.asarray(posterior["sample"]))
+        sites[SAMPLE_EFFECT] = np.asarray(posterior[SAMPLE_EFFECT]).reshape(-1, len(samples))
+    target = str(attrs.get("target", "coating"))
+    return DesignRun(scene, measurements, sites, path, target, samples)
 
 
-def target_values(target: DesignTarget, draws: dict[str, np.ndarray], scene: Scene) -> np.ndarray:
+def target_values(
+    target: DesignTarget, draws: dict[str, np.ndarray], scene: Scene, coating: str = "coating"
+) -> np.ndarray:
     """(draws, P) values of the target per draw of ``draws`` (P = 1, or the free parameters
     for ``all``): the products' BRDF and TIS (``[outputs] fold``; each draw's out-of-plane
-    width where the run has one)."""
+    width where the run has one) of ``coating``, the sample(s) measured, the coating or a new
+    part (:mod:`brdf_infer.posterior._targets`: the BRDF times each draw's e^u; a parameter
+    is the coating's)."""
+    values = _coating_values(target, draws, scene)
+    if target.kind in ("param", "all") or coating == "coating":
+        return values
+    effects = draws[SAMPLE_EFFECT]
+    names = tuple(str(k) for k in range(effects.shape[1]))
+    factor = target_log_factor(coating, effects, draws[NEW_PART_EFFECT], names)
+    return values * np.exp(factor)[:, None]
+
+
+def _coating_values(target: DesignTarget, draws: dict[str, np.ndarray], scene: Scene):
+    """:func:`target_values` of the coating."""
     params = Params(*(jnp.asarray(draws[name]) for name in PARAM_NAMES))
     fold = scene.outputs.fold
     constants = scene.model.constants
@@ -213,19 +244,58 @@ def _loading_columns(errors, measurements, new, fresh: np.ndarray, columns: int)
     return sample_col, calibration_col, fresh_col, fresh_groups, rotation_col
 
 
-def predictive(run: DesignRun, candidates: Candidates, draws: dict) -> RowPredictive:
+def _given_effects(model, effects, measured, sample_sd, new: Measurements):
+    """The measured rows' (residual, factor, diagonal) given each draw's sample effects
+    ``effects`` (S, samples): the residual less the row's u_j, the samples' columns out and a
+    lone row's τ² off its diagonal; and each candidate's shift, its sample's u_j (0 for a
+    sample not measured)."""
+    residual, factor, diagonal = measured
+    names = list(model.sample_names)
+    index = np.array([names.index(str(sample)) for sample in model.row_samples])
+    noise = model.data.noise
+    residual = residual - effects[:, index]
+    factor = factor.at[..., : noise.sample_members.shape[-1]].set(0.0)
+    diagonal = diagonal - noise.sample_alone[None, :] * sample_sd[:, None] ** 2
+    on = np.array([names.index(str(s)) if str(s) in names else -1 for s in new.sample])
+    shift = jnp.where(jnp.asarray(on >= 0)[None, :], effects[:, np.maximum(on, 0)], 0.0)
+    return residual, factor, diagonal, shift
+
+
+def predictive(
+    run: DesignRun,
+    candidates: Candidates,
+    draws: dict,
+    coating: str = "coating",
+    new_sample: bool = False,
+) -> RowPredictive:
     """Every draw's conditional predictive of every candidate row (:mod:`._estimate`), each
     row in its session (:attr:`Candidates.session`; None: its series' measured one). A new
     session's calibration factor is one more shared effect, a column of the loading that the
-    measured rows do not load on."""
+    measured rows do not load on; so is a new sample's effect (``new_sample``: every candidate
+    on one physical sample not yet measured, :data:`NEW_SAMPLE`).
+
+    For the ``measured`` target the draws carry each measured sample's effect u_j
+    (``sample_effect``), and the rows are conditioned on it: a measured row's residual less
+    its u_j, the samples' columns of the factor (and a lone row's τ²) out, a candidate's mean
+    plus its sample's u_j; the importance weights are then those of the joint draw (θ, u).
+    """
     scene, measurements = run.scene, run.measurements
     model = build_posterior_model(scene, measurements)
     parts = model.draw_parts(draws)
     residual = model.data.rows.log_reflectance[None, :] - parts.mean
-    new = candidate_measurements(candidates, measurements)
-    rows = build_observation_model(scene, new).data
-    layout = noise_layout(scene.errors, new)
+    factor, diagonal = parts.factor, parts.diagonal
+    count = residual.shape[0]
     errors = scene.errors
+    sample_sd = jnp.asarray(draws.get("sample_sd", np.full(count, errors.stated_sample_sd)))
+    new = candidate_measurements(candidates, measurements, new_sample)
+    known = coating == "measured"
+    shift = jnp.zeros((count, len(new)))
+    if known:
+        residual, factor, diagonal, shift = _given_effects(
+            model, jnp.asarray(draws[SAMPLE_EFFECT]), (residual, factor, diagonal), sample_sd, new
+        )
+    rows = build_observation_model(scene, new).data
+    layout = noise_layout(errors, new)
     columns = parts.factor.shape[2]
     sample_col, calibration_col, fresh_col, fresh_groups, rotation_col = _loading_columns(
         errors, measurements, new, candidates.sessions() == "new", columns
@@ -235,10 +305,11 @@ def predictive(run: DesignRun, candidates: Candidates, draws: dict) -> RowPredic
     one_hot_cal = jnp.asarray(calibration_col[:, None] == np.arange(columns)[None, :], float)
     one_hot_rotation = jnp.asarray(rotation_col[:, None] == np.arange(columns)[None, :], float)
     rotation_new = jnp.asarray(rotation_col < 0, float)
+    # a candidate's own sample variance: where its sample is neither a column of the measured
+    # rows (a sample of one row) nor known (the measured target) nor the new sample's column
+    own_sample = jnp.asarray((sample_col < 0) & (not known) & (not new_sample), float)
     fold, constants = scene.model.fold, scene.model.constants
     params = Params(*(jnp.asarray(draws[name]) for name in PARAM_NAMES))
-    count = params.brdf0.shape[0]
-    sample_sd = jnp.asarray(draws.get("sample_sd", np.zeros(count)))
     if "repeatability" in draws:
         repeatability = jnp.asarray(draws["repeatability"])
     else:  # fixed by the scene (learned: a site of the run)
@@ -250,9 +321,9 @@ def predictive(run: DesignRun, candidates: Candidates, draws: dict) -> RowPredic
     # prediction then carries Δφ's uncertainty, and its outcome can teach it
     dphi_scale = jnp.asarray(draws.get(DPHI_NAME, np.ones(count)))
 
-    def one(p, scale, tau, rep, res, factor, diagonal):
+    def one(p, scale, tau, rep, res, factor, diagonal, shift):
         widths = with_dphi_scale(constants, scale)
-        mean = predicted_log_reflectance(p, rows, fold, widths)
+        mean = predicted_log_reflectance(p, rows, fold, widths) + shift
         if angles:
             g_rot, g_cam = angle_slopes(
                 lambda ti, ts: log_reflectance_at(ti, ts, p, fold, widths, rows),
@@ -264,26 +335,28 @@ def predictive(run: DesignRun, candidates: Candidates, draws: dict) -> RowPredic
             g_rot = g_cam = jnp.zeros_like(mean)
         rotation = g_rot * errors.rotation_deg * angles
         loading = (
-            tau * one_hot_sample + calibration * one_hot_cal + rotation[:, None] * one_hot_rotation
+            (0.0 if known else tau) * one_hot_sample
+            + calibration * one_hot_cal
+            + rotation[:, None] * one_hot_rotation
         )
         own = (
             layout.sigma_row**2
             + rep**2
             + (g_cam * errors.camera_deg * angles) ** 2
             + rotation_new * rotation**2
-            + jnp.asarray(sample_col < 0, float) * tau**2
+            + own_sample * tau**2
             + jnp.asarray((calibration_col < 0) & (fresh_col < 0), float) * calibration**2
         )
         given = row_predictive(res, factor, diagonal, mean, loading, own)
-        if not fresh_groups:
+        fresh = [calibration * fresh_one_hot] if fresh_groups else []
+        if new_sample:  # the new sample's effect, shared by every candidate
+            fresh.append(tau * jnp.ones((mean.shape[0], 1)))
+        if not fresh:
             return given
-        shared = jnp.concatenate([given.loading, calibration * fresh_one_hot], axis=1)
-        return given._replace(loading=shared)
+        return given._replace(loading=jnp.concatenate([given.loading, *fresh], axis=1))
 
     program = jax.jit(jax.vmap(one))
-    return program(
-        params, dphi_scale, sample_sd, repeatability, residual, parts.factor, parts.diagonal
-    )
+    return program(params, dphi_scale, sample_sd, repeatability, residual, factor, diagonal, shift)
 
 
 @dataclass(frozen=True)
@@ -301,11 +374,15 @@ class DesignResult:
     reach: dict[str, Any]
     left_out: dict[str, int] | None
     same_session: str | None
+    coating: str = "coating"
+    new_sample: bool = False
 
     def as_json(self) -> dict[str, Any]:
         return {
             "target": self.target.name,
             "target_label": self.target.label,
+            "for": self.coating,  # the sample(s) measured, the coating or a new part
+            "new_sample": self.new_sample,  # the rows on a physical sample not yet measured
             "current": self.current,
             "candidates": self.candidates,
             "chosen": self.chosen,
@@ -350,6 +427,8 @@ def design(
     series: str | None = None,
     same_session: str | None = None,
     aperture: tuple[float, float] | None = None,
+    coating: str | None = None,
+    new_sample: bool = False,
 ) -> DesignResult:
     """Where to measure next for ``target`` (module docstring).
 
@@ -365,10 +444,16 @@ def design(
         same_session: the measured series whose session its new rows continue (default
             ``[design] same_session``; None: every new row is a new session).
         aperture: (diameter, distance) [mm] of a new series (default its ``[series.NAME]``).
+        coating: whose target: ``measured``, ``coating`` or ``new_part``
+            (:mod:`brdf_infer.posterior._targets`; None: the run's); a parameter is the
+            coating's.
+        new_sample: the new rows are taken on one physical sample not yet measured (is
+            another sample worth more than another angle?).
 
     Raises:
         BadInputError: ``same_session`` not a measured series, a new series without an
-            aperture.
+            aperture, a sample's or new part's target of a parameter or of a run written
+            before the targets.
     """
     ensure_float64()
     start = time.perf_counter()
@@ -386,17 +471,18 @@ def design(
     total = len(run.sites["brdf0"])
     keep = np.unique(np.linspace(0, total - 1, min(options.draws, total)).round().astype(int))
     draws = {name: values[keep] for name, values in run.sites.items()}
-    values = target_values(target, draws, scene)
+    coating = design_coating(target, run, coating)
+    values = target_values(target, draws, scene, coating)
     scale = np.std(values, axis=0)
     scale = np.where(scale > 0, scale, 1.0)
-    row_predictive_ = predictive(run, candidates, draws)
+    row_predictive_ = predictive(run, candidates, draws, coating, new_sample)
     chosen, single = _greedy(
         row_predictive_, candidates, target, jnp.asarray(values / scale), float(scale[0]), options
     )
     samples = {name: design_sample(measurements, name) for name in set(candidates.series)}
     for entry in [*chosen, *single]:  # the sample a row is to be taken on
-        entry["sample"] = samples[entry["series"]]
-    current = _current(target, run, scene, scale)
+        entry["sample"] = NEW_SAMPLE if new_sample else samples[entry["series"]]
+    current = _current(target, run, scene, scale, coating)
     rows = measurements.series, measurements.theta_i_deg, measurements.theta_s_deg
     measured = [
         {"series": str(s), "theta_i_deg": float(i), "theta_s_deg": float(t)}
@@ -417,7 +503,33 @@ def design(
         },
         left_out=candidates.left_out,
         same_session=same_session,
+        coating=coating,
+        new_sample=new_sample,
     )
+
+
+def design_coating(target: DesignTarget, run: DesignRun, coating: str | None) -> str:
+    """Whose ``target`` a design shrinks: ``coating`` as asked, else the run's target; a
+    parameter is always the coating's.
+
+    Raises:
+        BadInputError: a parameter asked of a sample or a new part, or a sample's or new
+            part's target of a run written before the targets.
+    """
+    if target.kind in ("param", "all"):
+        if coating not in (None, "coating"):
+            raise BadInputError(
+                f"{target.label} is a parameter of the coating, not of {coating}", field="coating"
+            )
+        return "coating"
+    chosen = coating or run.target
+    if chosen != "coating" and SAMPLE_EFFECT not in run.sites:
+        raise BadInputError(
+            "a run written before the measured and new-part targets: rerun its posterior",
+            file=run.path,
+            field="coating",
+        )
+    return chosen
 
 
 def _greedy(
@@ -475,12 +587,14 @@ def _order(entries: list[dict], target: DesignTarget) -> list[int]:
     return sorted(range(len(entries)), key=lambda i: entries[i]["expected_sd"])
 
 
-def _current(target: DesignTarget, run: DesignRun, scene: Scene, scale) -> dict[str, Any]:
+def _current(
+    target: DesignTarget, run: DesignRun, scene: Scene, scale, coating: str
+) -> dict[str, Any]:
     """Today's median, 95 % interval and sd of the target over every draw of the run (sd: over
     the thinned draws the expectation uses, so that the ratio compares like with like)."""
     if target.kind == "all":
         return {"median": None, "lo95": None, "hi95": None, "sd": 1.0}
-    values = target_values(target, run.sites, scene)[:, 0]
+    values = target_values(target, run.sites, scene, coating)[:, 0]
     return {**interval95(values), "sd": float(scale[0])}
 
 

@@ -64,7 +64,9 @@ from brdf_infer.posterior._run import (
 )
 from brdf_infer.posterior._samplers import Draws, nuts_draws, run_emcee, run_nuts
 from brdf_infer.posterior._targets import (
+    NEW_PART_EFFECT,
     QUESTIONS,
+    SAMPLE_EFFECT,
     chosen_target,
     load_run_target,
     sample_effect_draws,
@@ -86,10 +88,12 @@ __all__ = [
     "FAMILY_TIS_DRAWS",
     "LEFT_OUT_SIGMA",
     "LINEAR",
+    "NEW_PART_EFFECT",
     "NOISE_SITES",
     "POSTERIOR_FILE",
     "QUANTILES",
     "QUESTIONS",
+    "SAMPLE_EFFECT",
     "SUMMARY_FILE",
     "THRESHOLDS",
     "Band",
