@@ -392,12 +392,15 @@ class PosteriorModel:
         factor, diagonal = covariance_factors(noise, scales, g_rot, g_cam)
         return LikelihoodParts(mean, factor, diagonal)
 
-    def draw_parts(self, sites: dict) -> LikelihoodParts:
-        """:meth:`likelihood_parts` of every draw (leading axis) of a posterior's sites."""
+    def draw_parts(self, sites: dict, data: ModelData | None = None) -> LikelihoodParts:
+        """:meth:`likelihood_parts` of every draw (leading axis) of a posterior's sites, on
+        ``data`` (default: the scene's; another data set of the same shape shares the
+        compiled program)."""
+        data = self.data if data is None else data
         physical = {name: jnp.asarray(sites[name]) for name in self.family.parameters}
         count = next(iter(physical.values())).shape[0]
-        scales = drawn_noise_scales(self.errors, self.data.noise, sites, count)
-        return _draw_parts_program(self)(physical, scales, self.data)
+        scales = drawn_noise_scales(self.errors, data.noise, sites, count)
+        return _draw_parts_program(self)(physical, scales, data)
 
 
 _DRAW_PARTS: dict[int, tuple[PosteriorModel, object]] = {}

@@ -42,6 +42,7 @@ from brdf_infer.errors import BadInputError
 from brdf_infer.model import ModelFamily
 from brdf_infer.posterior._bands import interval95
 from brdf_infer.posterior._blocks import factor_columns, over_draw_blocks
+from brdf_infer.posterior._likelihood import ModelData
 from brdf_infer.posterior._model import PosteriorModel
 from brdf_infer.posterior._results import family_draws, run_posterior_group, sample_index
 from brdf_infer.scene import TARGETS
@@ -88,19 +89,20 @@ def _conditional_effects(residual, rest, diagonal, members, tau):
 
 
 def sample_effect_moments(
-    model: PosteriorModel, sites: dict[str, np.ndarray]
+    model: PosteriorModel, sites: dict[str, np.ndarray], data: ModelData | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
     """The conditional mean (draws, samples) and covariance (draws, samples, samples) [ln R]
     of the measured samples' effects u given each posterior draw and the rows (module
     docstring), samples in ``model.sample_names``' order; zeros where the error model has no
-    sample effect. ``sites``: (chains, draws, ...)."""
+    sample effect. ``sites``: (chains, draws, ...); ``data``: the rows (default the
+    scene's; a simulated data set of the same layout)."""
     flat = {k: np.reshape(v, (-1, *np.shape(v)[2:])) for k, v in sites.items()}
     count = len(next(iter(flat.values())))
     samples = len(model.sample_names)
     errors = model.errors
     if not errors.sample_effects:
         return np.zeros((count, samples)), np.zeros((count, samples, samples))
-    data = model.data
+    data = model.data if data is None else data
     members = np.zeros((len(model.row_samples), samples))
     members[np.arange(len(model.row_samples)), sample_index(model)] = 1.0
     members = jnp.asarray(members * np.asarray(data.mask)[:, None])
@@ -110,7 +112,7 @@ def sample_effect_moments(
     measured = jnp.asarray(data.mask) > 0
 
     def compute(block: dict[str, np.ndarray]) -> tuple:
-        parts = model.draw_parts(block)
+        parts = model.draw_parts(block, data)
         size = len(block[model.family.parameters[0]])
         tau = jnp.asarray(block.get("sample_sd", np.full(size, errors.stated_sample_sd)))
         diagonal = jnp.where(measured, parts.diagonal - alone * tau[:, None] ** 2, 1.0)
@@ -124,11 +126,14 @@ def sample_effect_moments(
 
 
 def sample_effect_draws(
-    model: PosteriorModel, sites: dict[str, np.ndarray], seed: int
+    model: PosteriorModel,
+    sites: dict[str, np.ndarray],
+    seed: int,
+    data: ModelData | None = None,
 ) -> np.ndarray:
     """One draw of every measured sample's effect u_j [ln R] per posterior draw,
     (draws, samples), from its conditional (:func:`sample_effect_moments`)."""
-    mean, covariance = sample_effect_moments(model, sites)
+    mean, covariance = sample_effect_moments(model, sites, data)
     values, vectors = np.linalg.eigh(covariance)  # τ = 0 leaves a zero covariance
     root = vectors * np.sqrt(np.clip(values, 0.0, None))[:, None, :]
     normal = np.random.default_rng(seed).standard_normal(mean.shape)

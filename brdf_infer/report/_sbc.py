@@ -26,6 +26,8 @@ LABELS = {
     "theta_s0": "θs0 [deg]",
     "dphi_scale": "Δφ factor (Eq. 8) [-]",
     "tis70": "TIS(70°) [-]",
+    "tis70_measured": "TIS(70°), sample(s) measured [-]",
+    "tis70_new_part": "TIS(70°), a new part [-]",
     "sample_sd": "sample sd τ [ln R]",
     "repeatability": "repeatability σ_rep [ln R]",
 }

@@ -8,11 +8,13 @@ thinned posterior draws. If the posterior is calibrated, the ranks of every quan
 uniform on {0, …, L}. All replicates run side by side in one compiled, vmapped NUTS program.
 
 Checks, per quantity (the family's physical parameters, for ``strumik2024`` the six of
-Eq. 7 in paper units; TIS(70°); and the learned noise scales of the error model,
-``sample_sd`` and ``repeatability``, where the scene learns them): χ² of the rank histogram
-(up to 20 bins of whole ranks, at least 10 replicates expected in each) against uniform counts,
-Kolmogorov–Smirnov of the randomised ranks (rank + U)/(L + 1) against U(0, 1), and the coverage
-of the central 50/90/95 % posterior intervals against the binomial 99 % range. The verdict
+Eq. 7 in paper units; TIS(70°), and where the rows carry sample effects TIS(70°) of the
+sample(s) measured and of a new part (:func:`target_quantities`); and the learned noise
+scales of the error model, ``sample_sd`` and ``repeatability``, where the scene learns them):
+χ² of the rank histogram (up to 20 bins of whole ranks, at least 10 replicates expected in
+each) against uniform counts, Kolmogorov–Smirnov of the randomised ranks (rank + U)/(L + 1)
+against U(0, 1), and the coverage of the central 50/90/95 % posterior intervals against the
+binomial 99 % range. The verdict
 controls the family-wise error over every test it runs (Bonferroni over the three tests — χ²,
 KS, 90 % coverage — of each of the m quantities: each fails below 0.01/(3m)), so a calibrated
 posterior passes at least 99 % of the time whatever the number of quantities (tested on uniform
@@ -58,6 +60,8 @@ from brdf_infer.posterior import (
     build_model,
     chain_keys,
     prior_draws,
+    sample_effect_draws,
+    target_log_factor,
 )
 from brdf_infer.runs.folder import SBC_FILE as SBC_FILE  # the old name, kept
 from brdf_infer.scene import Scene
@@ -186,6 +190,56 @@ def ranked_quantities(
     return _ranked_values(simulated, model.family), _ranked_values(thinned, model.family)
 
 
+def target_quantities(
+    models: tuple[PosteriorModel, PosteriorModel],
+    simulated: dict,
+    sites: dict[str, np.ndarray],
+    datasets: ModelData,
+    settings: SbcSettings,
+) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """(truth, posterior) of TIS(70°) of the sample(s) measured and of a new part
+    (:mod:`brdf_infer.posterior._targets`), ``tis70_measured`` and ``tis70_new_part``.
+
+    The simulator marginalises the sample effects, so each replicate's true effects are drawn
+    from their conditional given its true parameters and its data, p(u | θ, y): with θ from
+    the prior and y from p(y | θ), that makes (θ, u, y) a draw of the joint. A new part's true
+    effect is τ z. The posterior's are the run's: each thinned draw's u from p(u | θ_s, y)
+    under the inference's model, a new part's τ_s z_s.
+
+    Args:
+        models: the simulator's model and the inference's (a planted fault's).
+        simulated: the true sites, one value per replicate (leading axis).
+        sites: NUTS draws of one chain per replicate, (replicates, 1, iterations, ...).
+        datasets: each replicate's data (leading axis).
+        settings: the SBC settings (thinning, seed).
+    """
+    model, inference = models
+    thinned = {k: v[:, 0, settings.thin - 1 :: settings.thin] for k, v in sites.items()}
+    replicates = len(simulated["obs"])
+    names = model.sample_names
+    truth_tis = _tis70(simulated, model.family)
+    draws_tis = _tis70(thinned, model.family)
+    rng = np.random.default_rng(settings.seed + 5)
+    truth = {"tis70_measured": np.empty(replicates), "tis70_new_part": np.empty(replicates)}
+    posterior = {name: np.empty_like(draws_tis) for name in truth}
+    for r in range(replicates):
+        data = jax.tree_util.tree_map(lambda leaf, r=r: leaf[r], datasets)
+        true_sites = {k: np.asarray(v)[r][None, None] for k, v in simulated.items() if k != "obs"}
+        effects = sample_effect_draws(model, true_sites, settings.seed + 7 * r, data)
+        factor = target_log_factor("measured", effects, np.zeros(1), names)
+        truth["tis70_measured"][r] = truth_tis[r] * np.exp(factor[0])
+        tau = float(np.asarray(simulated["sample_sd"])[r])
+        truth["tis70_new_part"][r] = truth_tis[r] * np.exp(tau * rng.standard_normal())
+        own = {k: np.asarray(v)[r][None] for k, v in thinned.items()}
+        effects = sample_effect_draws(inference, own, settings.seed + 7 * r + 3, data)
+        zeros = np.zeros(len(effects))
+        factor = target_log_factor("measured", effects, zeros, names)
+        posterior["tis70_measured"][r] = draws_tis[r] * np.exp(factor)
+        new_part = own["sample_sd"][0] * rng.standard_normal(len(effects))
+        posterior["tis70_new_part"][r] = draws_tis[r] * np.exp(new_part)
+    return truth, posterior
+
+
 def ranks_of(truth: dict[str, np.ndarray], posterior: dict[str, np.ndarray]) -> dict:
     """The rank of each truth among its replicate's draws (0 … draws), per quantity; a
     quantity the scene fixes (every draw equals the truth) is left out."""
@@ -236,6 +290,12 @@ def run_sbc(
         description="SBC",
     )
     truth, posterior = ranked_quantities(model, simulated, output.sites, settings.thin)
+    if model.errors.sample_effects and "tis70" in truth:
+        target_truth, target_posterior = target_quantities(
+            (model, inference), simulated, output.sites, datasets, settings
+        )
+        truth.update(target_truth)
+        posterior.update(target_posterior)
     result = assess_ranks(settings, ranks_of(truth, posterior))
     return dataclasses.replace(
         result,
