@@ -33,7 +33,7 @@ from brdf_infer.design import (
     parse_target,
     target_values,
 )
-from brdf_infer.model.params import PARAM_NAMES, Params
+from brdf_infer.model.params import DPHI_NAME, PARAM_NAMES, Params
 from brdf_infer.posterior import NutsProgram, build_model_data, build_posterior_model, chain_keys
 from brdf_infer.scene import Scene
 from brdf_infer.studies.synthetic import SyntheticLab
@@ -100,7 +100,8 @@ class Fitter:
         self.programs: dict[int, NutsProgram] = {}
 
     def fit(self, measurements: Measurements, seed: int) -> dict[str, np.ndarray]:
-        """Draws (flattened over chains) of the parameters and the learned noise scales."""
+        """Draws (flattened over chains) of the parameters (Eq. 8's width factor too, where the
+        scene leaves it uncertain) and the learned noise scales."""
         rows = len(measurements)
         if rows not in self.programs:
             model = build_posterior_model(self.scene, measurements)
@@ -110,7 +111,7 @@ class Fitter:
             chain_keys(seed, 1, self.chains)[0],
             self.draws,
         )
-        names = [*PARAM_NAMES, *NOISE_SITES]
+        names = [*PARAM_NAMES, DPHI_NAME, *NOISE_SITES]
         return {n: np.reshape(output.sites[n], -1) for n in names if n in output.sites}
 
 
