@@ -253,3 +253,26 @@ def record_mismatches(value, record_type, path: str = "") -> list[str]:
             return [f"{path}: not an object"]
         return [m for k, v in value.items() for m in record_mismatches(v, args[1], f"{path}.{k}")]
     raise TypeError(f"{path}: no check for {record_type!r}")
+
+
+def series_ii_scene_file(folder, errors: str = ""):
+    """A scene of series II of the bundled rows alone (18 rows, one physical sample) with
+    ``errors`` as its ``[errors]`` lines; its file (``scene.toml`` in ``folder``)."""
+    from brdf_infer.scene import load_scene
+
+    lya = load_scene("lya")
+    rows = lya.load_measurements()
+    lines = ["series,sample,theta_i_deg,theta_s_deg,reflectance,reflectance_err"]
+    for k in np.flatnonzero(rows.series == "II"):
+        lines.append(
+            f"II,{rows.sample[k]},{rows.theta_i_deg[k]:g},{rows.theta_s_deg[k]:g},"
+            f"{rows.reflectance[k]:.6e},{rows.reflectance_err[k]:.6e}"
+        )
+    (folder / "rows.csv").write_text("\n".join(lines) + "\n")
+    geometry = lya.series["II"]
+    (folder / "scene.toml").write_text(
+        'name = "series-ii"\nmeasurements = "rows.csv"\n[series.II]\n'
+        f"aperture_diameter_mm = {geometry.aperture_diameter_mm}\n"
+        f"aperture_distance_mm = {geometry.aperture_distance_mm}\n[errors]\n{errors}\n"
+    )
+    return folder / "scene.toml"

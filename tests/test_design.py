@@ -215,6 +215,12 @@ def test_the_grid_holds_only_what_the_lya_goniometer_reaches_and_counts_the_rest
     assert grid_candidates(lax, "II").left_out["reachable"] == 513
 
 
+def four_draws(run) -> dict:
+    """Four evenly spaced draws of a design run's sites."""
+    keep = np.arange(0, len(run.sites["brdf0"]), len(run.sites["brdf0"]) // 4)[:4]
+    return {name: values[keep] for name, values in run.sites.items()}
+
+
 def _dense_conditional(run, candidates, draws, series, known=False, new_sample=False):
     """Mean and covariance of the candidates' rows given the measured ones from the dense
     joint Gaussian of the error model with the rows appended to the data in ``series`` (an
@@ -278,8 +284,7 @@ def test_a_sessions_predictive_is_the_dense_conditional_of_rows_appended_to_the_
         phi_s_deg=np.full(3, np.nan),
         session=np.array([session] * 3),
     )
-    keep = np.arange(0, len(run.sites["brdf0"]), len(run.sites["brdf0"]) // 4)[:4]
-    draws = {name: values[keep] for name, values in run.sites.items()}
+    draws = four_draws(run)
     got = predictive(run, candidates, draws)
     mean, covariance = _dense_conditional(run, candidates, draws, appended_as)
     np.testing.assert_allclose(got.mean, mean, rtol=1e-6, atol=1e-9)
@@ -308,8 +313,7 @@ def test_a_targets_predictive_is_the_dense_conditional_given_what_it_conditions_
         phi_s_deg=np.full(3, np.nan),
         session=np.array(["II"] * 3),
     )
-    keep = np.arange(0, len(run.sites["brdf0"]), len(run.sites["brdf0"]) // 4)[:4]
-    draws = {name: values[keep] for name, values in run.sites.items()}
+    draws = four_draws(run)
     got = predictive(run, candidates, draws, coating, new_sample)
     known = coating == "measured"
     mean, covariance = _dense_conditional(run, candidates, draws, "II", known, new_sample)
@@ -339,8 +343,7 @@ def test_an_out_of_plane_rows_predictive_carries_each_draws_out_of_plane_width(n
         phi_s_deg=np.array([150.0, 165.0, np.nan]),
         session=np.array(["new"] * 3),
     )
-    keep = np.arange(0, len(run.sites["brdf0"]), len(run.sites["brdf0"]) // 4)[:4]
-    draws = {name: values[keep] for name, values in run.sites.items()}
+    draws = four_draws(run)
     assert np.ptp(draws["dphi_scale"]) > 0.05  # the draws differ in their width
     got = predictive(run, candidates, draws)
     mean, covariance = _dense_conditional(run, candidates, draws, "III")
@@ -651,10 +654,10 @@ def test_for_a_new_part_of_a_one_sample_scene_another_sample_is_worth_more(tmp_p
     design seeds 0–3: 1.61–1.78 % against 1.95–1.98 %, from 2.44 %; the gap, ≥ 0.17, is over
     twice the new sample's spread over the seeds)."""
     from brdf_infer.posterior import run_posterior
-    from tests.helpers import REDUCED_NUTS
-    from tests.test_docs_numbers import _series_ii_scene
+    from brdf_infer.scene import load_scene
+    from tests.helpers import REDUCED_NUTS, series_ii_scene_file
 
-    scene = _series_ii_scene(tmp_path, "")
+    scene = load_scene(series_ii_scene_file(tmp_path))
     run_posterior(
         scene, scene.load_measurements(), out=tmp_path / "run", progress=False, **REDUCED_NUTS
     )

@@ -414,30 +414,6 @@ SERIES_II_ROWS = {
 }
 
 
-def _series_ii_scene(folder, errors: str):
-    """Series II of the bundled rows as a scene of its own (one sample) with ``errors``."""
-    import numpy as np
-
-    from brdf_infer.scene import load_scene
-
-    lya = load_scene("lya")
-    rows = lya.load_measurements()
-    lines = ["series,sample,theta_i_deg,theta_s_deg,reflectance,reflectance_err"]
-    for k in np.flatnonzero(rows.series == "II"):
-        lines.append(
-            f"II,{rows.sample[k]},{rows.theta_i_deg[k]:g},{rows.theta_s_deg[k]:g},"
-            f"{rows.reflectance[k]:.6e},{rows.reflectance_err[k]:.6e}"
-        )
-    (folder / "rows.csv").write_text("\n".join(lines) + "\n")
-    geometry = lya.series["II"]
-    (folder / "scene.toml").write_text(
-        'name = "series-ii"\nmeasurements = "rows.csv"\n[series.II]\n'
-        f"aperture_diameter_mm = {geometry.aperture_diameter_mm}\n"
-        f"aperture_distance_mm = {geometry.aperture_distance_mm}\n[errors]\n{errors}\n"
-    )
-    return load_scene(folder / "scene.toml")
-
-
 @pytest.mark.slow
 def test_the_docs_table_of_series_ii_alone_agrees_with_its_runs(nuts_run, tmp_path):
     """Each interval of the table (τ's default prior; τ from a run of the bundled scene, here
@@ -449,7 +425,8 @@ def test_the_docs_table_of_series_ii_alone_agrees_with_its_runs(nuts_run, tmp_pa
     import numpy as np
 
     from brdf_infer.posterior import load_run_target, run_posterior
-    from tests.helpers import mcmc_quantile_se
+    from brdf_infer.scene import load_scene
+    from tests.helpers import mcmc_quantile_se, series_ii_scene_file
 
     text = (REPO / "docs" / "posterior.md").read_text()
     rows = {row[0]: row[1:] for row in _table_rows(text, SERIES_II_TABLE)}
@@ -458,7 +435,7 @@ def test_the_docs_table_of_series_ii_alone_agrees_with_its_runs(nuts_run, tmp_pa
     for column, lines in enumerate(errors):
         folder = tmp_path / f"column{column}"
         folder.mkdir()
-        scene = _series_ii_scene(folder, lines)
+        scene = load_scene(series_ii_scene_file(folder, lines))
         run = run_posterior(  # the docs' settings: `posterior --draws 4000`
             scene, scene.load_measurements(), out=folder / "run", progress=False, draws=4000
         )

@@ -23,7 +23,14 @@ from brdf_infer.posterior import (
 )
 from brdf_infer.posterior._targets import sample_effect_moments, targets_record
 from brdf_infer.scene import load_scene
-from tests.helpers import MC_BOUND, assert_allclose, mcmc_quantile_se, quantile_se, run_cli
+from tests.helpers import (
+    MC_BOUND,
+    assert_allclose,
+    mcmc_quantile_se,
+    quantile_se,
+    run_cli,
+    series_ii_scene_file,
+)
 from tests.test_families import PHYSICAL
 
 # ---------------------------------------------------------------- a sample effect is a factor
@@ -202,27 +209,6 @@ def test_the_targets_record_holds_three_answers_and_per_sample_intervals():
 # ---------------------------------------------------------------- τ from another run
 
 
-def _tau_scene(folder: Path, errors: str) -> Path:
-    """A one-sample scene (series II of the bundled data) with ``errors`` in its [errors]."""
-    from brdf_infer.tables.measurements import load_measurements
-
-    rows = load_measurements(load_scene("lya").measurements_path)
-    lines = ["series,sample,theta_i_deg,theta_s_deg,reflectance,reflectance_err"]
-    for k in np.flatnonzero(rows.series == "II"):
-        lines.append(
-            f"II,1,{rows.theta_i_deg[k]:g},{rows.theta_s_deg[k]:g},"
-            f"{rows.reflectance[k]:.6e},{rows.reflectance_err[k]:.6e}"
-        )
-    (folder / "rows.csv").write_text("\n".join(lines) + "\n")
-    geometry = load_scene("lya").series["II"]
-    (folder / "scene.toml").write_text(
-        'name = "one"\nmeasurements = "rows.csv"\n[series.II]\n'
-        f"aperture_diameter_mm = {geometry.aperture_diameter_mm}\n"
-        f"aperture_distance_mm = {geometry.aperture_distance_mm}\n[errors]\n{errors}\n"
-    )
-    return folder / "scene.toml"
-
-
 def _fake_run(folder: Path, tau: np.ndarray) -> Path:
     """A run folder whose posterior.nc holds τ draws only (what a scene reads of it)."""
     import arviz
@@ -241,7 +227,7 @@ def test_a_run_of_the_coating_gives_tau_its_prior(tmp_path):
     rng = np.random.default_rng(0)
     tau = np.abs(rng.normal(0.03, 0.02, 4000)) + 1e-4  # half-normal-like: ln τ skewed left
     _fake_run(tmp_path / "coating_run", tau)
-    scene = load_scene(_tau_scene(tmp_path, 'sample_sd_from = "coating_run"'))
+    scene = load_scene(series_ii_scene_file(tmp_path, 'sample_sd_from = "coating_run"'))
     prior = noise_prior(scene.errors, "sample_sd")
     for q in (0.05, 0.5, 0.95):
         assert float(prior.cdf(np.quantile(tau, q))) == pytest.approx(q, abs=0.02)
@@ -263,13 +249,13 @@ def test_a_run_of_the_coating_gives_tau_its_prior(tmp_path):
 def test_a_bad_tau_source_is_refused_naming_its_field(tmp_path, errors, match):
     _fake_run(tmp_path / "few", np.full(20, 0.03))
     with pytest.raises(BadInputError, match=match):
-        load_scene(_tau_scene(tmp_path, errors))
+        load_scene(series_ii_scene_file(tmp_path, errors))
 
 
 def test_a_stated_tau_is_data_of_the_model_not_a_site(tmp_path):
     """``sample_sd = 0.05`` with its source: no τ site; the draws' noise scales carry 0.05."""
     scene = load_scene(
-        _tau_scene(tmp_path, 'sample_sd = 0.05\nsample_sd_source = "six panels, 2025"')
+        series_ii_scene_file(tmp_path, 'sample_sd = 0.05\nsample_sd_source = "six panels, 2025"')
     )
     assert not scene.errors.learns_sample_sd and scene.errors.stated_sample_sd == 0.05
     from brdf_infer.posterior._likelihood import drawn_noise_scales
@@ -293,7 +279,7 @@ def one_sample_run(tmp_path_factory):
     folder = tmp_path_factory.mktemp("one")
     tau = np.abs(np.random.default_rng(0).normal(0.0, 0.045, 4000))
     _fake_run(folder / "coating_run", tau)
-    scene = load_scene(_tau_scene(folder, 'sample_sd_from = "coating_run"'))
+    scene = load_scene(series_ii_scene_file(folder, 'sample_sd_from = "coating_run"'))
     run = run_posterior(
         scene, scene.load_measurements(), out=folder / "run", seed=3, progress=False, **REDUCED_NUTS
     )
