@@ -239,7 +239,7 @@ def test_a_run_of_the_coating_gives_tau_its_prior(tmp_path):
 @pytest.mark.parametrize(
     "errors, match",
     [
-        ('sample_sd_from = "nowhere"', "no posterior.nc here"),
+        ('sample_sd_from = "nowhere"', "errors.sample_sd_from': no posterior.nc here"),
         ("sample_sd = 0.03", "needs its source"),
         ('sample_sd = 0.03\nsample_sd_source = "x"\nsample_sd_from = "run"', "exclude each other"),
         ('sample_sd = "large"', 'expected "learned" or a number'),

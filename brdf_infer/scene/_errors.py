@@ -91,7 +91,10 @@ def _sample_spread(table: dict, path: Path, number) -> dict:
         return {"sample_sd": number("sample_sd", 0.0), "sample_sd_source": source}
     if not run:
         return {"sample_sd_source": source}
-    draws = RunFolder(path.parent / run).posterior_draws("sample_sd")
+    try:
+        draws = RunFolder(path.parent / run).posterior_draws("sample_sd")
+    except BadInputError as error:
+        raise BadInputError(error.problem, file=error.file, field="errors.sample_sd_from") from None
     draws = draws[np.isfinite(draws) & (draws > 0)]
     if draws.size < MIN_TAU_DRAWS:
         raise BadInputError(
