@@ -215,7 +215,7 @@ def test_old_options_reproduce_the_old_likelihood_bit_for_bit(lya):
     series_one_hot = (measurements.series[:, None] == np.array(["I", "II"])[None, :]).astype(float)
     assert np.array_equal(np.asarray(layout.calibration_members), series_one_hot)
     assert not np.any(np.asarray(layout.calibration_alone))
-    assert float(layout.calibration_sd) == 0.065
+    assert np.all(np.asarray(layout.calibration_sd) == 0.065)
     assert np.array_equal(
         np.asarray(layout.sigma_row),
         measurements.reflectance_err / measurements.reflectance / np.sqrt(12),

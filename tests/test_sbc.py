@@ -352,15 +352,15 @@ def test_the_measured_samples_and_a_new_parts_tis_are_calibrated(tmp_path, monke
     from brdf_infer.studies.synthetic import write_hemisphere_scene
 
     if planted:
-        original = sbc_module.sample_effect_draws
+        original = sbc_module.latent_effect_draws
 
         def moved(model, sites, seed, data=None):
-            draws = original(model, sites, seed, data)
+            draws, calibration = original(model, sites, seed, data)
             if len(draws) == 1:  # the truth's, from its conditional
-                return draws
-            return draws + np.asarray(sites["sample_sd"]).reshape(-1, 1)
+                return draws, calibration
+            return draws + np.asarray(sites["sample_sd"]).reshape(-1, 1), calibration
 
-        monkeypatch.setattr(sbc_module, "sample_effect_draws", moved)
+        monkeypatch.setattr(sbc_module, "latent_effect_draws", moved)
     scene = load_scene(write_hemisphere_scene(tmp_path, UV_PAPER, dphi_scale=1.0, seed=2))
     result = run_sbc(scene, scene.load_measurements(), SbcSettings(replicates=100))
     assert "tis70_new_part" in result.ranks and "tis70_measured" in result.ranks

@@ -132,8 +132,8 @@ def test_the_sample_effects_conditional_is_the_dense_gaussian_conditional(tmp_pa
         assert_allclose(covariance[k], dense_cov, rtol=0, atol=1e-12)
     original = _targets._conditional_effects
 
-    def without_calibration(residual, rest, diagonal, members, tau):
-        return original(residual, jnp.zeros_like(rest), diagonal, members, tau)
+    def without_calibration(residual, rest, diagonal, members, tau, scale):
+        return original(residual, jnp.zeros_like(rest), diagonal, members, tau, scale)
 
     _targets._conditional_effects = without_calibration
     try:

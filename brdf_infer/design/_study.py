@@ -315,8 +315,7 @@ def predictive(
     else:  # fixed by the scene (learned: a site of the run)
         fixed = float(errors.repeatability) if errors.model == "generative" else 0.0
         repeatability = jnp.full(count, fixed)
-    calibration = float(layout.calibration_sd)
-    angles = errors.angles_on
+    calibration = layout.calibration_sd  # per new row, as the rotation and camera scales
     # each draw's own out-of-plane width (Eq. 8 scaled): an out-of-plane candidate's
     # prediction then carries Δφ's uncertainty, and its outcome can teach it
     dphi_scale = jnp.asarray(draws.get(DPHI_NAME, np.ones(count)))
@@ -324,7 +323,7 @@ def predictive(
     def one(p, scale, tau, rep, res, factor, diagonal, shift):
         widths = with_dphi_scale(constants, scale)
         mean = predicted_log_reflectance(p, rows, fold, widths) + shift
-        if angles:
+        if errors.angles_on:
             g_rot, g_cam = angle_slopes(
                 lambda ti, ts: log_reflectance_at(ti, ts, p, fold, widths, rows),
                 rows.theta_i_deg,
@@ -333,22 +332,22 @@ def predictive(
             )
         else:
             g_rot = g_cam = jnp.zeros_like(mean)
-        rotation = g_rot * errors.rotation_deg * angles
+        rotation = g_rot * layout.rotation_deg
         loading = (
             (0.0 if known else tau) * one_hot_sample
-            + calibration * one_hot_cal
+            + calibration[:, None] * one_hot_cal
             + rotation[:, None] * one_hot_rotation
         )
         own = (
             layout.sigma_row**2
             + rep**2
-            + (g_cam * errors.camera_deg * angles) ** 2
+            + (g_cam * layout.camera_deg) ** 2
             + rotation_new * rotation**2
             + own_sample * tau**2
             + jnp.asarray((calibration_col < 0) & (fresh_col < 0), float) * calibration**2
         )
         given = row_predictive(res, factor, diagonal, mean, loading, own)
-        fresh = [calibration * fresh_one_hot] if fresh_groups else []
+        fresh = [calibration[:, None] * fresh_one_hot] if fresh_groups else []
         if new_sample:  # the new sample's effect, shared by every candidate
             fresh.append(tau * jnp.ones((mean.shape[0], 1)))
         if not fresh:

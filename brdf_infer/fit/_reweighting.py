@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from brdf_infer.model import ModelFamily, Physical
-from brdf_infer.model.error_model import angle_slopes, theta_s_per_rotation
+from brdf_infer.model.error_model import NoiseLayout, angle_slopes
 from brdf_infer.predict.observations import family_log_reflectance_at, log_reflectance
 from brdf_infer.scene import Scene
 
@@ -18,9 +18,9 @@ class Reweighting:
     """The per-row σ of least squares, updated after each solve (:mod:`brdf_infer.fit.lsq`'s
     docstring)."""
 
-    def __init__(self, scene: Scene, model, member: ModelFamily, n_free: int):
+    def __init__(self, scene: Scene, model, member: ModelFamily, n_free: int, layout: NoiseLayout):
         errors = scene.errors
-        self.model, self.member, self.errors = model, member, errors
+        self.model, self.member, self.errors, self.layout = model, member, errors, layout
         self.value_variance = np.asarray(model.data.sigma) ** 2
         self.generative = errors.model == "generative"
         self.dof = model.n_points - n_free
@@ -45,17 +45,17 @@ class Reweighting:
         self.solves += 1
         if not self.generative:
             return False
-        data, errors = self.model.data, self.errors
+        data, errors, layout = self.model.data, self.errors, self.layout
         if errors.angles_on:
             g_rot, g_cam = angle_slopes(
                 lambda ti, ts: family_log_reflectance_at(self.member, ti, ts, physical, data),
                 data.theta_i_deg,
                 data.theta_s_deg,
-                theta_s_per_rotation(errors, len(self.value_variance)),
+                layout.theta_s_per_rotation,
             )
             self.rotation_slope = np.asarray(g_rot)
             self.angle_variance = np.asarray(
-                (g_rot * errors.rotation_deg) ** 2 + (g_cam * errors.camera_deg) ** 2
+                (g_rot * layout.rotation_deg) ** 2 + (g_cam * layout.camera_deg) ** 2
             )
         if self.learned:
             residuals = np.asarray(

@@ -246,7 +246,8 @@ def fit_lsq(
     solve = _batched_solver(
         solver, rtol, atol, max_steps, space.free_index, member.name, member.fold
     )
-    reweight = Reweighting(scene, model, member, len(space.free))
+    layout = noise_layout(scene.errors, measurements)
+    reweight = Reweighting(scene, model, member, len(space.free), layout)
     model = model.with_sigma(reweight.sigma)
     solved = _solve_reweighted(solve, u0, model, space, reweight)
     return _lsq_result(
@@ -436,9 +437,9 @@ def _residual_trends(
             "residual_trend_statistic": float("nan"),
             "residual_trend_detectable": {},
         }
-    layout = noise_layout(scene.errors, measurements)
-    rotation = reweight.rotation_slope * scene.errors.rotation_deg
-    calibration = float(layout.calibration_sd)
+    layout = reweight.layout
+    rotation = reweight.rotation_slope * np.asarray(layout.rotation_deg, float)
+    calibration = np.asarray(layout.calibration_sd, float)
     rotation_alone = np.asarray(layout.rotation_alone, float)
     noise = LowRankNoise(  # no rows × rows object: the parts of D + W Wᵀ
         diagonal=sigma**2
@@ -447,7 +448,7 @@ def _residual_trends(
         factor=np.column_stack(
             [
                 rotation[:, None] * np.asarray(layout.rotation_members, float),
-                calibration * np.asarray(layout.calibration_members, float),
+                calibration[:, None] * np.asarray(layout.calibration_members, float),
             ]
         ),
     )

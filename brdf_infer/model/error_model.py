@@ -64,7 +64,8 @@ counts the measurement noise twice (s is computed from values that already carry
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections import Counter
+from dataclasses import dataclass, field, replace
 from typing import NamedTuple
 
 import jax
@@ -72,7 +73,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from brdf_infer.errors import BadInputError
-from brdf_infer.tables.measurements import Measurements
+from brdf_infer.tables.measurements import CAMPAIGN_SEPARATOR, Measurements
 
 ERROR_MODELS = ("generative", "spread")
 CALIBRATIONS = ("per_series", "per_sample", "none")
@@ -81,7 +82,7 @@ ROTATION_COUPLINGS = ("camera_follows", "camera_fixed")
 THETA_S_PER_ROTATION = {"camera_follows": 1.0, "camera_fixed": -1.0}
 ANGLE_METHODS = ("linearised", "latent")
 # settings a scene's [errors] does not hold: loading derives them from its keys
-DERIVED = ("sample_sd_log_kde",)
+DERIVED = ("sample_sd_log_kde", "campaign_errors")
 LEARNED = "learned"
 # the options that are data of the compiled likelihood (NoiseLayout), not model structure
 DATA_OPTIONS = (
@@ -139,6 +140,10 @@ class ErrorSettings:
             included: what judges a least-squares fit's learned σ_rep
             (:mod:`brdf_infer.fit.quality`) [ln R]; a scene without the key gets its
             ``reflectance_rel`` (0.065 by default).
+        campaign_errors: a pooled scene's campaigns (``[campaigns.NAME]``), each with the
+            :data:`DATA_OPTIONS` its own ``[campaigns.NAME.errors]`` sets over these (empty:
+            one measurement file, no campaigns); a campaign's rows are those whose series
+            is named ``NAME/…`` (:func:`row_campaigns`).
     """
 
     model: str = "generative"
@@ -161,6 +166,18 @@ class ErrorSettings:
     repeatability: float | str = LEARNED
     repeatability_sd_prior: float = 0.1
     expected_repeatability: float = 0.065
+    campaign_errors: dict[str, dict] = field(default_factory=dict)
+
+    def of_campaign(self, name: str) -> ErrorSettings:
+        """The settings of campaign ``name``'s rows: these with its own data options over
+        them (its own per-series ``images_per_row`` names its series without the prefix)."""
+        own = dict(self.campaign_errors[name])
+        images = own.get("images_per_row")
+        if isinstance(images, dict):
+            own["images_per_row"] = {
+                f"{name}{CAMPAIGN_SEPARATOR}{series}": count for series, count in images.items()
+            }
+        return replace(self, **own, campaign_errors={})
 
     @property
     def learns_repeatability(self) -> bool:
@@ -227,7 +244,7 @@ class ErrorSettings:
         return {
             k: v
             for k, v in self.describe().items()
-            if k not in DATA_OPTIONS and k != "expected_repeatability"
+            if k not in (*DATA_OPTIONS, "expected_repeatability", "campaign_errors")
         }
 
 
@@ -246,14 +263,14 @@ class NoiseLayout(NamedTuple):
         calibration_members: one-hot (rows × calibration groups with two or more rows): the
             series, the (series, sample) pairs, or none (``errors.calibration``).
         calibration_alone: 1 where the row is its calibration group's only row.
-        calibration_sd: σ_cal of a calibration factor [ln R] (a scalar; 0: none).
+        calibration_sd: σ_cal of the row's calibration factor [ln R] (0: none).
         rotation_members: one-hot (rows × rotation settings (series, sample, θi) with two or
             more rows).
         rotation_alone: 1 where the row is its rotation setting's only row.
         theta_s_per_rotation: s = ∂θs/∂ε of each row: +1 when the camera follows the specular
             beam, −1 when it stays put (``errors.rotation_coupling``).
-        rotation_deg: σ_rot of a sample rotation [deg] (a scalar; 0: the angle errors off).
-        camera_deg: σ_cam of a camera position [deg] (a scalar; 0: the angle errors off).
+        rotation_deg: σ_rot of the row's sample rotation [deg] (0: the angle errors off).
+        camera_deg: σ_cam of the row's camera position [deg] (0: the angle errors off).
     """
 
     sigma_row: jnp.ndarray
@@ -270,7 +287,8 @@ class NoiseLayout(NamedTuple):
 
 
 class NoiseScales(NamedTuple):
-    """Scales of the noise sources for one draw (ln R units, angles in degrees)."""
+    """Scales of the noise sources for one draw (ln R units, angles in degrees): τ and σ_rep
+    one each; σ_cal, σ_rot and σ_cam per row (:class:`NoiseLayout`) or one for all."""
 
     sample_sd: jnp.ndarray
     repeatability: jnp.ndarray
@@ -369,34 +387,94 @@ def theta_s_per_rotation(settings: ErrorSettings, rows: int) -> np.ndarray:
     return np.full(rows, THETA_S_PER_ROTATION[settings.rotation_coupling])
 
 
-def noise_layout(settings: ErrorSettings, measurements: Measurements) -> NoiseLayout:
-    """The per-row noise structure of ``measurements`` under ``settings``."""
+def row_campaigns(measurements: Measurements) -> np.ndarray:
+    """The campaign of each row of a pooled scene: its series' name before
+    :data:`CAMPAIGN_SEPARATOR`."""
+    return np.array([str(s).split(CAMPAIGN_SEPARATOR, 1)[0] for s in measurements.series])
+
+
+def campaign_rows(
+    settings: ErrorSettings, measurements: Measurements
+) -> list[tuple[ErrorSettings, np.ndarray]]:
+    """(settings, row mask) of each campaign of a pooled scene; one pair of the whole table
+    under ``settings`` for a scene of one measurement file."""
+    if not settings.campaign_errors:
+        return [(settings, np.ones(len(measurements), bool))]
+    campaigns = row_campaigns(measurements)
+    return [(settings.of_campaign(name), campaigns == name) for name in settings.campaign_errors]
+
+
+def _row_noise(settings: ErrorSettings, measurements: Measurements) -> dict[str, np.ndarray]:
+    """The per-row noise values of one campaign's rows (or a whole table's): σ_i, σ_cal, s,
+    σ_rot, σ_cam."""
+    rows = len(measurements)
     if settings.model == "spread":
         sigma = spread_sigma(settings.reflectance_rel, measurements)
     else:
         sigma = value_sigma(settings, measurements)
+    angles = 1.0 if settings.angles_on else 0.0
+    return {
+        "sigma": sigma,
+        "calibration_sd": np.full(rows, settings.calibration_sd),
+        "coupling": theta_s_per_rotation(settings, rows),
+        "rotation_deg": np.full(rows, settings.rotation_deg * angles),
+        "camera_deg": np.full(rows, settings.camera_deg * angles),
+    }
+
+
+def row_calibration_groups(settings: ErrorSettings, measurements: Measurements) -> list:
+    """The calibration group key of every row, each campaign's under its own
+    ``calibration`` (:func:`calibration_groups`); a row without a calibration is a group of
+    its own."""
+    groups: list = [("alone", i) for i in range(len(measurements))]
+    for own, mask in campaign_rows(settings, measurements):
+        keys = calibration_groups(own, measurements.subset(mask))
+        if keys is not None:
+            for index, key in zip(np.flatnonzero(mask), keys, strict=True):
+                groups[index] = key
+    return groups
+
+
+def calibration_group_names(settings: ErrorSettings, measurements: Measurements) -> list[str]:
+    """The calibration groups of two or more rows (W's calibration columns, in their order)
+    by name: the series, or "series, sample"."""
+    counts = Counter(row_calibration_groups(settings, measurements))  # in first-seen order
+    return [
+        str(key) if isinstance(key, str) else ", ".join(map(str, key))
+        for key, count in counts.items()
+        if count > 1
+    ]
+
+
+def noise_layout(settings: ErrorSettings, measurements: Measurements) -> NoiseLayout:
+    """The per-row noise structure of ``measurements`` under ``settings`` (each campaign's
+    rows of a pooled scene under its own settings, :func:`campaign_rows`)."""
+    rows = len(measurements)
+    values: dict[str, np.ndarray] = {}
+    for own, mask in campaign_rows(settings, measurements):
+        part = _row_noise(own, measurements.subset(mask))
+        for name, value in part.items():
+            values.setdefault(name, np.zeros(rows))[mask] = value
+    groups = row_calibration_groups(settings, measurements)
     rotation_keys = list(
         zip(measurements.series, measurements.sample, measurements.theta_i_deg, strict=True)
     )
     samples = group_members(list(measurements.sample))
-    groups = calibration_groups(settings, measurements)
-    if groups is None:
-        calibration = (np.zeros((len(measurements), 0)), np.zeros(len(measurements)))
-    else:
-        calibration = group_members(groups)
+    calibration = group_members(groups)
+    has_calibration = values["calibration_sd"] > 0  # rows without one: alone, variance 0
     rotations = group_members(rotation_keys)
     return NoiseLayout(
-        sigma_row=jnp.asarray(sigma),
+        sigma_row=jnp.asarray(values["sigma"]),
         sample_members=jnp.asarray(samples[0]),
         sample_alone=jnp.asarray(samples[1]),
         calibration_members=jnp.asarray(calibration[0]),
-        calibration_alone=jnp.asarray(calibration[1]),
-        calibration_sd=jnp.asarray(settings.calibration_sd),
+        calibration_alone=jnp.asarray(calibration[1] * has_calibration),
+        calibration_sd=jnp.asarray(values["calibration_sd"]),
         rotation_members=jnp.asarray(rotations[0]),
         rotation_alone=jnp.asarray(rotations[1]),
-        theta_s_per_rotation=jnp.asarray(theta_s_per_rotation(settings, len(measurements))),
-        rotation_deg=jnp.asarray(settings.rotation_deg if settings.angles_on else 0.0),
-        camera_deg=jnp.asarray(settings.camera_deg if settings.angles_on else 0.0),
+        theta_s_per_rotation=jnp.asarray(values["coupling"]),
+        rotation_deg=jnp.asarray(values["rotation_deg"]),
+        camera_deg=jnp.asarray(values["camera_deg"]),
     )
 
 
@@ -450,7 +528,7 @@ def covariance_factors(
     factor = jnp.concatenate(
         [
             scales.sample_sd * layout.sample_members,
-            scales.calibration * layout.calibration_members,
+            jnp.expand_dims(scales.calibration, -1) * layout.calibration_members,
             rotation[:, None] * layout.rotation_members,
         ],
         axis=1,

@@ -169,10 +169,16 @@ def drawn_noise_scales(
             if "repeatability" in sites
             else jnp.full(count, float(errors.repeatability) if generative else 0.0)
         ),
-        calibration=jnp.full(count, noise.calibration_sd),
-        rotation_deg=jnp.full(count, noise.rotation_deg),
-        camera_deg=jnp.full(count, noise.camera_deg),
+        calibration=_per_draw(noise.calibration_sd, count),
+        rotation_deg=_per_draw(noise.rotation_deg, count),
+        camera_deg=_per_draw(noise.camera_deg, count),
     )
+
+
+def _per_draw(per_row: jnp.ndarray, count: int) -> jnp.ndarray:
+    """A per-row scale of the layout repeated for ``count`` draws: (count, rows)."""
+    per_row = jnp.asarray(per_row)
+    return jnp.broadcast_to(per_row, (count, *per_row.shape))
 
 
 def build_model_data(scene: Scene, measurements: Measurements) -> ModelData:

@@ -43,20 +43,20 @@ _ROW_FILL: dict[str, Any] = {
     "phi_s_deg": "first",  # NaN (in the plane) or a finite azimuth: both valid
     "kernel": "first",  # every leaf (rows, nodes) or (rows,): the first row's nodes
 }
-# per field of NoiseLayout: fill of padding rows (None: not per row, a scalar kept as it is),
-# and whether it has a member axis (axis 1)
-_NOISE_FILL: dict[str, tuple[float | None, bool]] = {
+# per field of NoiseLayout (every one per row): fill of padding rows, and whether it has a
+# member axis (axis 1)
+_NOISE_FILL: dict[str, tuple[float, bool]] = {
     "sigma_row": (1.0, False),
     "sample_members": (0.0, True),
     "sample_alone": (0.0, False),
     "calibration_members": (0.0, True),
     "calibration_alone": (0.0, False),
-    "calibration_sd": (None, False),
+    "calibration_sd": (0.0, False),
     "rotation_members": (0.0, True),
     "rotation_alone": (0.0, False),
     "theta_s_per_rotation": (1.0, False),
-    "rotation_deg": (None, False),
-    "camera_deg": (None, False),
+    "rotation_deg": (0.0, False),
+    "camera_deg": (0.0, False),
 }
 MEMBER_FIELDS = tuple(name for name, (_, members) in _NOISE_FILL.items() if members)
 
@@ -168,11 +168,7 @@ def pad_data(data: ModelData, rows: int, members: tuple[int, ...]) -> ModelData:
     width = dict(zip(MEMBER_FIELDS, members, strict=True))
     for name in NoiseLayout._fields:
         fill, has_members = _NOISE_FILL[name]
-        value = getattr(data.noise, name)
-        if fill is None:
-            noise[name] = value
-            continue
-        value = _pad_rows(value, rows, fill)
+        value = _pad_rows(getattr(data.noise, name), rows, fill)
         noise[name] = _pad_members(value, width[name]) if has_members else value
     return ModelData(
         rows=Observations(**observations),

@@ -20,7 +20,7 @@ from brdf_infer._internal.outlock import writing
 from brdf_infer._internal.precision import ensure_float64
 from brdf_infer.errors import BadInputError
 from brdf_infer.model import check_family_name
-from brdf_infer.model.error_model import ERROR_MODELS
+from brdf_infer.model.error_model import ERROR_MODELS, calibration_group_names
 from brdf_infer.model.params import PARAM_NAMES
 from brdf_infer.posterior._answer import answer_records
 from brdf_infer.posterior._bands import (
@@ -28,6 +28,7 @@ from brdf_infer.posterior._bands import (
     interval95,
     posterior_bands,
 )
+from brdf_infer.posterior._campaigns import campaign_records
 from brdf_infer.posterior._laplace import laplace_draws
 from brdf_infer.posterior._loo import (
     ExactTerm,
@@ -60,8 +61,9 @@ from brdf_infer.posterior._targets import (
     NEW_PART_EFFECT,
     SAMPLE_EFFECT,
     chosen_target,
+    latent_effect_draws,
     new_part_draws,
-    sample_effect_draws,
+    store_calibration_effects,
     store_effects,
     target_log_factor,
 )
@@ -479,11 +481,15 @@ def complete_run(
     physical = draws_physical(result.sites, member)
     with_tis = scene.outputs.tis and member.hemispheric(scene.model.out_of_plane)
     target = chosen_target(scene.outputs.target, len(model.sample_names))
+    sample_effects, calibration_effects = latent_effect_draws(model, result.sites, seed + 23)
     effects = {
-        SAMPLE_EFFECT: sample_effect_draws(model, result.sites, seed + 23),
+        SAMPLE_EFFECT: sample_effects,
         NEW_PART_EFFECT: new_part_draws(model, result.sites, seed + 29),
     }
     store_effects(idata, effects, model.sample_names, target)
+    store_calibration_effects(
+        idata, calibration_effects, calibration_group_names(scene.errors, measurements)
+    )
     factor = target_log_factor(target, *effects.values(), model.sample_names)
     products = model.products  # the same parameters as the family's
     bands = posterior_bands(products, products.scaled(physical, factor), theta_i_band, with_tis)
@@ -519,9 +525,11 @@ def complete_run(
     )
     clock.lap("answer")
     predictive = predictive_checks(loo, measurements, exact)
-    own_checks = posterior_checks(
-        model, measurements, np.asarray(predictive["loo_pit"]), result.sites
+    pit = np.asarray(predictive["loo_pit"])
+    pooled, pooled_checks = campaign_records(
+        model, measurements, calibration_effects, loo.with_exact(exact).elpd_i, pit
     )
+    own_checks = [*posterior_checks(model, measurements, pit, result.sites), *pooled_checks]
     summary = {
         "scene": scene.name,
         "model": name,
@@ -541,6 +549,7 @@ def complete_run(
         "diagnostics": checks,
         "predictive": predictive,
         "model_check": model_check([*fit_checks, *own_checks], scene, measurements),
+        **pooled,  # calibration_effects, and campaigns for a pooled scene
         "target": target,  # what tis_70deg, pi_brdf0 and the bands describe
         "tis_70deg": _tis_70(bands),
         "pi_brdf0": pi_brdf0,

@@ -57,6 +57,8 @@ QUESTIONS = {
 # dimension) and a new part's
 SAMPLE_EFFECT = "sample_effect"
 NEW_PART_EFFECT = "new_part_effect"
+# and each draw's calibration factors (dimension calibration_group)
+CALIBRATION_EFFECT = "calibration_effect"
 
 
 def chosen_target(requested: str, samples: int) -> str:
@@ -68,12 +70,14 @@ def chosen_target(requested: str, samples: int) -> str:
 
 
 @jax.jit
-def _conditional_effects(residual, rest, diagonal, members, tau):
-    """Per draw, mean (samples,) and covariance (samples, samples) of the sample effects u
-    given the rows (module docstring): ``residual`` y − mean (draws, rows), ``rest`` the
-    covariance factor's columns other than the samples' (draws, rows, k), ``diagonal`` D
-    without the samples' τ² (draws, rows), ``members`` one-hot rows × samples, ``tau`` τ of
-    each draw."""
+def _conditional_effects(residual, rest, diagonal, members, tau, calibration_scale):
+    """Per draw, mean and covariance of the sample effects u (samples,) and of the
+    calibration factors κ (groups,) given the rows (module docstring): ``residual`` y − mean
+    (draws, rows), ``rest`` the covariance factor's columns other than the samples' (draws,
+    rows, k; the calibration groups' first), ``diagonal`` D without the samples' τ² (draws,
+    rows), ``members`` one-hot rows × samples, ``tau`` τ of each draw, ``calibration_scale``
+    σ_cal of each calibration column (κ_g = σ_g z_g)."""
+    count, groups = members.shape[1], calibration_scale.shape[0]
 
     def one(r, w_rest, d, t):
         w = jnp.concatenate([t * members, w_rest], axis=1)
@@ -82,29 +86,49 @@ def _conditional_effects(residual, rest, diagonal, members, tau):
         root = jnp.linalg.cholesky(precision)
         mean = jax.scipy.linalg.cho_solve((root, True), scaled.T @ r)
         covariance = jax.scipy.linalg.cho_solve((root, True), jnp.eye(w.shape[1]))
-        count = members.shape[1]
-        return t * mean[:count], t**2 * covariance[:count, :count]
+        kept = slice(count, count + groups)
+        return (
+            t * mean[:count],
+            t**2 * covariance[:count, :count],
+            calibration_scale * mean[kept],
+            calibration_scale[:, None] * covariance[kept, kept] * calibration_scale[None, :],
+        )
 
     return jax.vmap(one)(residual, rest, diagonal, tau)
 
 
-def sample_effect_moments(
+def calibration_scales(noise) -> np.ndarray:
+    """σ_cal of each calibration group of two or more rows (W's calibration columns) [ln R]."""
+    members = np.asarray(noise.calibration_members, float)
+    return np.max(np.asarray(noise.calibration_sd, float)[:, None] * members, axis=0)
+
+
+def effect_moments(
     model: PosteriorModel, sites: dict[str, np.ndarray], data: ModelData | None = None
-) -> tuple[np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, ...]:
     """The conditional mean (draws, samples) and covariance (draws, samples, samples) [ln R]
     of the measured samples' effects u given each posterior draw and the rows (module
-    docstring), samples in ``model.sample_names``' order; zeros where the error model has no
-    sample effect. ``sites``: (chains, draws, ...); ``data``: the rows (default the
-    scene's; a simulated data set of the same layout)."""
+    docstring), samples in ``model.sample_names``' order, and the same of the calibration
+    factors κ of the groups of two or more rows (:func:`calibration_scales`); zeros where
+    the error model has no such effect. ``sites``: (chains, draws, ...); ``data``: the rows
+    (default the scene's; a simulated data set of the same layout)."""
     flat = {k: np.reshape(v, (-1, *np.shape(v)[2:])) for k, v in sites.items()}
     count = len(next(iter(flat.values())))
     samples = len(model.sample_names)
     errors = model.errors
-    if not errors.sample_effects:
-        return np.zeros((count, samples)), np.zeros((count, samples, samples))
     data = model.data if data is None else data
+    scale = jnp.asarray(calibration_scales(data.noise))
+    groups = int(scale.shape[0])
+    if errors.model != "generative":
+        return (
+            np.zeros((count, samples)),
+            np.zeros((count, samples, samples)),
+            np.zeros((count, groups)),
+            np.zeros((count, groups, groups)),
+        )
     members = np.zeros((len(model.row_samples), samples))
-    members[np.arange(len(model.row_samples)), sample_index(model)] = 1.0
+    if errors.sample_effects:
+        members[np.arange(len(model.row_samples)), sample_index(model)] = 1.0
     members = jnp.asarray(members * np.asarray(data.mask)[:, None])
     shared = data.noise.sample_members.shape[-1]  # the factor's leading columns
     alone = jnp.asarray(data.noise.sample_alone)
@@ -118,11 +142,41 @@ def sample_effect_moments(
         diagonal = jnp.where(measured, parts.diagonal - alone * tau[:, None] ** 2, 1.0)
         residual = jnp.where(measured, observed - parts.mean, 0.0)
         rest = jnp.where(measured[:, None], parts.factor[..., shared:], 0.0)
-        return _conditional_effects(residual, rest, diagonal, members, tau)
+        return _conditional_effects(residual, rest, diagonal, members, tau, scale)
 
     columns = factor_columns(data.noise) + samples
-    mean, covariance = over_draw_blocks(compute, flat, len(model.row_samples), columns)
-    return mean, covariance
+    return tuple(over_draw_blocks(compute, flat, len(model.row_samples), columns))
+
+
+def sample_effect_moments(
+    model: PosteriorModel, sites: dict[str, np.ndarray], data: ModelData | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """The sample effects' part of :func:`effect_moments`: mean and covariance of u."""
+    return effect_moments(model, sites, data)[:2]
+
+
+def _draw_normal(mean: np.ndarray, covariance: np.ndarray, seed: int) -> np.ndarray:
+    """One draw of N(mean, covariance) per leading index (a zero covariance allowed)."""
+    values, vectors = np.linalg.eigh(covariance)
+    root = vectors * np.sqrt(np.clip(values, 0.0, None))[:, None, :]
+    normal = np.random.default_rng(seed).standard_normal(mean.shape)
+    return mean + np.einsum("dij,dj->di", root, normal)
+
+
+def latent_effect_draws(
+    model: PosteriorModel,
+    sites: dict[str, np.ndarray],
+    seed: int,
+    data: ModelData | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """One draw per posterior draw of every measured sample's effect u_j, (draws, samples),
+    and of every calibration factor κ_g, (draws, groups) [ln R], each from its own
+    conditional (:func:`effect_moments`; u and κ are drawn apart: each is summarised alone)."""
+    mean, covariance, calibration_mean, calibration_covariance = effect_moments(model, sites, data)
+    return (
+        _draw_normal(mean, covariance, seed),
+        _draw_normal(calibration_mean, calibration_covariance, seed + 1),
+    )
 
 
 def sample_effect_draws(
@@ -134,10 +188,7 @@ def sample_effect_draws(
     """One draw of every measured sample's effect u_j [ln R] per posterior draw,
     (draws, samples), from its conditional (:func:`sample_effect_moments`)."""
     mean, covariance = sample_effect_moments(model, sites, data)
-    values, vectors = np.linalg.eigh(covariance)  # τ = 0 leaves a zero covariance
-    root = vectors * np.sqrt(np.clip(values, 0.0, None))[:, None, :]
-    normal = np.random.default_rng(seed).standard_normal(mean.shape)
-    return mean + np.einsum("dij,dj->di", root, normal)
+    return _draw_normal(mean, covariance, seed)
 
 
 def new_part_draws(model: PosteriorModel, sites: dict[str, np.ndarray], seed: int) -> np.ndarray:
@@ -259,6 +310,19 @@ def store_effects(
     )
     idata.posterior.coords["sample"] = list(sample_names)
     idata.posterior.attrs["target"] = target
+
+
+def store_calibration_effects(idata, draws: np.ndarray, names: Sequence[str]) -> None:
+    """Add each draw's calibration factors κ_g [ln R] to the run's posterior group
+    (``calibration_effect``, dimension ``calibration_group``) where it has any."""
+    if not len(names):
+        return
+    sizes = idata.posterior.sizes
+    idata.posterior[CALIBRATION_EFFECT] = (
+        ("chain", "draw", "calibration_group"),
+        np.asarray(draws).reshape(sizes["chain"], sizes["draw"], len(names)),
+    )
+    idata.posterior.coords["calibration_group"] = [str(name) for name in names]
 
 
 def run_log_factor(

@@ -98,7 +98,54 @@ def result_box(summary: PosteriorSummary, bands: Bands, angles, member: ModelFam
         + (WIDTH_LEGEND if widths else "")
         + reference_lines(summary)
         + "</div>"
+        + campaigns_table(summary)
     )
+
+
+def campaigns_table(summary: dict) -> str:
+    """Each calibration factor learned (:mod:`brdf_infer.posterior._campaigns`) and, for a
+    pooled scene, each campaign: its file, rows, own error settings, elpd with its standard
+    error and LOO-PIT p; empty where the run has neither."""
+    campaigns = summary.get("campaigns") or {}
+    effects = summary.get("calibration_effects") or []
+    html = ""
+    if campaigns:
+        rows = [
+            [
+                name,
+                entry["measurements"],
+                f"{entry['rows']} rows, {len(entry['samples'])} sample(s)",
+                ", ".join(f"{k} = {v}" for k, v in entry["errors"].items()) or "the scene's",
+                f"{entry['elpd_loo']:.1f} ± {entry['se'] or 0:.1f}",
+                f"{entry['loo_pit_ks_p']:.2g}",
+            ]
+            for name, entry in campaigns.items()
+        ]
+        html += "<h3>Campaigns pooled</h3>" + _html.table(
+            ["campaign", "file", "rows", "own [errors]", "elpd_loo ± se", "LOO-PIT p"], rows
+        )
+    if effects:
+        rows = [
+            [
+                entry["name"],
+                f"{100 * entry['prior_sd']:.3g} %",
+                f"{100 * entry['median']:+.2f} % ({100 * entry['lo95']:+.2f} to "
+                f"{100 * entry['hi95']:+.2f} %)",
+                "–" if entry["sd_ratio"] is None else f"{entry['sd_ratio']:.2f}",
+            ]
+            for entry in effects
+        ]
+        html += (
+            "<h3>Calibration factors learned</h3>"
+            + _html.table(
+                ["group", "σ_cal (prior, ln R)", "κ median (95 %), ln R", "posterior sd / σ_cal"],
+                rows,
+            )
+            + "<p class='fold'>The rows locate the differences between calibration groups, "
+            "not their common level (the coating's amplitude takes it): a ratio near 1 is a "
+            "factor only its prior sets.</p>"
+        )
+    return html
 
 
 def targets_table(targets: dict | None) -> str:

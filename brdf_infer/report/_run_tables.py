@@ -81,7 +81,7 @@ def run_table(scene, rows, idata, summary: PosteriorSummary, member) -> str:
     return _html.table(
         ["item", "value"],
         [
-            ["scene", f"{scene.name}: {scene.description}"],
+            ["scene", scene.name + (f": {scene.description}" if scene.description else "")],
             ["scene file", attrs["scene_file"]],
             # Eq. (7)'s units are in its priors table (the scene's [priors])
             ["model", member.name + ("" if member.paper_parameters else f" ({units(member)})")],
@@ -90,7 +90,11 @@ def run_table(scene, rows, idata, summary: PosteriorSummary, member) -> str:
                 f"{attrs.get('instrument', 'point')}: "
                 + MEANINGS.get(attrs.get("instrument", "point"), ""),
             ],
-            ["measurements", f"{scene.measurements_path} ({len(rows)} rows)"],
+            [
+                "measurements",
+                f"{', '.join(str(path) for _, path in scene.measurement_files)} "
+                f"({len(rows)} rows)",
+            ],
             ["sampler", f"{attrs['sampler']} {attrs['settings']}"],
             ["seed", attrs["seed"]],
             ["options", json.dumps(summary.get("options", {}))],

@@ -35,6 +35,14 @@ for _member in FAMILIES.values():  # the other families' physical parameters
     LABELS.update({n: f"{n} [{_member.units[n]}]" for n in _member.parameters if n not in LABELS})
 
 
+def label(name: str) -> str:
+    """A ranked quantity's label with its unit; ``calibration_G``: the G-th calibration
+    factor κ (brdf_infer.studies.sbc.target_quantities)."""
+    if name.startswith("calibration_"):
+        return f"calibration factor κ{name.removeprefix('calibration_')} [ln R]"
+    return LABELS[name]
+
+
 def png(figure: Figure, dpi: int = 90) -> bytes:
     """The figure as PNG bytes (no pyplot, no backend switching)."""
     buffer = io.BytesIO()
@@ -62,7 +70,7 @@ def rank_histograms(result: SbcResult) -> Figure:
         axis.axhspan(low, high, color="0.85", label="99 % range, uniform")
         axis.axhline(settings.replicates / HISTOGRAM_BINS, color="0.5", lw=0.8)
         axis.hist(result.ranks[name], bins=edges, color="C0", alpha=0.85)
-        axis.set_title(f"{LABELS[name]}\nχ² p = {result.chi2_p[name]:.2g}", fontsize=9)
+        axis.set_title(f"{label(name)}\nχ² p = {result.chi2_p[name]:.2g}", fontsize=9)
         axis.set_xlabel(f"rank of the truth among {settings.draws} draws")
         axis.set_ylabel("replicates")
     axes[0].legend(fontsize=7, loc="lower left")
@@ -85,7 +93,7 @@ def ecdf_differences(result: SbcResult) -> Figure:
         axis.fill_between(points, low - points, high - points, color="0.85", label="95 % band")
         axis.axhline(0.0, color="0.5", lw=0.8)
         axis.plot(points, ecdf - points, color="C3")
-        axis.set_title(f"{LABELS[name]}\nKS p = {result.ks_p[name]:.2g}", fontsize=9)
+        axis.set_title(f"{label(name)}\nKS p = {result.ks_p[name]:.2g}", fontsize=9)
         axis.set_xlabel("normalised rank [-]")
         axis.set_ylabel("ECDF − uniform [-]")
     axes[0].legend(fontsize=7, loc="lower left")
@@ -144,7 +152,7 @@ def sbc_page(result: SbcResult, figures: dict[str, bytes]) -> str:
     for name in result.quantities:
         rows.append(
             [
-                LABELS[name],
+                label(name),
                 f"{result.chi2_p[name]:.3f}",
                 f"{result.ks_p[name]:.3f}",
                 *(f"{result.coverage[level][name]:.1%}" for level in COVERAGE_LEVELS),

@@ -184,6 +184,30 @@ class Targets(TypedDict):
     new_part: TargetAnswer
 
 
+class CalibrationEffect(TypedDict):
+    """One calibration factor κ_g learned (:mod:`brdf_infer.posterior._campaigns`) [ln R]."""
+
+    name: str  # the group: its series, or "series, sample"
+    prior_sd: float  # σ_cal
+    median: float
+    lo95: float
+    hi95: float
+    sd: float  # posterior sd
+    sd_ratio: float | None  # sd / σ_cal (None without a calibration)
+
+
+class CampaignRecord(TypedDict):
+    """One campaign of a pooled scene (:mod:`brdf_infer.posterior._campaigns`)."""
+
+    measurements: str  # its file
+    rows: int
+    samples: list[str]  # its samples, as the pooled table names them
+    errors: dict[str, Any]  # its own data options of the error model
+    elpd_loo: float  # its rows' share of the run's PSIS-LOO elpd
+    se: float | None  # √n × the sd of its rows' terms (None: one row)
+    loo_pit_ks_p: float  # Kolmogorov–Smirnov p of its rows' LOO-PIT
+
+
 class Dropout(TypedDict):
     """One dropout of a .BSDF table, left out (:mod:`brdf_infer.tables.screening`)."""
 
@@ -224,6 +248,8 @@ class PosteriorSummary(TypedDict):
     diagnostics: Diagnostics
     predictive: Predictive
     model_check: NotRequired[ModelCheck]  # whether the data reject the model
+    calibration_effects: NotRequired[list[CalibrationEffect]]  # each κ_g learned
+    campaigns: NotRequired[dict[str, CampaignRecord]]  # a pooled scene's campaigns
     target: NotRequired[str]  # what tis_70deg, pi_brdf0 and the bands describe (older: coating)
     tis_70deg: Band | None  # TIS at θi = 70° (None: the run has no TIS band)
     pi_brdf0: Interval | None  # π·BRDF0, Eq. (7)'s near-normal TIS (None: other families)

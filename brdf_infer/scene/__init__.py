@@ -6,7 +6,9 @@ Schema (keys other than these are errors; defaults in brackets)::
     name = "my-coating"                      # required
     description = "..."                      # [""]
     wavelength_nm = 121.6                    # [unset]
-    measurements = "my_measurements.csv"     # required, relative to the scene file
+    measurements = "my_measurements.csv"     # required, relative to the scene file (or
+                                             #   [campaigns.NAME] tables in its place and
+                                             #   [series]'s: brdf_infer.scene._campaigns)
     [series.NAME]                            # one table per series named in the CSV
     aperture_diameter_mm = 7.2               # required, > 0
     aperture_distance_mm = 103.8             # required, > 0

@@ -15,6 +15,7 @@ from brdf_infer.model.params import (
     with_dphi_scale,
 )
 from brdf_infer.model.priors import DEFAULT_PRIORS, PRIOR_NAMES, parse_prior
+from brdf_infer.scene._campaigns import parse_campaigns
 from brdf_infer.scene._errors import parse_errors
 from brdf_infer.scene._fields import _boolean, _choice, _count, _number, _string, _table
 from brdf_infer.scene._records import (
@@ -58,6 +59,7 @@ _TOP_KEYS = {
     "bsdf",
     "design",
     "reference",
+    "campaigns",
 }
 
 
@@ -68,12 +70,18 @@ def parse_scene(document: dict, path: Path) -> Scene:
             raise BadInputError(
                 f"unknown key (allowed: {', '.join(sorted(_TOP_KEYS))})", file=path, field=key
             )
-    measurements = _string(document, "measurements", path)
-    series, thinning = _parse_series(document, path, path.parent / measurements)
     errors_table = document.get("errors", {})
     if not isinstance(errors_table, dict):
         raise BadInputError("expected a table [errors]", file=path, field="errors")
+    campaigns, own_errors = (), {}
+    if "campaigns" in document:
+        campaigns, series, own_errors = parse_campaigns(document, path, errors_table, _parse_series)
+        measurements_path, thinning = campaigns[0].measurements_path, (1, 1)
+    else:
+        measurements_path = path.parent / _string(document, "measurements", path)
+        series, thinning = _parse_series(document, path, measurements_path)
     errors = parse_errors(errors_table, path, tuple(series))
+    errors = dataclasses.replace(errors, campaign_errors=own_errors)
     model = _table(
         document, "model", path, {"fold", "out_of_plane", "family", *HemisphereConstants._fields}
     )
@@ -101,7 +109,7 @@ def parse_scene(document: dict, path: Path) -> Scene:
         path=path,
         description=_string(document, "description", path, default=""),
         wavelength_nm=None if wavelength is None else _number(document, "wavelength_nm", path),
-        measurements_path=(path.parent / measurements),
+        measurements_path=measurements_path,
         series=series,
         errors=errors,
         model=model_settings,
@@ -118,6 +126,7 @@ def parse_scene(document: dict, path: Path) -> Scene:
         instrument=_parse_instrument(document, path, series),
         design=_parse_design(document, path, series),
         references=_parse_references(document, path),
+        campaigns=campaigns,
     )
     check_instrument(scene, scene.instrument.model, field="instrument.model")
     return scene

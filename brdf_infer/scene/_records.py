@@ -11,12 +11,16 @@ import numpy as np
 
 from brdf_infer.errors import BadInputError
 from brdf_infer.model import ModelFamily, family
-from brdf_infer.model.error_model import ErrorSettings
+from brdf_infer.model.error_model import ErrorSettings, value_sigma
 from brdf_infer.model.params import DPHI_NAME, PAPER_CONSTANTS, PARAM_NAMES, HemisphereConstants
 from brdf_infer.model.priors import DEFAULT_PRIORS, Prior
 from brdf_infer.scene.design_target import DESIGN_BUDGET
 from brdf_infer.tables.bsdf_measurements import is_bsdf_path, measurements_from_bsdf
-from brdf_infer.tables.measurements import Measurements, load_measurements
+from brdf_infer.tables.measurements import (
+    Measurements,
+    load_measurements,
+    pooled_measurements,
+)
 
 
 @dataclass(frozen=True)
@@ -255,8 +259,48 @@ def tis_angle_deg(quantity: str) -> float | None:
 
 
 @dataclass(frozen=True)
+class Campaign:
+    """One measurement file of a pooled scene (``[campaigns.NAME]``): a lab, a session, an
+    instrument measuring the same coating. Its series and samples are named
+    ``NAME/SERIES`` and ``NAME/SAMPLE`` in the pooled table (a sample of one campaign is never
+    a sample of another); its own data options of the error model are in
+    :attr:`ErrorSettings.campaign_errors`.
+
+    Attributes:
+        name: the campaign's name (no ``/``).
+        measurements_path: its measurement file (CSV or .BSDF).
+        series: its series under their names in the file.
+        bsdf_thinning: its ``[campaigns.NAME.bsdf]`` thinning of a .BSDF table.
+    """
+
+    name: str
+    measurements_path: Path
+    series: dict[str, SeriesGeometry]
+    bsdf_thinning: tuple[int, int] = (1, 1)
+
+    def load_measurements(self) -> Measurements:
+        """The campaign's rows under their own series and sample names."""
+        return read_measurements(self.measurements_path, self.series, self.bsdf_thinning)
+
+
+def read_measurements(
+    path: Path, series: dict[str, SeriesGeometry], thinning: tuple[int, int]
+) -> Measurements:
+    """A measurement table validated against its series (a .BSDF table: its BRDF values,
+    thinned by ``thinning``)."""
+    if is_bsdf_path(path):
+        return measurements_from_bsdf(path, *thinning)
+    return load_measurements(
+        path,
+        known_series=series,
+        series_quantity={name: g.quantity for name, g in series.items()},
+    )
+
+
+@dataclass(frozen=True)
 class Scene:
-    """A validated scene."""
+    """A validated scene. A pooled scene (:attr:`campaigns`) has its campaigns' series under
+    their prefixed names and, as :attr:`measurements_path`, its first campaign's file."""
 
     name: str
     path: Path
@@ -275,6 +319,15 @@ class Scene:
     instrument: InstrumentSettings = field(default_factory=InstrumentSettings)
     design: DesignSettings = field(default_factory=DesignSettings)
     references: tuple[ReferenceValue, ...] = ()
+    campaigns: tuple[Campaign, ...] = ()
+
+    @property
+    def measurement_files(self) -> list[tuple[str, Path]]:
+        """(what names it, path) of every measurement file: ``measurements``, or
+        ``campaigns.NAME.measurements`` of each campaign."""
+        if not self.campaigns:
+            return [("measurements", self.measurements_path)]
+        return [(f"campaigns.{c.name}.measurements", c.measurements_path) for c in self.campaigns]
 
     def setup_of(self, series: str) -> RaytraceSettings | None:
         """The beam geometry of a series: ``[instrument.series.NAME]``, else the
@@ -338,14 +391,17 @@ class Scene:
 
     def load_measurements(self) -> Measurements:
         """The scene's measurement table, validated against its series (a .BSDF table: its
-        BRDF values, thinned as ``[bsdf]`` says)."""
-        if is_bsdf_path(self.measurements_path):
-            return measurements_from_bsdf(self.measurements_path, *self.bsdf_thinning)
-        return load_measurements(
-            self.measurements_path,
-            known_series=self.series,
-            series_quantity={name: g.quantity for name, g in self.series.items()},
-        )
+        BRDF values, thinned as ``[bsdf]`` says); a pooled scene's campaigns joined
+        (:func:`brdf_infer.tables.measurements.pooled_measurements`)."""
+        if not self.campaigns:
+            return read_measurements(self.measurements_path, self.series, self.bsdf_thinning)
+        parts = {}
+        for campaign in self.campaigns:
+            rows = campaign.load_measurements()
+            own = self.errors.of_campaign(campaign.name)
+            value_sigma(own, rows)  # a row without noise is named in its own file
+            parts[campaign.name] = (rows, own.reflectance_rel)
+        return pooled_measurements(parts)
 
     def check_files(self) -> None:
         """Resolve and read every file the scene names, before any work.
@@ -355,7 +411,7 @@ class Scene:
                 key and the resolved path.
         """
         for key, path in (
-            ("measurements", self.measurements_path),
+            *self.measurement_files,
             ("outputs.tis_reference", self.outputs.tis_reference),
         ):
             if path is None:

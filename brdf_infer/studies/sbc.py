@@ -59,8 +59,8 @@ from brdf_infer.posterior import (
     PosteriorModel,
     build_model,
     chain_keys,
+    latent_effect_draws,
     prior_draws,
-    sample_effect_draws,
     target_log_factor,
 )
 from brdf_infer.runs.folder import SBC_FILE as SBC_FILE  # the old name, kept
@@ -198,7 +198,11 @@ def target_quantities(
     settings: SbcSettings,
 ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
     """(truth, posterior) of TIS(70°) of the sample(s) measured and of a new part
-    (:mod:`brdf_infer.posterior._targets`), ``tis70_measured`` and ``tis70_new_part``.
+    (:mod:`brdf_infer.posterior._targets`), ``tis70_measured`` and ``tis70_new_part``, and, for
+    a pooled scene (``[campaigns]``), of each calibration factor κ_g, ``calibration_1``, … in
+    the order of W's calibration columns
+    (:func:`brdf_infer.model.error_model.calibration_group_names`; true κ drawn from
+    p(κ | θ, y) as the effects are).
 
     The simulator marginalises the sample effects, so each replicate's true effects are drawn
     from their conditional given its true parameters and its data, p(u | θ, y): with θ from
@@ -222,16 +226,26 @@ def target_quantities(
     rng = np.random.default_rng(settings.seed + 5)
     truth = {"tis70_measured": np.empty(replicates), "tis70_new_part": np.empty(replicates)}
     posterior = {name: np.empty_like(draws_tis) for name in truth}
+    # a pooled scene's calibration factors (others' would add quantities to the Bonferroni
+    # correction for what the sample effects' ranks already exercise)
+    groups = int(np.shape(datasets.noise.calibration_members)[-1]) if model.scene.campaigns else 0
+    for g in range(groups):
+        truth[f"calibration_{g + 1}"] = np.empty(replicates)
+        posterior[f"calibration_{g + 1}"] = np.empty_like(draws_tis)
     for r in range(replicates):
         data = jax.tree_util.tree_map(lambda leaf, r=r: leaf[r], datasets)
         true_sites = {k: np.asarray(v)[r][None, None] for k, v in simulated.items() if k != "obs"}
-        effects = sample_effect_draws(model, true_sites, settings.seed + 7 * r, data)
+        effects, calibration = latent_effect_draws(model, true_sites, settings.seed + 7 * r, data)
+        for g in range(groups):
+            truth[f"calibration_{g + 1}"][r] = calibration[0, g]
         factor = target_log_factor("measured", effects, np.zeros(1), names)
         truth["tis70_measured"][r] = truth_tis[r] * np.exp(factor[0])
         tau = float(np.asarray(simulated["sample_sd"])[r])
         truth["tis70_new_part"][r] = truth_tis[r] * np.exp(tau * rng.standard_normal())
         own = {k: np.asarray(v)[r][None] for k, v in thinned.items()}
-        effects = sample_effect_draws(inference, own, settings.seed + 7 * r + 3, data)
+        effects, calibration = latent_effect_draws(inference, own, settings.seed + 7 * r + 3, data)
+        for g in range(groups):
+            posterior[f"calibration_{g + 1}"][r] = calibration[:, g]
         zeros = np.zeros(len(effects))
         factor = target_log_factor("measured", effects, zeros, names)
         posterior["tis70_measured"][r] = draws_tis[r] * np.exp(factor)

@@ -127,6 +127,7 @@ def variant_scene(scene: Scene, changed: Variant, field_name: str = "variants") 
     table = {**scene.errors.as_table(), **changed.changes}
     try:
         errors = parse_errors(table, scene.path, tuple(scene.series))
+        errors = dataclasses.replace(errors, campaign_errors=scene.errors.campaign_errors)
     except BadInputError as error:
         raise BadInputError(
             f"variant {changed.name!r}: {error.field}: {error.problem}", field=field_name

@@ -187,6 +187,61 @@ def _azimuth(text: str, theta_s: float, where: dict) -> tuple[float, float]:
     return theta_s, phi
 
 
+# joins a campaign's name to the names of its series and samples in a pooled scene ("labA/II")
+CAMPAIGN_SEPARATOR = "/"
+
+
+def pooled_measurements(parts: dict[str, tuple[Measurements, float]]) -> Measurements:
+    """The rows of several campaigns as one table, in the campaigns' order: each campaign's
+    series and samples named ``CAMPAIGN/NAME`` (so no two campaigns share a series or a
+    sample). ``parts``: campaign name → (its rows, its ``reflectance_rel``): a campaign whose
+    file has no ``reflectance_err`` column gets σ = reflectance_rel × value, which is what its
+    own error settings give it (:func:`brdf_infer.model.error_model.value_sigma`).
+
+    Raises:
+        BadInputError: the campaigns measure different quantities (raw reflectance, BRDF).
+    """
+    tables = [rows for rows, _ in parts.values()]
+    quantities = {rows.quantity for rows in tables}
+    if len(quantities) > 1:
+        raise BadInputError(
+            f"the campaigns of one scene measure one quantity, got {sorted(quantities)}",
+            file=tables[-1].path,
+            field="quantity",
+        )
+
+    def joined(get) -> np.ndarray:
+        return np.concatenate([np.asarray(get(name, rows)) for name, (rows, _) in parts.items()])
+
+    with_errors = any(rows.reflectance_err is not None for rows in tables)
+    out_of_plane = any(rows.phi_s_deg is not None for rows in tables)
+    return Measurements(
+        path=tables[0].path,
+        series=joined(lambda name, rows: [f"{name}{CAMPAIGN_SEPARATOR}{s}" for s in rows.series]),
+        sample=joined(lambda name, rows: [f"{name}{CAMPAIGN_SEPARATOR}{s}" for s in rows.sample]),
+        theta_i_deg=joined(lambda _, rows: rows.theta_i_deg),
+        theta_s_deg=joined(lambda _, rows: rows.theta_s_deg),
+        reflectance=joined(lambda _, rows: rows.reflectance),
+        reflectance_err=None
+        if not with_errors
+        else joined(
+            lambda name, rows: (
+                rows.reflectance_err
+                if rows.reflectance_err is not None
+                else parts[name][1] * rows.reflectance
+            )
+        ),
+        quantity=quantities.pop(),
+        phi_s_deg=None
+        if not out_of_plane
+        else joined(
+            lambda _, rows: (
+                rows.phi_s_deg if rows.phi_s_deg is not None else np.full(len(rows), math.nan)
+            )
+        ),
+    )
+
+
 def load_measurements(
     path: str | Path,
     known_series: Iterable[str] | None = None,
