@@ -92,8 +92,7 @@ def run_table(scene, rows, idata, summary: PosteriorSummary, member) -> str:
             ],
             [
                 "measurements",
-                f"{', '.join(str(path) for _, path in scene.measurement_files)} "
-                f"({len(rows)} rows)",
+                f"{', '.join(str(path) for _, path in scene.measurement_files)} ({len(rows)} rows)",
             ],
             ["sampler", f"{attrs['sampler']} {attrs['settings']}"],
             ["seed", attrs["seed"]],
