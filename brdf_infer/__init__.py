@@ -4,7 +4,8 @@ The reference problem is the Acktar Magic Black coating at Lyman-alpha (121.6 nm
 Strumik et al. 2024, J. Astron. Telesc. Instrum. Syst. 10(1), 018004.
 
 The model needs float64: its coefficients span 1e-13 to 1e-2 and its likelihood is evaluated
-in log space, which float32 cannot carry. Importing the package changes no JAX setting;
+in log space, which float32 cannot carry. Importing the package changes no JAX setting and
+installs no import hook (the modules that moved are listed in CHANGELOG.md);
 :func:`use_float64` switches float64 on for the process, with JAX's persistent compilation
 cache (``BRDF_INFER_CACHE=off`` to opt out). The command line calls it first, and the
 library's entry points (``load_scene``, ``run_posterior``, ``fit_lsq``, …) call it while JAX
@@ -12,7 +13,6 @@ holds no array yet, or refuse float32 in one line (:class:`Float32Error`). Call 
 before using the model functions directly.
 """
 
-from brdf_infer import _moved
 from brdf_infer._internal.precision import Float32Error, use_float64
 from brdf_infer._internal.resources import data_path
 from brdf_infer.model.params import UV_PAPER, VIS_PAPER, Params
@@ -27,10 +27,3 @@ __all__ = [
     "data_path",
     "use_float64",
 ]
-
-_moved.install()
-
-
-def __getattr__(name: str):
-    """``from brdf_infer import lsq`` and the other old module paths (see ``_moved``)."""
-    return _moved.attribute(__name__, name)
