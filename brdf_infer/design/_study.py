@@ -67,6 +67,7 @@ from brdf_infer.posterior import (
     SAMPLE_EFFECT,
     build_posterior_model,
     interval95,
+    run_measurements,
     run_scene,
     target_log_factor,
 )
@@ -127,15 +128,17 @@ def load_design_run(run: str | Path, scene: Scene | str | None = None) -> Design
     check_family_name(name, file=path)
     if not family(name).paper_parameters:  # the design's targets are Eq. (7)'s
         raise BadInputError(f"a run of {name}, not of strumik2024", file=path)
-    if scene is None:
-        scene = run_scene(attrs)
+    measurements = None
+    if scene is None:  # the run's own scene and rows (no measurement file read)
+        scene, measurements = run_scene(attrs), run_measurements(idata)
     elif isinstance(scene, str):
         scene = load_scene(scene)
     if attrs.get("scene") != scene.name:
         raise BadInputError(
             f"a run of scene '{attrs.get('scene')}', not of '{scene.name}'", file=path
         )
-    measurements = scene.load_measurements()
+    if measurements is None:
+        measurements = scene.load_measurements()
     observed = np.asarray(idata.observed_data["obs"])
     if observed.shape != (len(measurements),) or not np.allclose(
         observed, np.log(measurements.reflectance)

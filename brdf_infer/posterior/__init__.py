@@ -50,6 +50,7 @@ from brdf_infer.posterior._results import (
     load_run_family,
     loo_terms,
     run_fold,
+    run_measurements,
 )
 from brdf_infer.posterior._run import (
     CHECKPOINT_FILE,
@@ -149,6 +150,7 @@ __all__ = [
     "run_emcee",
     "run_fingerprint",
     "run_fold",
+    "run_measurements",
     "run_nuts",
     "run_posterior",
     "run_scene",

@@ -12,6 +12,7 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 import numpy as np
+import xarray as xr
 from numpyro.infer import Predictive
 
 import brdf_infer
@@ -31,6 +32,8 @@ from brdf_infer.runs.folder import POSTERIOR_FILE as POSTERIOR_FILE  # the old n
 from brdf_infer.runs.folder import SUMMARY_FILE as SUMMARY_FILE  # the old name, kept
 from brdf_infer.runs.folder import RunFolder
 from brdf_infer.runs.records import Bands, PosteriorSummary
+from brdf_infer.tables.measurements import Measurements
+from brdf_infer.tables.screening import TableScreening
 
 THRESHOLDS = {"r_hat": 1.01, "ess": 400, "bfmi": 0.3, "tau_multiple": 50}
 
@@ -222,6 +225,70 @@ def inference_data(
         }
     )
     return idata
+
+
+# the run's own rows (posterior.nc group), so that its readers need no measurement file
+MEASUREMENTS_GROUP = "measurements"
+_ROW_COLUMNS = ("series", "sample", "theta_i_deg", "theta_s_deg", "reflectance")
+
+
+def store_measurements(idata: az.InferenceData, measurements: Measurements) -> None:
+    """Add the rows the run sampled to ``idata`` (group ``measurements``: every column of
+    the table, its quantity, its file, and what reading a .BSDF table left out), so that
+    the run's readers (report, design) work after the measurement file is moved or deleted
+    (:func:`run_measurements`)."""
+    columns = {name: np.asarray(getattr(measurements, name)) for name in _ROW_COLUMNS}
+    columns["series"] = columns["series"].astype(str)
+    columns["sample"] = columns["sample"].astype(str)
+    for name in ("reflectance_err", "phi_s_deg"):
+        if getattr(measurements, name) is not None:
+            columns[name] = np.asarray(getattr(measurements, name), float)
+    screening = measurements.screening
+    if screening is not None:
+        columns["zero_directions"] = np.asarray(screening.zero_directions, float)
+    attrs = {"quantity": measurements.quantity, "path": str(measurements.path)}
+    if screening is not None:
+        kept = ("zero_cells", "detection_limit", "below_horizon", "dropouts")
+        attrs["screening"] = json.dumps({k: screening.as_json()[k] for k in kept})
+    group = xr.Dataset(
+        {
+            name: (("zero_cell", "angle") if name == "zero_directions" else ("row",), values)
+            for name, values in columns.items()
+        },
+        attrs=attrs,
+    )
+    idata.add_groups({MEASUREMENTS_GROUP: group})
+
+
+def run_measurements(idata: az.InferenceData) -> Measurements | None:
+    """The rows a run sampled (:func:`store_measurements`); None for a run written before
+    they were kept."""
+    if MEASUREMENTS_GROUP not in idata.groups():
+        return None
+    group = idata[MEASUREMENTS_GROUP]
+    column = {name: np.asarray(group[name]) for name in group.data_vars}
+    screening = None
+    if "screening" in group.attrs:
+        record = json.loads(group.attrs["screening"])
+        screening = TableScreening(
+            zero_cells=int(record["zero_cells"]),
+            detection_limit=float(record["detection_limit"]),
+            below_horizon=int(record["below_horizon"]),
+            dropouts=tuple(record["dropouts"]),
+            zero_directions=column.get("zero_directions", np.zeros((0, 3))).reshape(-1, 3),
+        )
+    return Measurements(
+        path=Path(str(group.attrs.get("path", ""))),
+        series=column["series"].astype(str),
+        sample=column["sample"].astype(str),
+        theta_i_deg=column["theta_i_deg"].astype(float),
+        theta_s_deg=column["theta_s_deg"].astype(float),
+        reflectance=column["reflectance"].astype(float),
+        reflectance_err=column.get("reflectance_err"),
+        quantity=str(group.attrs.get("quantity", "raw_reflectance")),
+        phi_s_deg=column.get("phi_s_deg"),
+        screening=screening,
+    )
 
 
 # the Laplace sampler's importance-sampling record (brdf_infer.posterior._laplace)

@@ -20,7 +20,7 @@ from brdf_infer._internal.outlock import writing
 from brdf_infer._internal.precision import ensure_float64
 from brdf_infer.errors import BadInputError
 from brdf_infer.model import check_family_name
-from brdf_infer.model.error_model import ERROR_MODELS, calibration_group_names
+from brdf_infer.model.error_model import ERROR_MODELS, ErrorSettings, calibration_group_names
 from brdf_infer.model.params import PARAM_NAMES
 from brdf_infer.posterior._answer import answer_records
 from brdf_infer.posterior._bands import (
@@ -48,6 +48,7 @@ from brdf_infer.posterior._results import (
     inference_data,
     loo_sites,
     loo_terms,
+    store_measurements,
     write_results,
 )
 from brdf_infer.posterior._samplers import (
@@ -100,13 +101,16 @@ def with_error_model(scene: Scene, error_model: str | None) -> Scene:
 def run_scene(attrs) -> Scene:
     """The scene a posterior run sampled, from its ``posterior`` group's attributes: the scene
     text recorded with the run (``scene_toml``; a run without it: the scene file as it is now),
-    read as if from its file (relative paths as there), with the run's instrument model and
-    error model (``--instrument``, ``--error-model`` may have changed them).
+    read as if from its file (relative paths as there) but without reading the files it names
+    (the run keeps its rows, :func:`~brdf_infer.posterior._results.run_measurements`), with the
+    run's error model as recorded (``error_model``: ``--error-model`` may have changed it, and
+    a τ prior from another run is kept there) and its instrument model.
 
     Raises:
-        BadInputError: the recorded text or a file it names no longer reads as a scene.
+        BadInputError: the recorded text no longer reads as a scene.
     """
     path = Path(str(attrs.get("scene_file", "lya")))
+    recorded = json.loads(attrs.get("error_model", "{}"))
     if "scene_toml" not in attrs:
         scene = load_scene(path)
     else:
@@ -114,13 +118,25 @@ def run_scene(attrs) -> Scene:
             document = tomllib.loads(str(attrs["scene_toml"]))
         except tomllib.TOMLDecodeError as error:
             raise BadInputError(f"the run's scene text: invalid TOML: {error}", file=path) from None
+        if isinstance(document.get("errors"), dict):  # its τ prior is in the record
+            document["errors"].pop("sample_sd_from", None)
         scene = parse_scene(document, path)
-        scene.check_files()
+        scene = dataclasses.replace(scene, errors=recorded_errors(scene.errors, recorded))
     instrument = str(attrs.get("instrument", scene.instrument.model))
     if instrument != scene.instrument.model:
         scene = check_instrument(scene, instrument, field="instrument")
-    errors = json.loads(attrs.get("error_model", "{}"))
-    return with_error_model(scene, errors.get("model"))
+    return with_error_model(scene, recorded.get("model"))
+
+
+def recorded_errors(errors: ErrorSettings, recorded: dict) -> ErrorSettings:
+    """``errors`` with every setting a run recorded (``ErrorSettings.describe``) put back;
+    a setting the record lacks (an older run) stays as parsed."""
+    fields = ErrorSettings.__dataclass_fields__
+    values = {key: value for key, value in recorded.items() if key in fields}
+    kde = values.get("sample_sd_log_kde")
+    if kde is not None:
+        values["sample_sd_log_kde"] = tuple(tuple(map(float, part)) for part in kde)
+    return dataclasses.replace(errors, **values)
 
 
 def build_model(
@@ -475,6 +491,7 @@ def complete_run(
     log_lik, cdf, thinning = _loo_terms(model, result, len(measurements))
     clock.lap("loo_terms")
     idata = inference_data(model, result, seed, log_lik if thinning == 1 else None)
+    store_measurements(idata, measurements)
     clock.lap("inference_data")
     theta_i_band = scene.band_theta_i_deg(measurements)
     member = model.family

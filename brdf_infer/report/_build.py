@@ -11,7 +11,13 @@ from brdf_infer._internal.outlock import require_complete, writing
 from brdf_infer._internal.precision import ensure_float64
 from brdf_infer.errors import BadInputError
 from brdf_infer.model import fold_statement
-from brdf_infer.posterior import THRESHOLDS, draws_params, family_draws, run_scene
+from brdf_infer.posterior import (
+    THRESHOLDS,
+    draws_params,
+    family_draws,
+    run_measurements,
+    run_scene,
+)
 from brdf_infer.report import _figures, _html, _noise
 from brdf_infer.report._compare import compare_section
 from brdf_infer.report._design import design_section
@@ -77,7 +83,7 @@ def write_report(run: Path, progress=print) -> tuple[Path, Verdict]:
             writes its report.
     """
     started = time.perf_counter()
-    ensure_float64()  # the scene's rows are read again: float32 would select others
+    ensure_float64()  # the rows are predicted again: float32 would not carry the model
     require_complete(run)
     folder = RunFolder(run)
     loaded = _load(folder)
@@ -94,7 +100,8 @@ def _write_report(run: RunFolder, loaded, started: float, progress) -> tuple[Pat
     attrs = idata.posterior.attrs
     scene = run_scene(attrs)  # what the run sampled, not the scene file as it is now
     member, physical = family_draws(idata.posterior)
-    rows = scene.load_measurements()
+    rows = run_measurements(idata)  # the rows it sampled, kept in the run
+    rows = scene.load_measurements() if rows is None else rows  # a run from before they were
     loo = summary["predictive"]  # PSIS-LOO as the run computed it
     verdict = Verdict.from_json(summary["verdict"])  # recorded when the run completed
     figures: list[Figure] = []
