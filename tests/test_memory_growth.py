@@ -1,4 +1,5 @@
-"""Resident memory stays flat while two NUTS chains of a large table sample in threads.
+"""Memory stays flat: while two NUTS chains of a large table sample in threads, and over
+runs repeated in one process.
 
 XLA's CPU backend (jaxlib 0.10) grows without bound when two threads run one program whose
 large loops it hands to YNNPACK; :class:`brdf_infer.posterior._nuts.NutsProgram` compiles with
@@ -56,3 +57,26 @@ def test_two_chain_threads_hold_their_memory():
 )
 def test_planted_fault_grows():
     assert growth_mb("--ynn") > 4 * FLAT_MB
+
+
+RUNS_TOOL = Path(__file__).resolve().parents[1] / "tools" / "repeated_runs_memory.py"
+PEAK_GROWTH = 0.15  # the peak from the third run on may grow by this share of the third's
+
+
+@pytest.mark.slow  # about 3 minutes on 2 cores: eight runs of the main job
+def test_the_main_job_repeated_in_one_process_holds_its_memory(tmp_path):
+    """The README's Python example (``workflow.run`` on ``lya``) eight times in one process:
+    the peak memory after the eighth run is within 15 % of the peak after the third (the
+    first two compile and fill the caches). The compiled programs live on the model and
+    family objects of a run, not in module-level caches keyed by identity, which held every
+    run's model and data."""
+    result = subprocess.run(
+        [sys.executable, str(RUNS_TOOL), "--runs", "8", "--out", str(tmp_path)],
+        capture_output=True,
+        text=True,
+        timeout=1500,
+        check=True,
+    )
+    peaks = [float(mb) for mb in re.findall(r"run \d+: (\d+) MB peak", result.stdout)]
+    assert len(peaks) == 8, result.stdout
+    assert peaks[-1] <= (1 + PEAK_GROWTH) * peaks[2], result.stdout

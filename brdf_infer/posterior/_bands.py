@@ -56,16 +56,14 @@ def evenly_spaced(physical: dict[str, np.ndarray], count: int) -> dict[str, np.n
     return {name: values[index] for name, values in physical.items()}
 
 
-_PROGRAMS: dict[tuple[str, int], tuple[ModelFamily, object]] = {}
-
-
 def _program(kind: str, family: ModelFamily, make):
-    """``make(family)`` jitted once per family object (a family holds a dict, so it is not
-    hashable; keyed by identity, the family kept alive beside its program)."""
-    key = (kind, id(family))
-    if key not in _PROGRAMS:
-        _PROGRAMS[key] = (family, jax.jit(make(family)))
-    return _PROGRAMS[key][1]
+    """``make(family)`` jitted once per family object and kept on it (``_programs``; a family
+    holds a dict, so it cannot key a cache): the programs go when the family goes, so runs
+    repeated in one process hold flat memory."""
+    programs = family.__dict__.setdefault("_programs", {})
+    if kind not in programs:
+        programs[kind] = jax.jit(make(family))
+    return programs[kind]
 
 
 def _tis_curve_program(family: ModelFamily):

@@ -403,18 +403,16 @@ class PosteriorModel:
         return _draw_parts_program(self)(physical, scales, data)
 
 
-_DRAW_PARTS: dict[int, tuple[PosteriorModel, object]] = {}
-
-
 def _draw_parts_program(model: PosteriorModel):
     """:meth:`PosteriorModel.likelihood_parts` vmapped over draws and jitted, once per model
-    object (kept alive beside its program; a model holds arrays, so it is not hashable); the
-    data an argument, not a constant, so one compilation serves every data set of a shape."""
-    key = id(model)
-    if key not in _DRAW_PARTS:
-        program = jax.jit(jax.vmap(lambda p, s, d: model.likelihood_parts(p, s, d), (0, 0, None)))
-        _DRAW_PARTS[key] = (model, program)
-    return _DRAW_PARTS[key][1]
+    object and kept on it (``_draw_parts``; a model holds arrays, so it cannot key a cache):
+    the program goes when the model goes. The data are an argument, not a constant, so one
+    compilation serves every data set of a shape."""
+    if "_draw_parts" not in model.__dict__:
+        model.__dict__["_draw_parts"] = jax.jit(
+            jax.vmap(lambda p, s, d: model.likelihood_parts(p, s, d), (0, 0, None))
+        )
+    return model.__dict__["_draw_parts"]
 
 
 def build_posterior_model(
