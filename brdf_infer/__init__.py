@@ -7,10 +7,10 @@ The model needs float64: its coefficients span 1e-13 to 1e-2 and its likelihood 
 in log space, which float32 cannot carry. Importing the package changes no JAX setting and
 installs no import hook (the modules that moved are listed in CHANGELOG.md);
 :func:`use_float64` switches float64 on for the process, with JAX's persistent compilation
-cache (``BRDF_INFER_CACHE=off`` to opt out). The command line calls it first, and the
-library's entry points (``load_scene``, ``run_posterior``, ``fit_lsq``, …) call it while JAX
-holds no array yet, or refuse float32 in one line (:class:`Float32Error`). Call it yourself
-before using the model functions directly.
+cache (``BRDF_INFER_CACHE=off`` to opt out). The command line calls it first; a library user
+calls it before anything else, and the library's entry points (``load_scene``,
+``run_posterior``, ``fit_lsq``, …) refuse float32 in one line (:class:`Float32Error`) rather
+than switch a process-wide setting themselves.
 """
 
 from brdf_infer._internal.precision import Float32Error, use_float64

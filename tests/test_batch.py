@@ -271,9 +271,11 @@ _SHARDED = textwrap.dedent(
     """
     import sys
     import jax, numpy as np
+    import brdf_infer
     from brdf_infer.scene import load_scene
     from brdf_infer.posterior import NutsProgram, build_posterior_model, chain_keys
     from brdf_infer.posterior._nuts import stack_data
+    brdf_infer.use_float64()
     scene = load_scene("lya")
     model = build_posterior_model(scene, scene.load_measurements())
     rows = model.data.rows

@@ -1,5 +1,6 @@
-"""float64: importing the package changes no JAX setting; the command line and the library's
-entry points switch float64 (and the compilation cache) on, or refuse float32 in one line."""
+"""float64: importing the package changes no JAX setting; the command line switches float64
+(and the compilation cache) on; the library's entry points refuse float32 in one line and
+switch nothing."""
 
 import os
 import subprocess
@@ -42,34 +43,36 @@ def test_importing_the_package_changes_no_jax_setting(tmp_path):
     assert result.stdout.splitlines() == ["False None", f"float64 {tmp_path / 'cache'}"]
 
 
-def test_an_entry_point_switches_float64_on_or_refuses_float32_in_one_line():
-    """Before any JAX array exists, ``load_scene`` switches float64 and the cache on; after
-    a float32 array was made, it refuses, naming ``brdf_infer.use_float64()``."""
+def test_an_entry_point_refuses_float32_in_one_line_and_switches_nothing():
+    """``load_scene`` in float32 (no JAX array yet, or one made) refuses in one line naming
+    ``brdf_infer.use_float64()`` and leaves ``jax_enable_x64`` and the cache as they were;
+    after ``brdf_infer.use_float64()`` it loads."""
     result = _python(
         """
         import jax
-        from brdf_infer.scene import load_scene
-        load_scene("lya")
-        print(jax.config.jax_enable_x64, jax.config.jax_compilation_cache_dir is not None)
-        """
-    )
-    assert result.returncode == 0, result.stderr
-    assert result.stdout.split() == ["True", "True"]
-    result = _python(
-        """
         import jax.numpy as jnp
+        import brdf_infer
         from brdf_infer import Float32Error
         from brdf_infer.scene import load_scene
-        kept = jnp.ones(3)  # float32
-        try:
-            load_scene("lya")
-        except Float32Error as error:
-            print(error)
-        """
+        for made in (False, True):
+            kept = jnp.ones(3) if made else None  # a float32 array
+            try:
+                load_scene("lya")
+            except Float32Error as error:
+                print(error)
+            print(jax.config.jax_enable_x64, jax.config.jax_compilation_cache_dir)
+        brdf_infer.use_float64()
+        print(load_scene("lya").name)
+        """,
+        BRDF_INFER_CACHE="off",
     )
     assert result.returncode == 0, result.stderr
     lines = result.stdout.splitlines()
-    assert len(lines) == 1 and "float32" in lines[0] and "brdf_infer.use_float64()" in lines[0]
+    assert len(lines) == 5, lines
+    for refusal, state in (lines[0:2], lines[2:4]):
+        assert "float32" in refusal and "brdf_infer.use_float64()" in refusal
+        assert state == "False None"
+    assert lines[4] == "lya"
 
 
 def test_the_command_line_switches_float64_on(capsys):

@@ -329,6 +329,7 @@ _SHARDED_TRACE = textwrap.dedent(
     from brdf_infer.studies.raytrace import raytrace_series
     from brdf_infer.scene import load_scene
 
+    brdf_infer.use_float64()
     scene = load_scene("lya")
     result = raytrace_series(scene, scene.load_measurements(), UV_PAPER, rays=3000, seed=2)
     rows = [[r["simulated"], r["image_ratio"]] for r in result.rows]

@@ -116,6 +116,9 @@ def splice(report: Path, lines: list[str]) -> None:
 
 
 def main() -> None:
+    import brdf_infer
+
+    brdf_infer.use_float64()
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("section", choices=sorted(SECTIONS))
     parser.add_argument("--report", type=Path, default=Path("reports/benchmarks.md"))

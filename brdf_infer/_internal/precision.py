@@ -1,4 +1,5 @@
-"""float64 for the model, switched on when asked for, never by importing the package.
+"""float64 for the model, switched on when asked for: never by importing the package or by
+calling it.
 
 The model is stiff (a2 ~ 1e-11; coefficients span 1e-13 to 1e-2) and its likelihood lives in
 log space, which float32 cannot carry. JAX's default float is float32 and ``jax_enable_x64``
@@ -8,10 +9,9 @@ is process-wide, so importing ``brdf_infer`` leaves it alone. Instead:
   persistent compilation cache (:mod:`brdf_infer._internal.cache`); the command line calls it first.
 - The library's entry points (``load_scene``, ``run_posterior``, ``fit_lsq``, ``paper_fit``,
   ``workflow.run``, ``compare_families``, ``predict_rows``, ``design``, ``run_batch``,
-  ``simulate_measurements``, ``write_report``) call :func:`ensure_float64`, which does the
-  same while JAX holds no array yet (switching later would mix float32 arrays into float64
-  work) and otherwise
-  refuses in one line (:class:`Float32Error`).
+  ``simulate_measurements``, ``write_report``) call :func:`ensure_float64`, which refuses
+  float32 in one line (:class:`Float32Error`) naming :func:`use_float64`: a library call
+  never switches a process-wide setting itself.
 - The pure model functions (``brdf_infer.model``) are not guarded: they run under ``jit`` and
   in whatever precision their caller chose; call ``brdf_infer.use_float64()`` first.
 """
@@ -53,20 +53,19 @@ def use_float64(cache: bool = True) -> None:
 
 
 def ensure_float64() -> None:
-    """What the library's entry points call first: float64 on (:func:`use_float64`) if JAX
-    holds no array yet; nothing when it is on already.
+    """What the library's entry points call first: nothing when float64 is on; else refuse,
+    naming :func:`use_float64` (switching a process-wide setting behind the caller's back
+    would change every other JAX library in the same process, a notebook's included).
 
     Raises:
-        Float32Error: JAX runs in float32 and already holds arrays.
+        Float32Error: JAX runs in float32.
     """
-    if _configured and jax.config.jax_enable_x64:
+    if jax.config.jax_enable_x64:
         return
-    if not jax.config.jax_enable_x64 and jax.live_arrays():
-        raise Float32Error(
-            "JAX runs in float32 and already holds arrays; brdf_infer needs float64: call "
-            "brdf_infer.use_float64() before creating any JAX array"
-        )
-    use_float64()
+    raise Float32Error(
+        "JAX runs in float32; brdf_infer needs float64: call brdf_infer.use_float64() "
+        "(float64 and the compilation cache, for this process) before creating any JAX array"
+    )
 
 
 def require_float64() -> None:
