@@ -32,7 +32,7 @@ REDUCED_NUTS = {"chains": 4, "warmup": SUITE_WARMUP, "draws": 2000}
 def lya_scene_text(measurements: Path | str, name: str = "lya") -> str:
     """The bundled ``lya`` scene's TOML named ``name`` with another measurements file: the
     same model structure as ``lya``, so the same compiled programs."""
-    from brdf_infer.bench._batch import scene_text_with_measurements
+    from benchmarks._batch import scene_text_with_measurements
     from brdf_infer.scene import load_scene
 
     return scene_text_with_measurements(load_scene("lya"), Path(measurements), name)

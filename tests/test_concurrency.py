@@ -12,7 +12,7 @@ starts each path from an empty cache folder and compiles in its first repetition
 
 Signals that stop a batch are tested in ``tests/test_batch.py``.
 ``BRDF_INFER_STRESS_REPEATS`` sets the repetitions per path (default 1; the benchmark runs 20
-through :func:`brdf_infer.bench._stress.stress_rows`).
+through :func:`benchmarks._stress.stress_rows`).
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ from pathlib import Path
 
 import pytest
 
-from brdf_infer.bench._stress import PATHS, StressSettings, repeats_from_environment, run_path
+from benchmarks._stress import PATHS, StressSettings, repeats_from_environment, run_path
 from tests.helpers import fewer_rows, lya_scene_file, scaled_rows
 
 REPEATS = repeats_from_environment(default=1)

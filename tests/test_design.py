@@ -489,7 +489,7 @@ def test_expected_sd_ratio_agrees_with_refits_of_independently_simulated_data(nu
     posterior (best, median, worst candidate; the benchmark runs 8 replicates)."""
     from scipy import stats
 
-    from brdf_infer.bench._design import RefitSettings, refit_check
+    from benchmarks._design import RefitSettings, refit_check
 
     replicates = 6
     result = refit_check(
@@ -513,7 +513,7 @@ def test_a_chosen_row_narrows_tis_more_than_a_random_one_after_the_first_campaig
     the study runs (as docs/design.md's was measured) with the width at the article's: on the
     bundled scene as it is, design's mean width was 0.805 of random's over two seeds, against
     the 0.8 asked here."""
-    from brdf_infer.bench._design_payoff import PayoffSettings, payoff
+    from benchmarks._design_payoff import PayoffSettings, payoff
     from brdf_infer.posterior import run_posterior
     from brdf_infer.scene import load_scene
     from tests.helpers import REDUCED_NUTS, lya_scene_file

@@ -278,7 +278,7 @@ def test_a_planted_back_import_is_found(tmp_path, module, source):
             "posterior._nuts",
         ),
         # a private name of a module in another directory
-        ("brdf_infer.bench._fits", "\nfrom brdf_infer.fit.lsq import _x\n", "lsq import _x"),
+        ("brdf_infer.studies.compare", "\nfrom brdf_infer.fit.lsq import _x\n", "lsq import _x"),
         # a private module named through `from package import`, relative, in a function
         ("brdf_infer.report._build", "\ndef f():\n    from ..posterior import _bands\n", "_bands"),
         # a private name of a shared helper of the top package, from a subpackage
@@ -288,7 +288,7 @@ def test_a_planted_back_import_is_found(tmp_path, module, source):
             "units import _x",
         ),
         # a private module of another distribution
-        ("brdf_infer.bench._tis", "\nimport jax._src.core\n", "jax._src"),
+        ("brdf_infer.studies.synthetic", "\nimport jax._src.core\n", "jax._src"),
     ],
 )
 def test_a_planted_private_import_is_found(tmp_path, module, source, found):

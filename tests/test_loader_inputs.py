@@ -2,7 +2,7 @@
 JSON): each ends in a result that holds what the loader promises or in one BadInputError line
 naming the file or option, never another exception, never a file written; the command line
 prints that line (an option's field named as its flag) and exits 2
-(``brdf_infer.bench._loader_inputs``).
+(``benchmarks._loader_inputs``).
 
 The suite runs the profile of ``tests/conftest.py`` (60 inputs per loader; fixed under CI);
 the ``slow`` set 5,000 per loader (the benchmark counts them too)."""
@@ -16,7 +16,7 @@ from contextlib import redirect_stderr, redirect_stdout
 import pytest
 from hypothesis import given, settings
 
-from brdf_infer.bench._loader_inputs import LOADERS, run_loader
+from benchmarks._loader_inputs import LOADERS, run_loader
 from brdf_infer.cli import main
 
 SLOW_EXAMPLES = 5000

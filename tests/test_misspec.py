@@ -11,7 +11,7 @@ import pytest
 from numpyro import handlers
 from numpyro.infer import Predictive
 
-from brdf_infer.bench._misspec import (
+from benchmarks._misspec import (
     MisspecCase,
     case_scene,
     posterior_truths,
@@ -168,7 +168,7 @@ def test_posterior_truths_are_distinct_draws_of_the_run_at_every_drawn_site(lya,
     its chains, each one draw at every site the simulator draws (the parameters and the noise
     scales; not ``obs``, the latent angles, the whitened coordinates or deterministic sites);
     a run with fewer draws than truths is an error."""
-    from brdf_infer.bench import _misspec
+    from benchmarks import _misspec
 
     chains, draws = 3, 7
     drawn = ("log_brdf0", "b1", "b2", "b3", "alpha", "t_s0", "log_dphi_scale", "sample_sd")
@@ -236,7 +236,7 @@ def test_a_replicate_with_a_non_finite_ln_r_is_drawn_again_whole(lya, monkeypatc
     """A replicate whose simulated ln R is not finite (a latent θs pushed past 90°) is
     replaced, every site of it, by a finite replicate of the next seed; it is counted; and a
     simulator that never gives a finite one is a clear error, not a NaN in the data."""
-    from brdf_infer.bench import _misspec
+    from benchmarks import _misspec
 
     def fake(model, replicates, seed):
         obs = np.full((replicates, 2), float(seed))

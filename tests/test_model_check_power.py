@@ -1,4 +1,4 @@
-"""The model-check power benchmark (brdf_infer.bench._model_check_power): its simulator keeps
+"""The model-check power benchmark (benchmarks._model_check_power): its simulator keeps
 the bundled rows' layout and plants each fault where it should (the noise-free part: uv-paper's
 prediction, series II alone moved by ln 1.3, a θs trend of ln 1.4 end to end), replicate i of
 every fault shares its noise, and the section formats its table from given rows."""
@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from brdf_infer.bench._model_check_power import (
+from benchmarks._model_check_power import (
     FAULTS,
     alpha_fault_truth,
     median_text,

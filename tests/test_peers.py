@@ -1,4 +1,4 @@
-"""The PyMC peer model of the benchmark (``brdf_infer.bench._peers``): the same posterior as
+"""The PyMC peer model of the benchmark (``benchmarks._peers``): the same posterior as
 ours, checked through its log density (no sampling)."""
 
 import dataclasses
@@ -9,7 +9,7 @@ import pytest
 pytest.importorskip("pymc", reason="the peers extra is not installed")
 pytest.importorskip("nutpie", reason="the peers extra is not installed")
 
-from brdf_infer.bench._peers_check import POINTS, log_density_check, relative_spread
+from benchmarks._peers_check import POINTS, log_density_check, relative_spread
 from brdf_infer.scene import load_scene
 
 

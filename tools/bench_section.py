@@ -17,15 +17,18 @@ import argparse
 import os
 import re
 import subprocess
+import sys
 import time
 from pathlib import Path
 
 from brdf_infer._internal.atomic import atomic_write_bytes
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the checkout: benchmarks/
+
 
 def sbc(report: Path) -> list[str]:
-    from brdf_infer.bench._sbc import sbc_rows
-    from brdf_infer.bench._sections import sbc_section
+    from benchmarks._sbc import sbc_rows
+    from benchmarks._sections import sbc_section
     from brdf_infer.report import ecdf_differences, png
     from brdf_infer.scene import load_scene
 
@@ -39,33 +42,33 @@ def sbc(report: Path) -> list[str]:
 
 
 def misspec(report: Path) -> list[str]:
-    from brdf_infer.bench._misspec import misspec_rows
-    from brdf_infer.bench._sections import misspec_section
+    from benchmarks._misspec import misspec_rows
+    from benchmarks._sections import misspec_section
     from brdf_infer.scene import load_scene
 
     return misspec_section(misspec_rows(load_scene("lya"), quick=False))
 
 
 def design(report: Path) -> list[str]:
-    from brdf_infer.bench._design_section import design_section
+    from benchmarks._design_section import design_section
 
     return design_section(False, report.with_name(f"{report.stem}_design.png"))
 
 
 def design_time(report: Path) -> list[str]:
-    from brdf_infer.bench._design_section import command_section
+    from benchmarks._design_section import command_section
 
     return command_section(False)
 
 
 def cost_curve(report: Path) -> list[str]:
-    from brdf_infer.bench._cost_curve import cost_rows, cost_section
+    from benchmarks._cost_curve import cost_rows, cost_section
 
     return cost_section(cost_rows(quick=False))
 
 
 def model_check_power(report: Path) -> list[str]:
-    from brdf_infer.bench._model_check_power import model_check_power, power_section
+    from benchmarks._model_check_power import model_check_power, power_section
 
     return power_section(model_check_power())
 

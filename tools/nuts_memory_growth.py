@@ -2,7 +2,7 @@
 
     python tools/nuts_memory_growth.py [--radial 3] [--workers 2] [--seconds 120] [--ynn]
 
-Builds the benchmark's full-grid table (:mod:`brdf_infer.bench._cost_curve`), thinned by
+Builds the benchmark's full-grid table (:mod:`benchmarks._cost_curve`), thinned by
 ``--radial`` (3: 19 637 rows), and runs two chains through :class:`NutsProgram` with
 ``--workers`` threads, printing the resident memory every 10 s. Measured 2026-11-27 on 2
 cores: two workers grow 18–40 MB/s (faster with ``MALLOC_ARENA_MAX=1``; also with one compiled
@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
 import tempfile
 import threading
 import time
@@ -30,7 +31,9 @@ from pathlib import Path
 import jax
 
 import brdf_infer
-from brdf_infer.bench._cost_curve import scene_file, write_table
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the checkout: benchmarks/
+from benchmarks._cost_curve import scene_file, write_table
 from brdf_infer.posterior import _nuts as nuts
 from brdf_infer.posterior import build_model
 from brdf_infer.posterior._nuts import NutsProgram

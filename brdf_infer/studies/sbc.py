@@ -27,7 +27,7 @@ as the likelihood has them. SBC therefore checks the inference *given the model*
 sampler, the whitened reparametrisation and its Jacobian, and that the inference's priors are
 the simulator's — and cannot see a wrong model (a wrong calibration size, rotation coupling
 or images per row, or the linearisation of the angle slopes): data and inference would share
-the error. The benchmark's misspecification study (:mod:`brdf_infer.bench._misspec`) measures
+the error. The benchmark's misspecification study (:mod:`benchmarks._misspec`) measures
 what such errors cost the intervals. Planted faults in the inference only show that the check
 has power against what it checks: ``planted_fault``
 (:data:`brdf_infer.scene.settings.PLANTED_FAULTS`: the whitening's log-Jacobian dropped, or every

@@ -25,7 +25,7 @@ from pathlib import Path
 import jax.numpy as jnp
 import numpy as np
 
-from brdf_infer.bench._design import (
+from benchmarks._design import (
     Fitter,
     concatenated,
     in_series,

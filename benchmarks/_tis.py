@@ -13,8 +13,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from benchmarks._timing import timed
 from brdf_infer._internal.units import DEG
-from brdf_infer.bench._timing import timed
 from brdf_infer.model import log_brdf_hemisphere, tis
 from brdf_infer.model.params import UV_PAPER, Params
 

@@ -14,7 +14,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from brdf_infer.bench._tables import markdown_table, startup_seconds, timed_process
+from benchmarks._tables import markdown_table, startup_seconds, timed_process
 from brdf_infer.posterior import FlatPotential, build_model, build_posterior_model
 from brdf_infer.scene import Scene
 
@@ -134,9 +134,9 @@ def gradient_rows(scene: Scene, measurements) -> list[list[str]]:
 def write_speed_report(out: Path, quick: bool, progress=print) -> Path:
     """``brdf-infer bench --speed``: the main job's cost, the peers on the same posterior,
     the concurrency stress test and a batch of unequal scenes, measured in one run."""
+    from benchmarks._peers_section import peer_section
+    from benchmarks._timing import machine_description
     from brdf_infer._internal.atomic import atomic_write_bytes
-    from brdf_infer.bench._peers_section import peer_section
-    from brdf_infer.bench._timing import machine_description
     from brdf_infer.scene import load_scene
 
     started = time.perf_counter()
@@ -194,10 +194,10 @@ def write_speed_report(out: Path, quick: bool, progress=print) -> Path:
 def write_stress_report(out: Path, quick: bool, progress=print) -> Path:
     """``brdf-infer bench --stress``: every concurrent path 20 times (``quick``: 2) under the
     watchdog. Timing does not matter here, only hangs: it may run beside other work."""
+    from benchmarks._stress import HEADERS as STRESS_HEADERS
+    from benchmarks._stress import StressSettings, stress_rows
+    from benchmarks._timing import machine_description
     from brdf_infer._internal.atomic import atomic_write_bytes
-    from brdf_infer.bench._stress import HEADERS as STRESS_HEADERS
-    from brdf_infer.bench._stress import StressSettings, stress_rows
-    from brdf_infer.bench._timing import machine_description
 
     started = time.perf_counter()
     stress = stress_rows(2 if quick else 20, progress=progress)
@@ -219,7 +219,7 @@ def write_stress_report(out: Path, quick: bool, progress=print) -> Path:
         f"{StressSettings().calls} times each, and {StressSettings().processes} processes of "
         "`fit lya --method lsq` started at once on one fresh cache folder (a new folder every "
         "repetition, at most 5: each compiles cold four times over; they must all finish "
-        "with the same result) (brdf_infer.bench._stress). Before the "
+        "with the same result) (benchmarks._stress). Before the "
         "posterior's linear algebra left LAPACK, both batch paths and the two threads hung "
         "(jaxlib 0.10.2's LAPACK handlers wait on the intra-op pool from a pool thread); "
         "the posterior, then sequential, did not.",

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from brdf_infer.bench._tables import markdown_table
+from benchmarks._tables import markdown_table
 from brdf_infer.runs.folder import RunFolder
 
 SCATTER = 0.05  # lognormal 1σ of the synthetic table's values
@@ -182,7 +182,7 @@ def cost_row(label: str, scene: str, scratch: Path, cache: Path, once: bool = Fa
 def scene_gradient(scene: str, evaluations: int | None = None) -> tuple[int, float]:
     """(rows, value-and-gradient [µs]) of a scene's whitened potential, averaged over
     ``evaluations`` in a compiled loop (default: 4 × 10⁶ row-evaluations, 20 to 4000)."""
-    from brdf_infer.bench._speed import gradient_microseconds
+    from benchmarks._speed import gradient_microseconds
     from brdf_infer.posterior import FlatPotential, build_model
     from brdf_infer.scene import load_scene
 
@@ -220,7 +220,7 @@ def cost_section(rows: list[CostRow], quick: bool = False) -> list[str]:
         "",
         f"Whole instrument tables: a full-grid `.BSDF` export of `uv-paper` (18 angles of "
         f"incidence, azimuth step 5°, radial step 1°) with {100 * SCATTER:.0f} % lognormal "
-        "scatter, thinned by `[bsdf]` for the smaller sizes (`brdf_infer.bench._cost_curve`). "
+        "scatter, thinned by `[bsdf]` for the smaller sizes (`benchmarks._cost_curve`). "
         "`posterior` at its defaults (4 × 1000 draws; `auto`: NUTS with 1000 warmup "
         "iterations on the bundled rows, Laplace + PSIS from 1000 rows) and `report`, each "
         f"in a fresh process, {runs}; peak memory is the larger of the two processes' "

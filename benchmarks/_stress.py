@@ -311,7 +311,7 @@ def child_environment(cache: Path, extra: dict[str, str] | None = None) -> dict[
 def write_scenes(folder: Path, count: int) -> list[str]:
     """``count`` synthetic scenes of one model structure (the benchmark's: the bundled geometry,
     every reflectance scaled by its own factor)."""
-    from brdf_infer.bench._batch import synthetic_scenes
+    from benchmarks._batch import synthetic_scenes
     from brdf_infer.scene import load_scene
 
     folder.mkdir(parents=True, exist_ok=True)

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from brdf_infer.bench._peers import PARAMETER_SITES, pymc_model
+from benchmarks._peers import PARAMETER_SITES, pymc_model
 
 POINTS = 20  # of the log-density check
 

@@ -10,9 +10,9 @@ from typing import Any
 
 from hypothesis import strategies as st
 
-from brdf_infer.bench._inputs import _KEY_TEXT, _LEVELS, _TOML_VALUES, _broken, toml_text
-from brdf_infer.bench._inputs_bsdf import bsdf_files
-from brdf_infer.bench._inputs_csv import check_measurements, measurement_csvs
+from benchmarks._inputs import _KEY_TEXT, _LEVELS, _TOML_VALUES, _broken, toml_text
+from benchmarks._inputs_bsdf import bsdf_files
+from benchmarks._inputs_csv import check_measurements, measurement_csvs
 
 _MISSING = object()
 

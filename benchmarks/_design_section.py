@@ -6,19 +6,19 @@ from __future__ import annotations
 import tempfile
 from pathlib import Path
 
-from brdf_infer._internal.atomic import atomic_write_bytes
-from brdf_infer.bench._design import HEADERS as REFIT_HEADERS
-from brdf_infer.bench._design import RefitSettings, rank_line, refit_check, refit_rows
-from brdf_infer.bench._design_payoff import (
+from benchmarks._design import HEADERS as REFIT_HEADERS
+from benchmarks._design import RefitSettings, rank_line, refit_check, refit_rows
+from benchmarks._design_payoff import (
     HEADERS as PAYOFF_HEADERS,
 )
-from brdf_infer.bench._design_payoff import (
+from benchmarks._design_payoff import (
     PayoffSettings,
     payoff,
     payoff_figure,
     payoff_rows,
 )
-from brdf_infer.bench._tables import markdown_table, timed_command
+from benchmarks._tables import markdown_table, timed_command
+from brdf_infer._internal.atomic import atomic_write_bytes
 from brdf_infer.posterior import run_posterior
 from brdf_infer.scene import Scene, load_scene
 

@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 from hypothesis import strategies as st
 
-from brdf_infer.bench._inputs import _LEVELS, _broken
+from benchmarks._inputs import _LEVELS, _broken
 
 _JSON_SCALARS = st.one_of(
     st.none(),

@@ -6,18 +6,18 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from brdf_infer.bench._batch import HEADERS as BATCH_HEADERS
-from brdf_infer.bench._cache import HEADERS as CACHE_HEADERS
-from brdf_infer.bench._export import ABG_HEADERS, GRID_HEADERS
-from brdf_infer.bench._instrument import BIAS_HEADERS, ESS_HEADERS, NODE_HEADERS
-from brdf_infer.bench._misspec import HEADERS as MISSPEC_HEADERS
-from brdf_infer.bench._misspec import MisspecStudy
-from brdf_infer.bench._misspec import section_text as misspec_text
-from brdf_infer.bench._robustness import HEADERS as ROBUSTNESS_HEADERS
-from brdf_infer.bench._robustness import LOADER_HEADERS
-from brdf_infer.bench._sbc import HEADERS as SBC_HEADERS
-from brdf_infer.bench._tables import markdown_table
-from brdf_infer.bench._timing import machine_description
+from benchmarks._batch import HEADERS as BATCH_HEADERS
+from benchmarks._cache import HEADERS as CACHE_HEADERS
+from benchmarks._export import ABG_HEADERS, GRID_HEADERS
+from benchmarks._instrument import BIAS_HEADERS, ESS_HEADERS, NODE_HEADERS
+from benchmarks._misspec import HEADERS as MISSPEC_HEADERS
+from benchmarks._misspec import MisspecStudy
+from benchmarks._misspec import section_text as misspec_text
+from benchmarks._robustness import HEADERS as ROBUSTNESS_HEADERS
+from benchmarks._robustness import LOADER_HEADERS
+from benchmarks._sbc import HEADERS as SBC_HEADERS
+from benchmarks._tables import markdown_table
+from benchmarks._timing import machine_description
 from brdf_infer.studies.raytrace import CHUNK_RAYS
 
 
@@ -223,7 +223,7 @@ def loader_section(loaders: list) -> list[str]:
         "## Bad input",
         "",
         "Every loader of user files on generated inputs (Hypothesis, the same inputs every run; "
-        "`brdf_infer/bench/_loader_inputs.py`): measurement CSVs of both quantities with "
+        "`benchmarks/_loader_inputs.py`): measurement CSVs of both quantities with "
         "`phi_s_deg`, other delimiters, encodings and byte-order marks, line endings, quoting, "
         "huge, tiny and non-finite numbers, duplicated rows and columns; scene TOML with every "
         "table and key, wrong types, unknown keys, odd paths; Zemax .BSDF files with tabs, "

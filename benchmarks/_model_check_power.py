@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from brdf_infer.bench._tables import markdown_table
+from benchmarks._tables import markdown_table
 from brdf_infer.model.params import UV_PAPER, Params
 from brdf_infer.scene import Scene
 
@@ -296,7 +296,7 @@ def power_section(rows: list[dict[str, Any]]) -> list[str]:
         "How often each check of a run's `model_check` fails (p < 0.001, or the `at_bound` "
         "rule) on data with a known fault, and on data without one (`none`: its false alarms). "
         "Each data set has the bundled 42 rows' layout (`lya`) and is drawn from the scene's "
-        "generative error model at `uv-paper` (`brdf_infer.bench._model_check_power.simulate`: "
+        "generative error model at `uv-paper` (`benchmarks._model_check_power.simulate`: "
         "a rotation error per (series, sample, θi) setting and a camera error per row, 1° each, "
         "moving the angles; each row's own sd; the repeatability "
         f"{POSTERIOR_SCALES['repeatability']:g} and sample effects of sd "

@@ -5,10 +5,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from brdf_infer.bench._peers import missing_peers
-from brdf_infer.bench._peers_check import relative_spread
-from brdf_infer.bench._peers_runs import LABELS, QUANTITIES, peer_rows
-from brdf_infer.bench._tables import markdown_table
+from benchmarks._peers import missing_peers
+from benchmarks._peers_check import relative_spread
+from benchmarks._peers_runs import LABELS, QUANTITIES, peer_rows
+from benchmarks._tables import markdown_table
 
 HEADERS = [
     "sampler",
@@ -48,7 +48,7 @@ def peer_section(quick: bool, progress=print, *, repeat: int = 1) -> str:
     draws = 250 if quick else 1000
     return (
         heading + f"The posterior of `lya` written in PyMC {pymc.__version__} "
-        "(`brdf_infer.bench._peers`: the same 42 rows, priors and generative error model, "
+        "(`benchmarks._peers`: the same 42 rows, priors and generative error model, "
         "one `pm.MvNormal` with covariance D + W Wᵀ and the analytic angle slopes) and sampled "
         f"by nutpie {nutpie.__version__} (numba backend) and by PyMC's NUTS (`pm.sample`), "
         f"4 chains × ({draws} warmup + {draws} draws), seed 0, against `brdf-infer posterior "

@@ -1,6 +1,6 @@
 """Benchmark of robustness: NUTS with default settings on the bundled scene for many seeds and
 on measurement geometries unlike the bundled one (synthetic data); and every loader of user
-files on thousands of generated bad inputs (:mod:`brdf_infer.bench._loader_inputs`)."""
+files on thousands of generated bad inputs (:mod:`benchmarks._loader_inputs`)."""
 
 from __future__ import annotations
 
@@ -110,7 +110,7 @@ LOADER_HEADERS = [
 def loader_rows(examples: int, progress=print) -> list[LoaderRow]:
     """Each loader on ``examples`` generated inputs (Hypothesis, derandomized: the same inputs
     every time), counted; a failure is counted and listed, not raised."""
-    from brdf_infer.bench._loader_inputs import LOADERS, run_loader
+    from benchmarks._loader_inputs import LOADERS, run_loader
 
     rows = []
     for loader in LOADERS.values():

@@ -9,7 +9,7 @@ ln R of Eq. (7) in internal coordinates plus the row's ln(Ω cos θs) (and Eq. 1
 scene turns it on), and one multivariate normal of the rows' ln R with covariance
 D + W Wᵀ (:func:`brdf_infer.model.error_model.covariance_factors`), written out as a dense 42 × 42
 matrix for ``pm.MvNormal``. The linearised angle slopes are the analytic derivatives of ln R.
-:func:`brdf_infer.bench._peers_check.log_density_check` compares the two log densities at
+:func:`benchmarks._peers_check.log_density_check` compares the two log densities at
 random points.
 
 Every sampler runs in a fresh process (wall time end to end: interpreter start, imports,

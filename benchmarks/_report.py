@@ -5,27 +5,26 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from brdf_infer._internal.atomic import atomic_write_bytes
-from brdf_infer.bench._batch import batch_rows
-from brdf_infer.bench._cache import cache_rows
-from brdf_infer.bench._cost_curve import cost_rows, cost_section
-from brdf_infer.bench._design_section import command_section, design_section
-from brdf_infer.bench._export import abg_rows, grid_rows
-from brdf_infer.bench._families import comparison_row, quadrature_rows
-from brdf_infer.bench._fits import fit_rows
-from brdf_infer.bench._instrument import bias_rows, ess_rows, node_rows
-from brdf_infer.bench._misspec import misspec_rows
-from brdf_infer.bench._model_check_power import (
+from benchmarks._batch import batch_rows
+from benchmarks._cache import cache_rows
+from benchmarks._cost_curve import cost_rows, cost_section
+from benchmarks._design_section import command_section, design_section
+from benchmarks._export import abg_rows, grid_rows
+from benchmarks._families import comparison_row, quadrature_rows
+from benchmarks._fits import fit_rows
+from benchmarks._instrument import bias_rows, ess_rows, node_rows
+from benchmarks._misspec import misspec_rows
+from benchmarks._model_check_power import (
     QUICK_REPLICATES,
     REPLICATES,
     model_check_power,
     power_section,
 )
-from brdf_infer.bench._raytrace import raytrace_rows
-from brdf_infer.bench._robustness import loader_rows, robustness_rows
-from brdf_infer.bench._samplers import sampler_rows
-from brdf_infer.bench._sbc import sbc_rows
-from brdf_infer.bench._sections import (
+from benchmarks._raytrace import raytrace_rows
+from benchmarks._robustness import loader_rows, robustness_rows
+from benchmarks._samplers import sampler_rows
+from benchmarks._sbc import sbc_rows
+from benchmarks._sections import (
     batch_section,
     cache_section,
     export_section,
@@ -41,7 +40,8 @@ from brdf_infer.bench._sections import (
     sbc_section,
     tis_section,
 )
-from brdf_infer.bench._tis import batched_throughput, tis_rows
+from benchmarks._tis import batched_throughput, tis_rows
+from brdf_infer._internal.atomic import atomic_write_bytes
 from brdf_infer.report import ecdf_differences, figure_png, png
 from brdf_infer.scene import load_scene
 

@@ -12,7 +12,7 @@ and hands are broken: delimiters, encodings and byte-order marks, line endings, 
 huge, tiny and non-finite numbers, duplicated rows and columns, wrong types and unknown keys,
 missing and odd paths, header lines out of order, counts that disagree with the data, tabs,
 truncation. ``tests/test_loader_inputs.py`` runs them in the suite (a fast profile) and in the
-``slow`` set (5,000 inputs per loader); :func:`brdf_infer.bench._robustness.loader_rows`
+``slow`` set (5,000 inputs per loader); :func:`benchmarks._robustness.loader_rows`
 counts them for the benchmark. Needs Hypothesis (the ``test`` extra).
 
 The inputs of each loader are in its own module: ``_inputs_csv``, ``_inputs_scene``,
@@ -30,22 +30,22 @@ from typing import Any
 
 from hypothesis import strategies as st
 
-from brdf_infer.bench._inputs_bsdf import _bsdf_command, _read_bsdf, _write_bsdf, bsdf_files
-from brdf_infer.bench._inputs_csv import (
+from benchmarks._inputs_bsdf import _bsdf_command, _read_bsdf, _write_bsdf, bsdf_files
+from benchmarks._inputs_csv import (
     _csv_command,
     _read_csv,
     _write_csv,
     check_measurements,
     measurement_csvs,
 )
-from brdf_infer.bench._inputs_params import (
+from benchmarks._inputs_params import (
     _params_command,
     _read_params,
     _write_params,
     check_params,
     parameter_inputs,
 )
-from brdf_infer.bench._inputs_scene import _read_scene, _write_scene, check_scene, scene_files
+from benchmarks._inputs_scene import _read_scene, _write_scene, check_scene, scene_files
 from brdf_infer.errors import BadInputError
 
 

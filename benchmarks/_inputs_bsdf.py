@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 from hypothesis import strategies as st
 
-from brdf_infer.bench._inputs import _LEVELS, _broken, _number_text, _scene_for_rows
+from benchmarks._inputs import _LEVELS, _broken, _number_text, _scene_for_rows
 from brdf_infer.tables.measurements import Measurements
 
 _HEADER_VALUES = {

@@ -10,7 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 from scipy.optimize import least_squares
 
-from brdf_infer.bench._timing import timed
+from benchmarks._timing import timed
 from brdf_infer.fit.lsq import fit_lsq, fit_space, internal_bounds, start_points
 from brdf_infer.fit.paper import paper_fit
 from brdf_infer.model import family

@@ -14,14 +14,14 @@ from pathlib import Path
 
 import numpy as np
 
-from brdf_infer.bench import _peers
-from brdf_infer.bench._peers import (
+from benchmarks import _peers
+from benchmarks._peers import (
     ANGLE_SCALE_DEG,
     PARAMETER_SITES,
     PRIOR_NAMES,
     model_arrays,
 )
-from brdf_infer.bench._peers_check import log_density_check
+from benchmarks._peers_check import log_density_check
 from brdf_infer.runs.folder import RunFolder
 
 QUANTITIES = ("brdf0", "alpha", "theta_s0", "tis70")

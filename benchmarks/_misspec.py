@@ -444,7 +444,7 @@ def section_text(study: MisspecStudy) -> tuple[str, str, str, str]:
         "SBC (above) simulates from the likelihood itself, so it checks the inference given "
         "the model and cannot see a wrong error model. Each case here simulates "
         f"{settings.replicates} replicates under one `[errors]` setting of the bundled scene "
-        "and fits them under another (`brdf_infer/bench/_misspec.py`), its data at the 42 "
+        "and fits them under another (`benchmarks/_misspec.py`), its data at the 42 "
         f"rows; NUTS as in SBC ({settings.warmup} warmup, {settings.draws * settings.thin} "
         f"draws thinned to {settings.draws}); every case of a block has the same truths and "
         "NUTS keys. Two blocks, by where the truths are drawn: from the scene's prior, as in "
