@@ -23,7 +23,13 @@ from brdf_infer.posterior._bands import (
 )
 from brdf_infer.posterior._likelihood import ModelData, build_model_data
 from brdf_infer.posterior._loo import LeaveOneOut, pointwise_loo_terms, psis_loo
-from brdf_infer.posterior._loo_refit import LEFT_OUT_SIGMA, exact_loo_rows, without_row
+from brdf_infer.posterior._loo_refit import (
+    LEFT_OUT_SIGMA,
+    exact_loo,
+    exact_loo_rows,
+    program_refit,
+    without_row,
+)
 from brdf_infer.posterior._lowrank import cholesky, solve_lower, solve_upper_transposed
 from brdf_infer.posterior._model import LINEAR, NOISE_SITES, PosteriorModel, build_posterior_model
 from brdf_infer.posterior._model_check import model_check, posterior_checks
@@ -123,6 +129,7 @@ __all__ = [
     "diagnostics",
     "draws_params",
     "draws_physical",
+    "exact_loo",
     "exact_loo_rows",
     "family_draws",
     "flatten_draws",
@@ -144,6 +151,7 @@ __all__ = [
     "posterior_settings",
     "power_scaling",
     "prior_draws",
+    "program_refit",
     "programs_by_structure",
     "psis_loo",
     "row_count",

@@ -94,20 +94,30 @@ def _refit(draws: Draws, model: PosteriorModel, data: ModelData) -> dict[str, np
     return None if isinstance(sampled, str) else sampled.sites
 
 
-def exact_loo_rows(
-    model: PosteriorModel, draws: Draws, pareto_k: np.ndarray, limit: float
-) -> dict[int, ExactTerm]:
+def program_refit(program: NutsProgram, keys, count: int):
+    """A refit through a compiled NUTS ``program`` with chain ``keys`` and ``count`` draws a
+    chain: data → its sites, None where the chains diverge or disagree (:func:`_converged`).
+    What the studies (``compare``, ``sensitivity``) refit with."""
+
+    def refit(data: ModelData) -> dict[str, np.ndarray] | None:
+        output = program.run(data, keys, count)
+        return output.sites if _converged(output.sites, output.stats) else None
+
+    return refit
+
+
+def exact_loo(model: PosteriorModel, rows, refit) -> dict[int, ExactTerm]:
     """Row → its exact ln p(yᵢ | y₋ᵢ), LOO-PIT and their Monte Carlo standard error
-    (:class:`~brdf_infer.posterior._loo.ExactTerm`) for every row whose k̂ exceeds ``limit``,
-    by a refit without it (module docstring, :func:`_refit`); a refit that fails its checks
-    leaves its row out. Empty when no row exceeds ``limit``, when more than
-    :data:`MAX_REFIT_ROWS` do, or when the run was emcee's."""
-    rows = np.flatnonzero(np.asarray(pareto_k) > limit)
-    if draws.program is None or not 0 < rows.size <= MAX_REFIT_ROWS:
+    (:class:`~brdf_infer.posterior._loo.ExactTerm`) for each of ``rows``, by ``refit`` (data →
+    sites, or None when the refit is refused) without it (module docstring); a refused refit
+    leaves its row out. Empty when more than :data:`MAX_REFIT_ROWS` rows are asked for. The
+    one exact-LOO of the run and of every study."""
+    rows = [int(row) for row in rows]
+    if len(rows) > MAX_REFIT_ROWS:
         return {}
     exact = {}
-    for row in map(int, rows):
-        sites = _refit(draws, model, without_row(model, row))
+    for row in rows:
+        sites = refit(without_row(model, row))
         if sites is None:
             continue  # the row stays a failure of the verdict
         # every row's terms are computed for the one row wanted: as few draws as PSIS-LOO's
@@ -117,3 +127,14 @@ def exact_loo_rows(
         elpd = float(logsumexp(terms) - np.log(terms.size))
         exact[row] = ExactTerm(elpd, pit, log_mean_mcse(terms))
     return exact
+
+
+def exact_loo_rows(
+    model: PosteriorModel, draws: Draws, pareto_k: np.ndarray, limit: float
+) -> dict[int, ExactTerm]:
+    """:func:`exact_loo` of a run's rows whose k̂ exceeds ``limit``, refitted through the
+    run's own program (:func:`_refit`); empty for an emcee run."""
+    if draws.program is None:
+        return {}
+    rows = np.flatnonzero(np.asarray(pareto_k) > limit)
+    return exact_loo(model, rows, lambda data: _refit(draws, model, data))

@@ -20,7 +20,9 @@ Where Pareto k exceeds its limit (:func:`brdf_infer.verdict.pareto_k_limit` of t
 term is then computed exactly by refitting without it (leave-one-out by refit, i.e. K-fold
 with one row per fold for those rows). Refitting needs no new compilation: the row is left
 out by giving its measurement noise a σ of 10⁶ in ln R, which removes its information from
-the likelihood while keeping the data's shape.
+the likelihood while keeping the data's shape. The refits are the run's own
+(:func:`brdf_infer.posterior.exact_loo`): at most five rows, a refit whose chains diverge or
+disagree refused (the row keeps its PSIS term and its warning).
 """
 
 from __future__ import annotations
@@ -33,7 +35,6 @@ from typing import Any
 import jax
 import jax.numpy as jnp
 import numpy as np
-from scipy.special import logsumexp
 
 from brdf_infer._internal import arviz as az
 from brdf_infer._internal.precision import ensure_float64
@@ -44,10 +45,11 @@ from brdf_infer.posterior import (
     NutsProgram,
     build_model,
     chain_keys,
+    exact_loo,
     flatten_draws,
     interval95,
     loo_terms,
-    without_row,
+    program_refit,
 )
 from brdf_infer.runs.folder import COMPARE_FILE as COMPARE_FILE  # the old name, kept
 from brdf_infer.scene import Scene
@@ -174,14 +176,12 @@ def fit_family(
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         loo = az.loo(idata, pointwise=True)
-    refitted, exact = [], {}
+    exact = {}
     if settings.refit:
-        limit = pareto_k_limit(int(loo.n_samples))
-        for row in np.flatnonzero(np.asarray(loo.pareto_k) > limit):
-            refit = program.run(without_row(model, int(row)), keys, settings.draws)
-            terms = loo_terms(model, refit.sites)[0][..., row].reshape(-1)
-            exact[int(row)] = float(logsumexp(terms) - np.log(terms.size))
-            refitted.append(int(row))
+        rows = np.flatnonzero(np.asarray(loo.pareto_k) > pareto_k_limit(int(loo.n_samples)))
+        terms = exact_loo(model, rows, program_refit(program, keys, settings.draws))
+        exact = {row: term.elpd for row, term in terms.items()}
+    refitted = sorted(exact)
     flat = flatten_draws({k: sites[k] for k in member.parameters})
     chosen = np.linspace(0, len(next(iter(flat.values()))) - 1, TIS_DRAWS).astype(int)
     physical = {k: jnp.asarray(v[chosen]) for k, v in flat.items()}

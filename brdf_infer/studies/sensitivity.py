@@ -17,8 +17,9 @@ nothing); another error model (``model=spread``) compiles its own.
 
 Each row's pointwise log predictive density is that of its leave-one-out conditional
 (:func:`brdf_infer.posterior.loo_terms`), as in the run's PSIS-LOO; where Pareto k > 0.7 the
-row's term is computed exactly by refitting without it, through the same program
-(:func:`brdf_infer.studies.compare.without_row`), as the model comparison does. The TIS follows the
+row's term is computed exactly by refitting without it, through the same program, by the
+run's own exact LOO (:func:`brdf_infer.posterior.exact_loo`: at most five rows, refits that
+fail their checks refused), as the model comparison does. The TIS follows the
 scene's ``[model] fold`` (its bands' convention).
 
 The baseline posterior is also checked for its sensitivity to the prior and to the likelihood
@@ -251,21 +252,19 @@ class SensitivityResult:
 
 def _exact_terms(
     program, model, pointwise: np.ndarray, rows: list[int], *, settings: SensitivitySettings
-) -> np.ndarray:
-    """``pointwise`` with the terms of ``rows`` replaced by their exact leave-one-out elpd:
-    log of the mean over draws of p(yᵢ | y₋ᵢ, θ) from a posterior without row i."""
-    from scipy.special import logsumexp
-
-    from brdf_infer.posterior import chain_keys, loo_terms
-    from brdf_infer.studies.compare import without_row
+) -> tuple[np.ndarray, list[int]]:
+    """(``pointwise`` with the terms of ``rows`` replaced by their exact leave-one-out elpd,
+    the rows replaced): :func:`brdf_infer.posterior.exact_loo` through the variant's compiled
+    program; a refit refused by its checks, or more rows than a run refits, leaves the PSIS
+    terms."""
+    from brdf_infer.posterior import chain_keys, exact_loo, program_refit
 
     keys = chain_keys(settings.seed, 1, settings.chains)[0]
     exact = pointwise.copy()
-    for row in rows:
-        refit = program.run(without_row(model, row), keys, settings.draws)
-        terms = loo_terms(model, refit.sites)[0][..., row].reshape(-1)
-        exact[row] = float(logsumexp(terms) - np.log(terms.size))
-    return exact
+    terms = exact_loo(model, rows, program_refit(program, keys, settings.draws))
+    for row, term in terms.items():
+        exact[row] = term.elpd
+    return exact, sorted(terms)
 
 
 def _summarise(
@@ -277,7 +276,7 @@ def _summarise(
     started: float,
     refit=None,
 ) -> VariantResult:
-    """TIS, π·BRDF0, PSIS-LOO (``refit(pointwise, rows)``: exact terms where Pareto k > 0.7)
+    """TIS, π·BRDF0, PSIS-LOO (``refit(pointwise, rows)``: exact terms and the rows refitted)
     and the sampler's health of one variant's draws."""
     from brdf_infer._internal import arviz as az
     from brdf_infer.posterior import (
@@ -304,12 +303,10 @@ def _summarise(
         summary = az.summary(idata, var_names=names, kind="diagnostics", round_to="none")
     pareto_k = np.asarray(loo.pareto_k)
     limit = pareto_k_limit(int(loo.n_samples))
-    refitted = [int(row) for row in np.flatnonzero(pareto_k > limit)]
-    pointwise = np.asarray(loo.loo_i)
-    if refit is not None and refitted:
-        pointwise = refit(pointwise, refitted)
-    else:
-        refitted = []
+    high = [int(row) for row in np.flatnonzero(pareto_k > limit)]
+    pointwise, refitted = np.asarray(loo.loo_i), []
+    if refit is not None and high:
+        pointwise, refitted = refit(pointwise, high)
     physical = draws_physical(sites, model.family)
     band = tis_band(model.family, physical, angles, FAMILY_TIS_DRAWS)
     return VariantResult(
