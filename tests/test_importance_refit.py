@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from brdf_infer._internal import arviz as az
+from brdf_infer.posterior import Refused, build_posterior_model, run_nuts
 from brdf_infer.posterior import _laplace as laplace
-from brdf_infer.posterior import build_posterior_model, run_nuts
 from brdf_infer.posterior._bands import draws_physical
 from brdf_infer.posterior._width import ASSUMPTIONS, headline_draws, variant_model
 from tests.helpers import (
@@ -80,7 +80,7 @@ def test_the_variant_without_the_calibration_by_importance_agrees_with_its_own_n
     variant's own NUTS run (:func:`disagreements`)."""
     _, run, variant, own = lya_runs
     sampled = refit(run, variant)
-    assert not isinstance(sampled, str), sampled
+    assert not isinstance(sampled, Refused), sampled
     assert sampled.extra["pareto_k"] <= laplace.pareto_k_limit(4000)
     assert sampled.extra["ess"] > 500
     assert sampled.sites["brdf0"].shape == (2, 2000)
@@ -114,7 +114,7 @@ def test_a_variant_far_from_the_run_is_reached_by_newton_steps(lya_runs, without
     _, run, _, _ = lya_runs
     far, own = without_angle_errors
     sampled = refit(run, far)
-    assert not isinstance(sampled, str), sampled
+    assert not isinstance(sampled, Refused), sampled
     assert disagreements(sampled, own, far) == []
 
 
@@ -125,20 +125,20 @@ def test_without_the_newton_steps_the_far_variant_is_refused(lya_runs, without_a
     far, _ = without_angle_errors
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(laplace.LaplaceProgram, "newton_proposal", lambda self, data, start: None)
-        assert "Pareto k" in refit(run, far)
+        assert "Pareto k" in refit(run, far).reason
 
 
 def test_a_variant_of_another_space_is_refused(lya_runs, lya):
     """Without the sample effect the variant has no scale τ: refused before any evaluation."""
     model, run, _, _ = lya_runs
     other = variant_model(model, lya[1], assumption("sample_effect"))
-    assert refit(run, other) == "the variant's unconstrained space is not the run's"
+    assert refit(run, other) == Refused("the variant's unconstrained space is not the run's")
 
 
 def test_a_run_without_unconstrained_draws_is_refused(lya_runs):
     model, run, _, _ = lya_runs
     bare = laplace.Draws(run.sites, run.stats, "emcee", run.settings, {})
-    assert refit(bare, model) == "the run kept no unconstrained draws"
+    assert refit(bare, model) == Refused("the run kept no unconstrained draws")
 
 
 def test_the_sample_size_sets_the_pareto_k_threshold():

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
+from brdf_infer.posterior import Refused, build_model, draws_params, run_posterior
 from brdf_infer.posterior import _laplace as laplace
-from brdf_infer.posterior import build_model, draws_params, run_posterior
 from brdf_infer.report import write_report
 from brdf_infer.scene.settings import LAPLACE_MIN_ROWS, PosteriorSettings, resolved_sampler
 from tests.helpers import MC_BOUND, mcmc_mean_se, mcmc_quantile_se, quantile_se, resampled_ess
@@ -142,7 +142,7 @@ def test_a_proposal_too_narrow_is_refused_and_the_run_samples_with_nuts(lya, mon
     monkeypatch.setattr(laplace, "ADAPT_ROUNDS", 0)
     scene, rows = lya
     refusal = laplace.laplace_draws(build_model(*lya), chains=2, draws=500, seed=0)
-    assert isinstance(refusal, str) and "Pareto k" in refusal
+    assert isinstance(refusal, Refused) and "Pareto k" in refusal.reason
     heard = []
     run = run_posterior(
         scene,

@@ -69,7 +69,7 @@ from brdf_infer.posterior._run import (
     run_posterior,
     run_scene,
 )
-from brdf_infer.posterior._samplers import Draws, nuts_draws, run_emcee, run_nuts
+from brdf_infer.posterior._samplers import Draws, Refused, nuts_draws, run_emcee, run_nuts
 from brdf_infer.posterior._targets import (
     NEW_PART_EFFECT,
     QUESTIONS,
@@ -118,6 +118,7 @@ __all__ = [
     "PosteriorRun",
     "PosteriorSummary",
     "Predictive",
+    "Refused",
     "VerdictRecord",
     "build_model",
     "build_model_data",

@@ -29,7 +29,7 @@ from brdf_infer.posterior._power_scaling import log_likelihood_draws
 from brdf_infer.posterior._prior import prior_draws
 from brdf_infer.posterior._reference import reference_record
 from brdf_infer.posterior._results import loo_sites
-from brdf_infer.posterior._samplers import Draws, run_nuts
+from brdf_infer.posterior._samplers import Draws, Refused, run_nuts
 from brdf_infer.posterior._targets import (
     NEW_PART_EFFECT,
     SAMPLE_EFFECT,
@@ -81,7 +81,7 @@ def _refit(draws: Draws, seed: int, tis_angles: Sequence[float]):
     count = min(REFIT_DRAWS, settings["draws"])
     shape = {"chains": chains, "draws": count}
 
-    def sample(variant: PosteriorModel) -> tuple[Draws | str, dict[str, int | str | float]]:
+    def sample(variant: PosteriorModel) -> tuple[Draws | Refused, dict[str, int | str | float]]:
         sampled = importance_refit(
             draws,
             variant,
@@ -92,7 +92,7 @@ def _refit(draws: Draws, seed: int, tis_angles: Sequence[float]):
             proposals=PROPOSALS_PER_DRAW * chains * count,
             target_ess=chains * count,
         )
-        if not isinstance(sampled, str):
+        if not isinstance(sampled, Refused):
             return sampled, {**shape, "sampler": "importance", **_importance(sampled)}
         if draws.sampler == "laplace":
             sampled = laplace_draws(
@@ -113,7 +113,7 @@ def _refit(draws: Draws, seed: int, tis_angles: Sequence[float]):
 
     def refit(variant: PosteriorModel) -> Refitted | None:
         sampled, record = sample(variant)
-        if isinstance(sampled, str):
+        if isinstance(sampled, Refused):
             return None
         physical = draws_physical(sampled.sites, variant.products)
         flat = headline_draws(variant.products, physical, tis_angles)

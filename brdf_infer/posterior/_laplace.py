@@ -44,7 +44,7 @@ from brdf_infer.posterior._compile_clock import compile_clock
 from brdf_infer.posterior._model import PosteriorModel
 from brdf_infer.posterior._nuts import same_structure
 from brdf_infer.posterior._potential import FlatPotential
-from brdf_infer.posterior._samplers import Draws
+from brdf_infer.posterior._samplers import Draws, Refused
 from brdf_infer.verdict import PARETO_K_LIMIT, pareto_k_limit
 
 STARTS = 4  # BFGS searches from dispersed points
@@ -350,11 +350,11 @@ class LaplaceProgram:
         proposals: int | None = None,
         target_ess: float | None = None,
         rescue: Callable[[], Proposal | None] | None = None,
-    ) -> Draws | str:
+    ) -> Draws | Refused:
         """Draws of the posterior with ``data`` (module docstring): ``proposals`` (default
         ``chains`` × ``draws``; with ``target_ess`` at most as many,
         :meth:`adapted_sample`) proposals resampled into ``chains`` × ``draws`` draws; or,
-        where the approximation is refused, why (one line, for the caller's fallback).
+        where the approximation is refused, why (:class:`Refused`, for the caller's fallback).
         ``start``: the first proposal (:func:`importance_refit`) in place of the Student-t at
         the mode with scale H⁻¹, whose searches are then skipped; ``rescue``: as in
         :meth:`adapted_sample`."""
@@ -365,12 +365,12 @@ class LaplaceProgram:
             if start is None:
                 fit = self.fit(data, seed)
                 if fit.refusal is not None:
-                    return fit.refusal
+                    return Refused(fit.refusal)
                 start = Proposal(fit.mode, np.linalg.inv(fit.hessian))
             sample = self.adapted_sample(data, start, count, rng, target_ess, rescue)
             count = len(sample.points)
             if not sample.pareto_k <= pareto_k_limit(count):
-                return (
+                return Refused(
                     f"the importance weights have Pareto k {sample.pareto_k:.2f} > "
                     f"{pareto_k_limit(count):.2f} after {sample.rounds} adaptations"
                 )
@@ -416,7 +416,7 @@ def importance_refit(
     seed: int,
     proposals: int | None = None,
     target_ess: float | None = None,
-) -> Draws | str:
+) -> Draws | Refused:
     """Draws of a variant of a run's posterior — ``model`` (the run's structure) with
     ``data`` (a row left out, an error scale set to zero) — by importance sampling from a
     Student-t with the mean and covariance of the run's draws, adapted and checked by PSIS
@@ -425,20 +425,27 @@ def importance_refit(
     ``target_ess`` is reached sooner, resampled into ``chains`` × ``count`` draws): the
     variant's posterior mostly lies within a few of the run's standard deviations of it, so
     the mode searches are not needed, and k̂ above :func:`pareto_k_limit` says where that
-    fails (then the caller samples the variant anew). One line saying why not where the
-    run kept no unconstrained draws or the variant's space is not the run's. Where the
+    fails (then the caller samples the variant anew). :class:`Refused` where the run kept no
+    unconstrained draws or the variant's space is not the run's. A NUTS run's variants are
+    reweighted by a Laplace program of each variant structure, made once and kept on the
+    run's NUTS program (``_reweighters``). Where the
     first trial's k̂ says the variant lies away from the run's draws, the proposal moves to
     its mode by Newton steps from their mean (:meth:`LaplaceProgram.newton_proposal`)."""
     if draws.unconstrained is None:
-        return "the run kept no unconstrained draws"
+        return Refused("the run kept no unconstrained draws")
     points = draws.unconstrained.reshape(-1, draws.unconstrained.shape[-1])
-    program = draws.program if isinstance(draws.program, LaplaceProgram) else draws.reweighter
-    if program is None or not program.serves(model):
+    # a NUTS run's reweighting programs, one per variant structure, kept on its program
+    kept = [] if draws.program is None else draws.program.__dict__.setdefault("_reweighters", [])
+    candidates = [draws.program, *kept]
+    program = next(
+        (p for p in candidates if isinstance(p, LaplaceProgram) and p.serves(model)), None
+    )
+    if program is None:
         program = LaplaceProgram(model)
         if program.flat.dimension != points.shape[1]:
-            return "the variant's unconstrained space is not the run's"
+            return Refused("the variant's unconstrained space is not the run's")
         if draws.sampler == "nuts":
-            draws.reweighter = program  # the next variant of the same structure reuses it
+            kept.append(program)  # the next variant of the same structure reuses it
     start = Proposal.weighted(points, np.zeros(len(points)))
     return program.sample(
         data,
@@ -459,16 +466,17 @@ def laplace_draws(
     draws: int,
     seed: int,
     program: LaplaceProgram | None = None,
-) -> Draws | str:
+) -> Draws | Refused:
     """Draws of ``model``'s posterior by Laplace + PSIS (module docstring) through
     ``program`` where it serves ``model`` (:meth:`LaplaceProgram.sample`)."""
     with compile_clock() as compiled:
         if program is None or not program.serves(model):
             program = LaplaceProgram(model)
     result = program.sample(model.data, chains=chains, draws=draws, seed=seed)
-    if not isinstance(result, str):
-        result.seconds["compile"] += compiled[0]
-    return result
+    if isinstance(result, Refused):
+        return result
+    seconds = {**result.seconds, "compile": result.seconds["compile"] + compiled[0]}
+    return dataclasses.replace(result, seconds=seconds)
 
 
 def _resampled(log_weights: np.ndarray, chains: int, draws: int, rng) -> np.ndarray:

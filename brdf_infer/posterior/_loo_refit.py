@@ -38,7 +38,7 @@ from brdf_infer.posterior._loo import ExactTerm, log_mean_mcse
 from brdf_infer.posterior._model import PosteriorModel
 from brdf_infer.posterior._nuts import NutsProgram, chain_keys
 from brdf_infer.posterior._results import loo_draws, loo_sites, loo_terms
-from brdf_infer.posterior._samplers import Draws
+from brdf_infer.posterior._samplers import Draws, Refused
 
 LEFT_OUT_SIGMA = 1e6  # σ of ln R that removes a row's information
 MAX_REFIT_ROWS = 5
@@ -82,7 +82,7 @@ def _refit(draws: Draws, model: PosteriorModel, data: ModelData) -> dict[str, np
             seed=settings["seed"],
             target_ess=REFIT_ESS,
         )
-        if not isinstance(sampled, str):
+        if not isinstance(sampled, Refused):
             return sampled.sites
     if isinstance(draws.program, NutsProgram):
         keys = chain_keys(settings["seed"], 1, settings["chains"])[0]
@@ -91,7 +91,7 @@ def _refit(draws: Draws, model: PosteriorModel, data: ModelData) -> dict[str, np
     sampled = draws.program.sample(
         data, chains=settings["chains"], draws=count, seed=settings["seed"]
     )
-    return None if isinstance(sampled, str) else sampled.sites
+    return None if isinstance(sampled, Refused) else sampled.sites
 
 
 def program_refit(program: NutsProgram, keys, count: int):

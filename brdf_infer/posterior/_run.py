@@ -53,6 +53,7 @@ from brdf_infer.posterior._results import (
 )
 from brdf_infer.posterior._samplers import (
     Draws,
+    Refused,
     emcee_settings,
     load_checkpoint,
     run_emcee,
@@ -404,9 +405,9 @@ def _sample(
         drawn = laplace_draws(
             model, chains=settings.chains, draws=settings.draws, seed=settings.seed
         )
-        if not isinstance(drawn, str):
+        if not isinstance(drawn, Refused):
             return drawn
-        refusal = drawn
+        refusal = drawn.reason
         if announce is not None:
             announce(f"Laplace + PSIS refused ({refusal}); sampling with NUTS")
     if sampler in ("nuts", "laplace"):
@@ -420,7 +421,7 @@ def _sample(
             progress=progress,
         )
         if refusal is not None:
-            result.extra["laplace_refused"] = refusal
+            result = dataclasses.replace(result, extra={**result.extra, "laplace_refused": refusal})
         return result
     checkpoint = None if out is None else out / CHECKPOINT_FILE
     if out is not None:

@@ -9,6 +9,7 @@ so the two samplers differ only by how they sample.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import io
 import signal
 import sys
@@ -30,7 +31,15 @@ from brdf_infer.posterior._nuts import NutsProgram, chain_keys
 from brdf_infer.posterior._potential import FlatPotential
 
 
-@dataclass
+class Refused(NamedTuple):
+    """A sampler's refusal to draw (Laplace + PSIS whose mode search or Pareto k̂ fails, an
+    importance refit outside the run's space): ``reason``, one line, for the caller's
+    fallback."""
+
+    reason: str
+
+
+@dataclass(frozen=True)
 class Draws:
     """Posterior draws of one run.
 
@@ -48,8 +57,6 @@ class Draws:
         unconstrained: the draws on the flat unconstrained space, (chain, draw, dimension)
             (NUTS and Laplace runs), from which a variant's refit starts
             (:func:`brdf_infer.posterior._laplace.importance_refit`).
-        reweighter: the Laplace program that reweights a NUTS run's draws for its variants
-            (made on first use).
     """
 
     sites: dict[str, np.ndarray]
@@ -60,7 +67,6 @@ class Draws:
     extra: dict = field(default_factory=dict)
     program: Any = field(default=None, repr=False, compare=False)  # NutsProgram, LaplaceProgram
     unconstrained: np.ndarray | None = field(default=None, repr=False, compare=False)
-    reweighter: Any = field(default=None, repr=False, compare=False)  # LaplaceProgram
 
 
 def _progress_enabled(progress: bool | None) -> bool:
@@ -95,9 +101,7 @@ def run_nuts(
         "target_accept": target_accept,
     }
     result = nuts_draws(output.sites, output.stats, settings, output.seconds)
-    result.program = program
-    result.unconstrained = output.unconstrained
-    return result
+    return dataclasses.replace(result, program=program, unconstrained=output.unconstrained)
 
 
 def nuts_draws(sites: dict, stats: dict, settings: dict, seconds: dict[str, float]) -> Draws:
