@@ -283,7 +283,8 @@ def test_a_row_with_pareto_k_above_0_7_is_refitted_on_a_single_series_scene(tmp_
     Pareto k lies far above the limit of 600 draws (1 − 1/log₁₀ 600 = 0.64; unplanted it had
     k ≈ 0.8 ± 0.12 from run to run, too near the limit for a test that must cross it on
     every CPU), so its LOO term is computed by refitting without it, as is every row above
-    that limit; elpd_loo and p_loo of the ranking carry the exact terms."""
+    that limit whose refit passes the run's checks; elpd_loo and p_loo of the ranking carry
+    the exact terms."""
     from brdf_infer._internal import arviz as az
     from brdf_infer.scene import load_scene
     from brdf_infer.studies.compare import fit_family, rank_families
@@ -302,7 +303,10 @@ def test_a_row_with_pareto_k_above_0_7_is_refitted_on_a_single_series_scene(tmp_
     limit = pareto_k_limit(sizes["chain"] * sizes["draw"])
     high = [int(row) for row in np.flatnonzero(k > limit)]
     assert high, k  # the scene has such a row
-    assert fit.refitted_rows == high and set(fit.exact_elpd) == set(high)
+    # every such row is refitted unless its refit fails the run's checks (divergences,
+    # R-hat > 1.01 over 2 × 300 draws), which leaves its PSIS term; the planted row is
+    assert 0 in fit.refitted_rows and set(fit.refitted_rows) <= set(high)
+    assert set(fit.exact_elpd) == set(fit.refitted_rows)
     assert all(np.isfinite(value) for value in fit.exact_elpd.values())
     table, notes = rank_families({"strumik2024": fit, "psis only": _psis_only(fit)})
     rows, shift = _with_refit_effect(fit, table)
@@ -311,8 +315,13 @@ def test_a_row_with_pareto_k_above_0_7_is_refitted_on_a_single_series_scene(tmp_
     assert refitted["elpd_loo"] == pytest.approx(psis["elpd_loo"] + shift, rel=1e-12)
     assert refitted["p_loo"] == pytest.approx(psis["p_loo"] - shift, rel=1e-12)
     assert refitted["pareto_k_limit"] == pytest.approx(limit)
-    assert refitted["pareto_k_max"] > limit >= refitted["pareto_k_max_after_refit"]
-    assert any(f"rows {high}" in note and "LOO by refit" in note for note in notes), notes
+    left = [row for row in high if row not in fit.refitted_rows]  # refits refused
+    after = max([float(k[row]) for row in left], default=0.0)
+    assert refitted["pareto_k_max"] > limit
+    assert refitted["pareto_k_max_after_refit"] <= max(after, limit)
+    assert any(f"rows {fit.refitted_rows}" in note and "LOO by refit" in note for note in notes), (
+        notes
+    )
 
 
 def test_fit_lsq_of_another_family_gives_its_parameters_in_json(capsys):
