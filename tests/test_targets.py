@@ -21,7 +21,7 @@ from brdf_infer.posterior import (
     chosen_target,
     target_log_factor,
 )
-from brdf_infer.posterior._targets import sample_effect_moments, targets_record
+from brdf_infer.posterior._targets import effect_moments, targets_record
 from brdf_infer.scene import load_scene
 from tests.helpers import (
     MC_BOUND,
@@ -125,7 +125,7 @@ def test_the_sample_effects_conditional_is_the_dense_gaussian_conditional(tmp_pa
         (scene := _three_sample_scene(tmp_path)), scene.load_measurements()
     )
     sites = _draws_near_truth(model, 5, seed=1)
-    mean, covariance = sample_effect_moments(model, sites)
+    mean, covariance = effect_moments(model, sites)[:2]
     for k in range(5):
         dense_mean, dense_cov = _dense_conditional(model, sites, k)
         assert_allclose(mean[k], dense_mean, rtol=0, atol=1e-10)
@@ -137,7 +137,7 @@ def test_the_sample_effects_conditional_is_the_dense_gaussian_conditional(tmp_pa
 
     _targets._conditional_effects = without_calibration
     try:
-        planted, _ = sample_effect_moments(model, sites)
+        planted = effect_moments(model, sites)[0]
     finally:
         _targets._conditional_effects = original
     dense = np.array([_dense_conditional(model, sites, k)[0] for k in range(5)])
@@ -153,7 +153,7 @@ def test_the_sample_effects_are_zero_without_a_sample_effect(tmp_path):
     model = build_posterior_model(scene, scene.load_measurements())
     sites = _draws_near_truth(model, 3, seed=2)
     del sites["sample_sd"]
-    mean, covariance = sample_effect_moments(model, sites)
+    mean, covariance = effect_moments(model, sites)[:2]
     assert not mean.any() and not covariance.any()
 
 

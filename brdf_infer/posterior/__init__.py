@@ -77,7 +77,6 @@ from brdf_infer.posterior._targets import (
     chosen_target,
     latent_effect_draws,
     load_run_target,
-    sample_effect_draws,
     target_log_factor,
 )
 from brdf_infer.runs.records import (
@@ -163,7 +162,6 @@ __all__ = [
     "run_nuts",
     "run_posterior",
     "run_scene",
-    "sample_effect_draws",
     "solve_lower",
     "solve_upper_transposed",
     "stack_data",

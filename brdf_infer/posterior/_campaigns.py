@@ -29,7 +29,7 @@ from brdf_infer.posterior._bands import interval95
 from brdf_infer.posterior._loo import uniformity_p_value
 from brdf_infer.posterior._model import PosteriorModel
 from brdf_infer.posterior._model_check import CHECK_P_VALUE, check, detectable_spread
-from brdf_infer.posterior._targets import calibration_scales
+from brdf_infer.posterior._targets import calibration_scales, store_calibration_effects
 from brdf_infer.scene import Scene
 from brdf_infer.tables.measurements import Measurements
 
@@ -37,24 +37,28 @@ from brdf_infer.tables.measurements import Measurements
 def campaign_records(
     model: PosteriorModel,
     measurements: Measurements,
+    idata,
     calibration_draws: np.ndarray,
     elpd_i: np.ndarray,
     pit: np.ndarray,
 ) -> tuple[dict[str, Any], list[dict[str, Any]]]:
     """The summary's ``calibration_effects`` (and, for a pooled scene, ``campaigns``) and the
-    model check's ``loo_pit_campaigns`` (for two or more campaigns) of a run: its
-    calibration factors' draws (draws, groups) and its rows' LOO terms and LOO-PIT."""
+    model check's ``loo_pit_campaigns`` (for two or more campaigns) of a run, from its
+    calibration factors' draws (draws, groups), which go into ``idata`` by group name
+    (:func:`~._targets.store_calibration_effects`), and its rows' LOO terms and LOO-PIT."""
     scene = model.scene
     names = calibration_group_names(scene.errors, measurements)
+    store_calibration_effects(idata, calibration_draws, names)
     records: dict[str, Any] = {
         "calibration_effects": calibration_record(
             names, calibration_draws, calibration_scales(model.data.noise)
         )
     }
     campaigns = campaigns_record(scene, measurements, elpd_i, pit)
-    if campaigns is not None:
-        records["campaigns"] = campaigns
-    pooled_check = campaign_pit_check(scene, measurements, pit)
+    if campaigns is None:
+        return records, []
+    records["campaigns"] = campaigns
+    pooled_check = campaign_pit_check(campaigns)
     return records, [] if pooled_check is None else [pooled_check]
 
 
@@ -103,19 +107,16 @@ def campaigns_record(
     return record
 
 
-def campaign_pit_check(scene: Scene, measurements: Measurements, pit: np.ndarray):
-    """The ``loo_pit_campaigns`` check of a pooled scene (module docstring); None for a scene
-    of one file."""
-    if len(scene.campaigns) < 2:
+def campaign_pit_check(campaigns: dict[str, Any]):
+    """The ``loo_pit_campaigns`` check of a pooled scene (module docstring) from its
+    ``campaigns`` record (:func:`campaigns_record`); None for fewer than two campaigns."""
+    if len(campaigns) < 2:
         return None
-    owner = row_campaigns(measurements)
-    p_values = {
-        c.name: uniformity_p_value(np.asarray(pit)[owner == c.name]) for c in scene.campaigns
-    }
+    p_values = {name: entry["loo_pit_ks_p"] for name, entry in campaigns.items()}
     worst = min(p_values, key=p_values.get)
     p = min(1.0, len(p_values) * p_values[worst])
     ok = p >= CHECK_P_VALUE
-    smallest = min(int(np.sum(owner == c.name)) for c in scene.campaigns)
+    smallest = min(entry["rows"] for entry in campaigns.values())
     spread = detectable_spread(smallest)
     detectable = (
         f"a campaign whose rows scatter {spread:.2g} times the predictive sd (the smallest "

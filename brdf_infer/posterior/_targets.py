@@ -148,13 +148,6 @@ def effect_moments(
     return tuple(over_draw_blocks(compute, flat, len(model.row_samples), columns))
 
 
-def sample_effect_moments(
-    model: PosteriorModel, sites: dict[str, np.ndarray], data: ModelData | None = None
-) -> tuple[np.ndarray, np.ndarray]:
-    """The sample effects' part of :func:`effect_moments`: mean and covariance of u."""
-    return effect_moments(model, sites, data)[:2]
-
-
 def _draw_normal(mean: np.ndarray, covariance: np.ndarray, seed: int) -> np.ndarray:
     """One draw of N(mean, covariance) per leading index (a zero covariance allowed)."""
     values, vectors = np.linalg.eigh(covariance)
@@ -177,18 +170,6 @@ def latent_effect_draws(
         _draw_normal(mean, covariance, seed),
         _draw_normal(calibration_mean, calibration_covariance, seed + 1),
     )
-
-
-def sample_effect_draws(
-    model: PosteriorModel,
-    sites: dict[str, np.ndarray],
-    seed: int,
-    data: ModelData | None = None,
-) -> np.ndarray:
-    """One draw of every measured sample's effect u_j [ln R] per posterior draw,
-    (draws, samples), from its conditional (:func:`sample_effect_moments`)."""
-    mean, covariance = sample_effect_moments(model, sites, data)
-    return _draw_normal(mean, covariance, seed)
 
 
 def new_part_draws(model: PosteriorModel, sites: dict[str, np.ndarray], seed: int) -> np.ndarray:
@@ -266,7 +247,7 @@ def targets_record(
     Args:
         headline: every draw of the coating's headline quantities (``tis_70deg``,
             ``pi_brdf0`` where the run has them), which a sample effect multiplies by e^u.
-        sample_effects, new_part: each draw's effects (:func:`sample_effect_draws`,
+        sample_effects, new_part: each draw's effects (:func:`latent_effect_draws`,
             :func:`new_part_draws`).
         sample_names: the measured samples, in the effects' order.
         chosen: the target the run's bands describe.
