@@ -17,7 +17,10 @@ from brdf_infer.errors import BadInputError
 def add_parser(commands) -> argparse.ArgumentParser:
     """The options of ``brdf-infer bench``."""
     parser = command_parser(
-        commands, "bench", "error-against-run-time benchmarks of every numerical method"
+        commands,
+        "bench",
+        "error-against-run-time benchmarks of every numerical method (in a checkout of the "
+        "repository: its benchmarks/ folder)",
     )
     parser.add_argument("--quick", action="store_true", help="small sizes, a couple of minutes")
     parser.add_argument(
