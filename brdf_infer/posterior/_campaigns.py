@@ -29,7 +29,7 @@ from brdf_infer.posterior._bands import interval95
 from brdf_infer.posterior._loo import uniformity_p_value
 from brdf_infer.posterior._model import PosteriorModel
 from brdf_infer.posterior._model_check import CHECK_P_VALUE, check, detectable_spread
-from brdf_infer.posterior._targets import calibration_scales, store_calibration_effects
+from brdf_infer.posterior._targets import calibration_scales
 from brdf_infer.scene import Scene
 from brdf_infer.tables.measurements import Measurements
 
@@ -37,18 +37,15 @@ from brdf_infer.tables.measurements import Measurements
 def campaign_records(
     model: PosteriorModel,
     measurements: Measurements,
-    idata,
     calibration_draws: np.ndarray,
     elpd_i: np.ndarray,
     pit: np.ndarray,
 ) -> tuple[dict[str, Any], list[dict[str, Any]]]:
     """The summary's ``calibration_effects`` (and, for a pooled scene, ``campaigns``) and the
     model check's ``loo_pit_campaigns`` (for two or more campaigns) of a run, from its
-    calibration factors' draws (draws, groups), which go into ``idata`` by group name
-    (:func:`~._targets.store_calibration_effects`), and its rows' LOO terms and LOO-PIT."""
+    calibration factors' draws (draws, groups) and its rows' LOO terms and LOO-PIT."""
     scene = model.scene
     names = calibration_group_names(scene.errors, measurements)
-    store_calibration_effects(idata, calibration_draws, names)
     records: dict[str, Any] = {
         "calibration_effects": calibration_record(
             names, calibration_draws, calibration_scales(model.data.noise)

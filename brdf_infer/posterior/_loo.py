@@ -171,16 +171,19 @@ class LeaveOneOut:
         )
 
 
-def relative_efficiency(posterior) -> float:
+def relative_efficiency(posterior, thinning: int = 1) -> float:
     """The relative efficiency of a posterior's draws, the mean over its variables of the
     mean's ESS over the number of draws (1 for one chain): what ArviZ's ``loo`` passes to the
-    Pareto smoothing."""
+    Pareto smoothing, so it is computed over every variable of the posterior group as it is
+    written. ``thinning``: the factor by which the draws PSIS-LOO reads were thinned, which
+    raises their relative efficiency by up to that factor (capped at 1)."""
     chains, draws = len(posterior.chain), len(posterior.draw)
     if chains == 1:
         return 1.0
     ess = az.ess(posterior, method="mean")
     means = np.hstack([ess[name].values.ravel() for name in ess.data_vars])
-    return float(means.mean() / (chains * draws))
+    reff = float(means.mean() / (chains * draws))
+    return reff if thinning == 1 else min(1.0, reff * thinning)
 
 
 def psis_loo(

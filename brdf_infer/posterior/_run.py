@@ -20,7 +20,7 @@ from brdf_infer._internal.outlock import writing
 from brdf_infer._internal.precision import ensure_float64
 from brdf_infer.errors import BadInputError
 from brdf_infer.model import check_family_name
-from brdf_infer.model.error_model import ERROR_MODELS, ErrorSettings
+from brdf_infer.model.error_model import ERROR_MODELS, ErrorSettings, calibration_group_names
 from brdf_infer.model.params import PARAM_NAMES
 from brdf_infer.posterior._answer import answer_records
 from brdf_infer.posterior._bands import (
@@ -65,6 +65,7 @@ from brdf_infer.posterior._targets import (
     chosen_target,
     latent_effect_draws,
     new_part_draws,
+    store_calibration_effects,
     store_effects,
     target_log_factor,
 )
@@ -504,6 +505,10 @@ def complete_run(
         NEW_PART_EFFECT: new_part_draws(model, result.sites, seed + 29),
     }
     store_effects(idata, effects, model.sample_names, target)
+    # stored before the relative efficiency, which reads every variable of the posterior group
+    store_calibration_effects(
+        idata, calibration_effects, calibration_group_names(scene.errors, measurements)
+    )
     factor = target_log_factor(target, *effects.values(), model.sample_names)
     products = model.products  # the same parameters as the family's
     bands = posterior_bands(products, products.scaled(physical, factor), theta_i_band, with_tis)
@@ -519,8 +524,7 @@ def complete_run(
     clock.lap("bands")
     checks = diagnostics(idata, result, parameters, fixed)
     clock.lap("diagnostics")
-    # thinning raises the draws' relative efficiency by up to its factor
-    reff = min(1.0, relative_efficiency(idata.posterior) * thinning)
+    reff = relative_efficiency(idata.posterior, thinning)
     loo = psis_loo(log_lik, cdf, reff)
     exact = exact_loo_rows(model, result, loo.pareto_k, loo.limit) if refit else {}
     clock.lap("loo")
@@ -541,7 +545,7 @@ def complete_run(
     predictive = predictive_checks(loo, measurements, exact)
     pit = np.asarray(predictive["loo_pit"])
     pooled, pooled_checks = campaign_records(
-        model, measurements, idata, calibration_effects, loo.with_exact(exact).elpd_i, pit
+        model, measurements, calibration_effects, loo.with_exact(exact).elpd_i, pit
     )
     own_checks = [*posterior_checks(model, measurements, pit, result.sites), *pooled_checks]
     summary = {
