@@ -144,7 +144,7 @@ def main(args: argparse.Namespace) -> int:
         raise BadInputError(f"{draws} > the run's {available} draws", field="--draws")
     # one writer per folder; an export that died here left files its rerun may replace
     claim = args.claims.enter_context(writing(out, "export", option="--out"))
-    unfinished = claim.previous is not None and claim.previous.command == "export"
+    unfinished = (claim.previous or {}).get("command") == "export"
     existing = [name for name in planned_files(source, args.format, draws) if (out / name).exists()]
     if existing and not (args.force or unfinished):
         raise BadInputError(

@@ -20,7 +20,8 @@ goes through :class:`RunFolder`, so the folder's layout is written down once, he
     exports.json            the exports made from the run, for the report
     report.html, figures/   the report
     variants/NAME/          a study's posterior (a run folder of its own)
-    .brdf-infer.lock        a writer at work (brdf_infer._internal.outlock)
+    .brdf-infer.lock        a writer at work, or one that stopped before finishing
+                            (brdf_infer._internal.outlock)
 
 A study folder of its own (``sbc --out``, ``batch --out``) uses the same writers with
 ``sbc.json`` and ``batch.json``. Readers of old run folders keep working: a study's file that
