@@ -27,7 +27,6 @@ from brdf_infer.posterior._loo_refit import (
     LEFT_OUT_SIGMA,
     exact_loo,
     exact_loo_rows,
-    program_refit,
     without_row,
 )
 from brdf_infer.posterior._lowrank import cholesky, solve_lower, solve_upper_transposed
@@ -151,7 +150,6 @@ __all__ = [
     "posterior_settings",
     "power_scaling",
     "prior_draws",
-    "program_refit",
     "programs_by_structure",
     "psis_loo",
     "row_count",

@@ -22,14 +22,14 @@ from typing import Any
 import numpy as np
 
 from brdf_infer.posterior._bands import FAMILY_TIS_DRAWS, draws_physical, evenly_spaced
-from brdf_infer.posterior._laplace import importance_refit, laplace_draws
 from brdf_infer.posterior._learned import learned_record
 from brdf_infer.posterior._model import PosteriorModel
 from brdf_infer.posterior._power_scaling import log_likelihood_draws
 from brdf_infer.posterior._prior import prior_draws
 from brdf_infer.posterior._reference import reference_record
+from brdf_infer.posterior._refit import VARIANT_CHAINS, VARIANT_DRAWS, refit
 from brdf_infer.posterior._results import loo_sites
-from brdf_infer.posterior._samplers import Draws, Refused, run_nuts
+from brdf_infer.posterior._samplers import Draws, Refused
 from brdf_infer.posterior._targets import (
     NEW_PART_EFFECT,
     SAMPLE_EFFECT,
@@ -45,14 +45,6 @@ from brdf_infer.posterior._width import (
 from brdf_infer.tables.measurements import Measurements
 
 PRIOR_DRAWS = 4000  # the prior predictive's 2.5 % quantile from ~100 draws beyond it
-# A refit's size (brdf_infer.posterior._width, "Monte Carlo error"): 2 × 500 draws, ESS ≈ 800
-# for the 95 % endpoints on lya, put the MC standard error of a width ratio near 0.03
-REFIT_CHAINS = 2
-REFIT_DRAWS = 500
-# an importance refit's proposals at most, a draw: as many as make Kish's ESS the draws; a
-# variant's posterior narrower than the run's leaves a quarter of them effective (ESS 260 of
-# 1000 without the calibration on lya), a large table's about half
-PROPOSALS_PER_DRAW = 4
 
 
 def headline_angles(model: PosteriorModel, band_angles: Sequence[float]) -> list[float]:
@@ -65,62 +57,24 @@ def headline_angles(model: PosteriorModel, band_angles: Sequence[float]) -> list
 
 
 def _refit(draws: Draws, seed: int, tis_angles: Sequence[float]):
-    """A variant's headline draws from a new posterior of it (:class:`Refitted`):
-    importance sampling from the run's draws (:func:`importance_refit`, Pareto k̂ checked),
-    as many proposals as make Kish's ESS the draws, at most :data:`PROPOSALS_PER_DRAW` a
-    draw, resampled into :data:`REFIT_CHAINS` × :data:`REFIT_DRAWS` draws (at most the
-    run's chains and draws);
-    where that is refused, the run's sampler: NUTS with as many chains and draws after
-    the run's warmup, or Laplace + PSIS, through the run's own compiled program where it
-    serves the variant. None: the run was emcee's (such a variant is reported unreliable);
-    a refit is None where every way is refused."""
-    if draws.sampler not in ("nuts", "laplace"):
-        return None
-    settings = draws.settings
-    chains = min(REFIT_CHAINS, settings["chains"])
-    count = min(REFIT_DRAWS, settings["draws"])
-    shape = {"chains": chains, "draws": count}
+    """A variant's headline draws from a new posterior of it (:class:`Refitted`) by the one
+    refitter (:func:`~brdf_infer.posterior._refit.refit`: importance sampling from the run's
+    draws, else the run's sampler through its compiled program where it serves the variant,
+    a NUTS refit held to the one convergence rule), :data:`~._refit.VARIANT_CHAINS` ×
+    :data:`~._refit.VARIANT_DRAWS` draws (at most the run's); None where it is refused (an
+    emcee run's variants: reported unreliable)."""
 
-    def sample(variant: PosteriorModel) -> tuple[Draws | Refused, dict[str, int | str | float]]:
-        sampled = importance_refit(
-            draws,
-            variant,
-            variant.data,
-            chains=chains,
-            count=count,
-            seed=seed,
-            proposals=PROPOSALS_PER_DRAW * chains * count,
-            target_ess=chains * count,
-        )
-        if not isinstance(sampled, Refused):
-            return sampled, {**shape, "sampler": "importance", **_importance(sampled)}
-        if draws.sampler == "laplace":
-            sampled = laplace_draws(
-                variant, chains=chains, draws=count, seed=seed, program=draws.program
-            )
-            return sampled, {**shape, "sampler": "laplace"}
-        sampled = run_nuts(
-            variant,
-            chains=chains,
-            warmup=settings["warmup"],
-            draws=count,
-            seed=seed,
-            target_accept=settings["target_accept"],
-            progress=False,
-            program=draws.program,
-        )
-        return sampled, {**shape, "warmup": settings["warmup"], "sampler": "nuts"}
-
-    def refit(variant: PosteriorModel) -> Refitted | None:
-        sampled, record = sample(variant)
+    def resample(variant: PosteriorModel) -> Refitted | None:
+        sampled = refit(draws, variant, chains=VARIANT_CHAINS, count=VARIANT_DRAWS, seed=seed)
         if isinstance(sampled, Refused):
             return None
-        physical = draws_physical(sampled.sites, variant.products)
+        physical = draws_physical(sampled.draws.sites, variant.products)
         flat = headline_draws(variant.products, physical, tis_angles)
-        headline = {name: values.reshape(chains, count) for name, values in flat.items()}
-        return Refitted(headline, record, sampled.sites)
+        shape = (sampled.record["chains"], sampled.record["draws"])
+        headline = {name: values.reshape(shape) for name, values in flat.items()}
+        return Refitted(headline, sampled.record, sampled.draws.sites)
 
-    return refit
+    return resample
 
 
 def thinned_sites(sites: dict[str, np.ndarray], count: int) -> dict[str, np.ndarray]:
@@ -128,11 +82,6 @@ def thinned_sites(sites: dict[str, np.ndarray], count: int) -> dict[str, np.ndar
     chains, draws = np.shape(next(iter(sites.values())))[:2]
     kept = np.unique(np.linspace(0, draws - 1, max(1, count // chains)).round().astype(int))
     return {name: np.asarray(values)[:, kept] for name, values in sites.items()}
-
-
-def _importance(sampled: Draws) -> dict[str, float]:
-    """An importance refit's Pareto k̂ and Kish effective sample size."""
-    return {"pareto_k": sampled.extra["pareto_k"], "ess": sampled.extra["ess"]}
 
 
 def answer_records(

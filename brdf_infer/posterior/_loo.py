@@ -128,7 +128,8 @@ class LeaveOneOut:
         se: its standard error, √(n Var(elpdᵢ)).
         p_loo: the effective number of parameters, lppd − elpd_loo.
         pareto_k: the Pareto shape k̂ of every row's importance weights, (rows,).
-        pit: the LOO-PIT of every row, (rows,) (:func:`loo_pit`).
+        pit: the LOO-PIT of every row, (rows,) (:func:`loo_pit`); None where no conditional
+            CDF was given (a study's ranking reads the elpd only).
         elpd_i: every row's term of ``elpd_loo``, (rows,).
         lppd_i: every row's ln mean_s p(yᵢ | y₋ᵢ, θ_s) over the draws, (rows,).
         limit: the k̂ above which a row's estimate is unreliable with this many draws
@@ -141,7 +142,7 @@ class LeaveOneOut:
     se: float
     p_loo: float
     pareto_k: np.ndarray
-    pit: np.ndarray
+    pit: np.ndarray | None
     elpd_i: np.ndarray
     lppd_i: np.ndarray
     limit: float = PARETO_K_LIMIT
@@ -152,15 +153,18 @@ class LeaveOneOut:
         Monte Carlo standard error, :mod:`brdf_infer.posterior._loo_refit`) put in; ``p_loo``
         follows the new elpd (lppd − elpd_loo, the lppd unchanged), the k̂ stay the importance
         sampling's."""
-        elpd_i, pit = self.elpd_i.copy(), self.pit.copy()
+        elpd_i = self.elpd_i.copy()
+        pit = None if self.pit is None else self.pit.copy()
         mcse_i = None if self.mcse_i is None else self.mcse_i.copy()
         for row, term in exact.items():
-            elpd_i[row], pit[row] = term.elpd, term.pit
+            elpd_i[row] = term.elpd
+            if pit is not None:
+                pit[row] = term.pit
             if mcse_i is not None:
                 mcse_i[row] = term.mcse
         return LeaveOneOut(
             elpd_loo=float(elpd_i.sum()),
-            se=float(np.sqrt(elpd_i.size * np.var(elpd_i))),
+            se=standard_error(elpd_i),
             p_loo=float(self.lppd_i.sum() - elpd_i.sum()),
             pareto_k=self.pareto_k,
             pit=pit,
@@ -187,7 +191,10 @@ def relative_efficiency(posterior, thinning: int = 1) -> float:
 
 
 def psis_loo(
-    log_likelihood: np.ndarray, cdf: np.ndarray, reff: float, rows_per_chunk: int = ROWS_PER_CHUNK
+    log_likelihood: np.ndarray,
+    cdf: np.ndarray | None,
+    reff: float,
+    rows_per_chunk: int = ROWS_PER_CHUNK,
 ) -> LeaveOneOut:
     """PSIS-LOO and LOO-PIT from the pointwise leave-one-out terms, a block of rows at a time,
     so that no more than ``rows_per_chunk`` × draws weights are held at once (the terms
@@ -199,12 +206,12 @@ def psis_loo(
 
     Args:
         log_likelihood: (chains, draws, rows) log p(yᵢ | y₋ᵢ, θ_s).
-        cdf: (chains, draws, rows) P(ỹᵢ ≤ yᵢ | y₋ᵢ, θ_s).
+        cdf: (chains, draws, rows) P(ỹᵢ ≤ yᵢ | y₋ᵢ, θ_s); None: no LOO-PIT (``pit`` None).
         reff: :func:`relative_efficiency` of the draws.
     """
     rows = log_likelihood.shape[-1]
     terms = np.reshape(log_likelihood, (-1, rows))
-    cdf = np.reshape(cdf, (-1, rows))
+    cdf = None if cdf is None else np.reshape(cdf, (-1, rows))
     draws = terms.shape[0]
     elpd, lppd, mcse = np.empty(rows), np.empty(rows), np.empty(rows)
     pareto_k, pit = np.empty(rows), np.empty(rows)
@@ -215,15 +222,92 @@ def psis_loo(
         elpd[block] = logsumexp(log_weights + values, axis=1)
         lppd[block] = logsumexp(values, axis=1) - np.log(draws)
         mcse[block] = psis_mcse(log_weights, values, reff)
-        pit[block] = weighted_pit(log_weights, np.asarray(cdf[:, block], float).T)
+        if cdf is not None:
+            pit[block] = weighted_pit(log_weights, np.asarray(cdf[:, block], float).T)
     return LeaveOneOut(
         elpd_loo=float(elpd.sum()),
-        se=float(np.sqrt(rows * np.var(elpd))),
+        se=standard_error(elpd),
         p_loo=float(lppd.sum() - elpd.sum()),
         pareto_k=pareto_k,
-        pit=pit,
+        pit=None if cdf is None else pit,
         elpd_i=elpd,
         lppd_i=lppd,
         limit=pareto_k_limit(draws),
         mcse_i=mcse,
     )
+
+
+def standard_error(elpd_i: np.ndarray) -> float:
+    """The standard error of a sum of n pointwise terms, √(n Var(elpdᵢ)) (Vehtari, Gelman &
+    Gabry 2017, Eq. 23): of elpd_loo, or, of the terms' differences, of Δelpd (Eq. 24)."""
+    elpd_i = np.asarray(elpd_i, float)
+    return float(np.sqrt(elpd_i.size * np.var(elpd_i)))
+
+
+def elpd_difference(elpd_i: np.ndarray, reference_i: np.ndarray) -> tuple[float, float]:
+    """Δelpd = Σᵢ (elpdᵢ − referenceᵢ) of two models' leave-one-out terms on the same rows and
+    its standard error √(n Var(elpdᵢ − referenceᵢ)) (Vehtari, Gelman & Gabry 2017, Eq. 24:
+    the paired estimate, not the two standard errors combined): as ArviZ's ``compare`` has
+    ``elpd_diff`` and ``dse`` (there best − other)."""
+    difference = np.asarray(elpd_i, float) - np.asarray(reference_i, float)
+    return float(difference.sum()), standard_error(difference)
+
+
+def stacking_weights(elpd_i: np.ndarray) -> np.ndarray:
+    """Stacking weights of models from their leave-one-out terms, (models, rows): the w on the
+    simplex that maximise Σᵢ ln Σₖ wₖ p(yᵢ | y₋ᵢ, Mₖ) (Yao, Vehtari, Simpson & Gelman 2018,
+    "Using stacking to average Bayesian predictive distributions", Bayesian Anal. 13, 917),
+    by SLSQP from equal weights as ArviZ's ``compare(method="stacking")``; each row's densities
+    are scaled by their largest (which moves the objective by a constant and leaves its
+    gradient), so that terms below ln(10⁻³⁰⁸) do not underflow to a zero density."""
+    from scipy.optimize import Bounds, LinearConstraint, minimize
+
+    terms = np.asarray(elpd_i, float).T  # (rows, models)
+    density = np.exp(terms - np.max(terms, axis=1, keepdims=True))
+    models = density.shape[1]
+
+    def log_score(weights):
+        return -np.sum(np.log(density @ weights))
+
+    def gradient(weights):
+        return -np.sum(density / (density @ weights)[:, None], axis=0)
+
+    result = minimize(
+        fun=log_score,
+        x0=np.full(models, 1.0 / models),
+        jac=gradient,
+        bounds=Bounds(lb=np.zeros(models), ub=np.ones(models)),
+        constraints=LinearConstraint(np.ones(models), lb=1.0, ub=1.0),
+    )
+    return np.asarray(result.x)
+
+
+class Ranked(NamedTuple):
+    """One model of a PSIS-LOO ranking (:func:`rank_models`).
+
+    Attributes:
+        name: the model.
+        loo: its PSIS-LOO.
+        d_elpd, dse: the best model's elpd_loo minus its own (≥ 0) and the difference's
+            standard error (:func:`elpd_difference`).
+        weight: its stacking weight (:func:`stacking_weights`).
+    """
+
+    name: str
+    loo: LeaveOneOut
+    d_elpd: float
+    dse: float
+    weight: float
+
+
+def rank_models(loos: dict[str, LeaveOneOut]) -> list[Ranked]:
+    """Models by their PSIS-LOO on the same rows, best (largest elpd_loo) first, each with its
+    difference to the best and the stacking weights: ArviZ's ``compare(method="stacking")``
+    of the same terms (``elpd_diff``, ``dse``, ``weight``)."""
+    order = sorted(loos, key=lambda name: loos[name].elpd_loo, reverse=True)
+    weights = stacking_weights(np.stack([loos[name].elpd_i for name in order]))
+    best = loos[order[0]].elpd_i
+    return [
+        Ranked(name, loos[name], *elpd_difference(best, loos[name].elpd_i), float(weight))
+        for name, weight in zip(order, weights, strict=True)
+    ]

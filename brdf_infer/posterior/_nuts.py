@@ -105,6 +105,11 @@ class NutsProgram:
         self._compiled: dict = {}
         self._lock = threading.Lock()
 
+    @property
+    def target_accept(self) -> float:
+        """The target acceptance probability of the step-size adaptation."""
+        return self._kernel_options["target_accept_prob"]
+
     def serves(self, model: PosteriorModel, warmup: int, target_accept: float) -> bool:
         """Whether this program samples ``model`` under these settings too: the same model but
         for its data (the same family, priors, scene and error-model structure, the error
@@ -113,7 +118,7 @@ class NutsProgram:
         programs."""
         return (
             warmup == self.warmup
-            and target_accept == self._kernel_options["target_accept_prob"]
+            and target_accept == self.target_accept
             and same_structure(model, self.model)
         )
 

@@ -27,7 +27,7 @@ from brdf_infer._internal.atomic import atomic_write_bytes
 from brdf_infer.errors import BadInputError
 from brdf_infer.posterior._compile_clock import compile_clock
 from brdf_infer.posterior._model import PosteriorModel
-from brdf_infer.posterior._nuts import NutsProgram, chain_keys
+from brdf_infer.posterior._nuts import NutsOutput, NutsProgram, chain_keys
 from brdf_infer.posterior._potential import FlatPotential
 
 
@@ -92,13 +92,22 @@ def run_nuts(
     output = program.run(
         model.data, chain_keys(seed, 1, chains)[0], draws, progress=_progress_enabled(progress)
     )
+    return program_draws(program, output, chains=chains, draws=draws, seed=seed)
+
+
+def program_draws(
+    program: NutsProgram, output: NutsOutput, *, chains: int, draws: int, seed: int
+) -> Draws:
+    """:class:`Draws` of one data set's run through ``program`` (``chains`` × ``draws`` from
+    :func:`chain_keys` of ``seed``), with the program and the unconstrained draws a refit
+    starts from (:func:`brdf_infer.posterior._refit.refit`)."""
     settings = {
         "chains": chains,
-        "warmup": warmup,
+        "warmup": program.warmup,
         "draws": draws,
         "seed": seed,
         "dense_mass": True,
-        "target_accept": target_accept,
+        "target_accept": program.target_accept,
     }
     result = nuts_draws(output.sites, output.stats, settings, output.seconds)
     return dataclasses.replace(result, program=program, unconstrained=output.unconstrained)

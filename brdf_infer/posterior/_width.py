@@ -26,8 +26,10 @@ reports its 95 % interval, with the Monte Carlo standard error of each end, and
   prior's energy factor then taken at the article's Δφ) — and the Pareto k̂ of the weights says
   whether that is reliable. Where k̂ > :func:`~brdf_infer.verdict.pareto_k_limit` of the draws
   (0.7 from 2200 draws, 0.67 at a table's 1000) the alternative is sampled anew (``refit``)
-  instead (:func:`brdf_infer.posterior._answer.answer_records`): by importance sampling from a
-  Student-t fitted to the run's draws, else by the run's own sampler. An end q of a 95 %
+  instead by the one refitter (:func:`brdf_infer.posterior._refit.refit`, 2 × 500 draws):
+  importance sampling from a Student-t fitted to the run's draws, else the run's own sampler
+  through its compiled program, a NUTS refit held to the refitter's convergence rule (no
+  divergence, R-hat ≤ 1.01; a refused refit leaves the alternative unreliable). An end q of a 95 %
   interval from an effective sample size n has standard error ≈ the half-distance between the
   quantiles at 0.025 ± √(0.025 · 0.975 / n) (:func:`quantile_se`; n: Kish's ESS of the
   weights, or the draws' ESS at that quantile), so a width ratio from n ≈ 1000 has a relative
@@ -63,7 +65,7 @@ from brdf_infer.model.params import DPHI_NAME, Params
 from brdf_infer.model.priors import Prior
 from brdf_infer.posterior._bands import draws_physical, tis_curve_draws
 from brdf_infer.posterior._likelihood import noise_prior
-from brdf_infer.posterior._loo import psis_loo
+from brdf_infer.posterior._loo import elpd_difference, psis_loo
 from brdf_infer.posterior._model import DPHI_SITE, PosteriorModel, build_posterior_model
 from brdf_infer.posterior._power_scaling import log_likelihood_draws, sample_scale_likelihoods
 from brdf_infer.posterior._results import loo_terms
@@ -316,8 +318,7 @@ def variant_elpd(
             warnings.simplefilter("ignore")
             ratios, _ = az.psislw(log_weights[None, :] - terms, reff)
         elpd_i = logsumexp(ratios + terms, axis=1) - logsumexp(ratios, axis=1)
-    difference = np.asarray(elpd_i) - np.asarray(run_elpd_i)
-    return float(difference.sum()), float(np.sqrt(difference.size * np.var(difference)))
+    return elpd_difference(elpd_i, run_elpd_i)
 
 
 def by_chains(values: np.ndarray, chains: int) -> np.ndarray:

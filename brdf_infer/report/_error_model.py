@@ -3,7 +3,11 @@ this run and of its spread variant, PSIS-LOO and the comparison with the run's m
 
 from __future__ import annotations
 
+import numpy as np
+
 from brdf_infer._internal import arviz as az
+from brdf_infer.posterior import psis_loo
+from brdf_infer.posterior._loo import rank_models, relative_efficiency
 from brdf_infer.report import _html
 from brdf_infer.runs.folder import SUMMARY_FILE, VARIANTS_DIR, RunFolder
 from brdf_infer.runs.records import PosteriorSummary
@@ -105,7 +109,10 @@ def error_model_table(summary: PosteriorSummary) -> str:
 
 
 def variants_comparison(run: RunFolder, idata) -> str:
-    """LOO comparison with model variants stored under ``run/variants/NAME``."""
+    """LOO comparison with model variants stored under ``run/variants/NAME``: the run's PSIS-LOO
+    (:func:`~brdf_infer.posterior.psis_loo`) of each posterior.nc's pointwise terms, ranked
+    with the differences' standard errors and stacking weights
+    (:func:`~brdf_infer.posterior._loo.rank_models`, ArviZ's ``compare`` of the same terms)."""
     variants = {"this run": idata}
     stored = run.path / VARIANTS_DIR
     for name in sorted(p.name for p in stored.glob("*/")) if stored.is_dir() else []:
@@ -113,21 +120,28 @@ def variants_comparison(run: RunFolder, idata) -> str:
             variants[name] = az.from_netcdf(posterior)
     if len(variants) < 2:
         return "<p>No model variants in this run to compare (variants/NAME/posterior.nc).</p>"
-    compared = az.compare(variants)
+    loos = {
+        name: psis_loo(
+            np.asarray(idata.log_likelihood["obs"].values),
+            None,
+            relative_efficiency(idata.posterior),
+        )
+        for name, idata in variants.items()
+    }
     return "<h3>Model variants (PSIS-LOO)</h3>" + _html.table(
         ["variant", "rank", "elpd_loo", "p_loo", "elpd_diff", "weight", "se", "dse"],
         [
             [
-                name,
-                int(r["rank"]),
-                f"{r['elpd_loo']:.2f}",
-                f"{r['p_loo']:.2f}",
-                f"{r['elpd_diff']:.2f}",
-                f"{r['weight']:.2f}",
-                f"{r['se']:.2f}",
-                f"{r['dse']:.2f}",
+                r.name,
+                rank,
+                f"{r.loo.elpd_loo:.2f}",
+                f"{r.loo.p_loo:.2f}",
+                f"{r.d_elpd:.2f}",
+                f"{r.weight:.2f}",
+                f"{r.loo.se:.2f}",
+                f"{r.dse:.2f}",
             ]
-            for name, r in compared.iterrows()
+            for rank, r in enumerate(rank_models(loos))
         ],
     )
 

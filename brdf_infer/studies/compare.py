@@ -5,9 +5,12 @@ same generative error model; only the BRDF differs (one
 :class:`brdf_infer.posterior.PosteriorModel` for every family).
 Each row's pointwise log predictive density is that of its leave-one-out conditional
 p(yᵢ | y₋ᵢ, θ) (the rows are correlated through the sample, calibration and angle effects;
-:mod:`brdf_infer.posterior._loo`), and ArviZ's ``loo``/``compare`` rank the families: elpd_loo
-with its standard error, the difference to the best with the standard error of the
-difference, stacking weights, p_loo and the largest Pareto k.
+:mod:`brdf_infer.posterior._loo`), and the run's own PSIS-LOO
+(:func:`brdf_infer.posterior.psis_loo`, smoothed with the relative efficiency of the family's
+draws) ranks the families: elpd_loo with its standard error, the difference to the best with
+the standard error of the difference (Vehtari, Gelman & Gabry 2017, Eq. 24), stacking weights
+(Yao et al. 2018), p_loo and the largest Pareto k: ArviZ's ``loo`` and ``compare`` of the same
+terms give the same numbers (tested).
 
 Each family's sampler diagnostics stand next to its rank: a family whose NUTS run fails the
 thresholds a posterior run is held to (R-hat ≤ 1.01, bulk ESS ≥ 400, no divergent
@@ -21,14 +24,13 @@ term is then computed exactly by refitting without it (leave-one-out by refit, i
 with one row per fold for those rows). Refitting needs no new compilation: the row is left
 out by giving its measurement noise a σ of 10⁶ in ln R, which removes its information from
 the likelihood while keeping the data's shape. The refits are the run's own
-(:func:`brdf_infer.posterior.exact_loo`): at most five rows, a refit whose chains diverge or
-disagree refused (the row keeps its PSIS term and its warning).
+(:func:`brdf_infer.posterior.exact_loo_rows`, through the one refitter): at most five rows, a
+refit whose chains diverge or disagree refused (the row keeps its PSIS term and its warning).
 """
 
 from __future__ import annotations
 
 import time
-import warnings
 from dataclasses import dataclass
 from typing import Any
 
@@ -42,21 +44,24 @@ from brdf_infer.errors import BadInputError
 from brdf_infer.model import check_family_name
 from brdf_infer.posterior import (
     THRESHOLDS,
+    LeaveOneOut,
     NutsProgram,
     build_model,
     chain_keys,
-    exact_loo,
+    exact_loo_rows,
     flatten_draws,
     interval95,
     loo_terms,
-    program_refit,
+    psis_loo,
 )
+from brdf_infer.posterior._loo import ExactTerm, rank_models, relative_efficiency
+from brdf_infer.posterior._samplers import program_draws
 from brdf_infer.runs.folder import COMPARE_FILE as COMPARE_FILE  # the old name, kept
 from brdf_infer.scene import Scene
 from brdf_infer.scene.settings import CompareSettings
 from brdf_infer.tables.measurements import Measurements
 from brdf_infer.verdict import PARETO_K_LIMIT as PARETO_K_LIMIT  # the old name, kept
-from brdf_infer.verdict import limit_text, pareto_k_limit
+from brdf_infer.verdict import limit_text
 
 TIS_DRAWS = 400  # posterior draws the TIS band is computed from
 TIS_ANGLE_DEG = 70.0
@@ -164,22 +169,25 @@ def fit_family(
     model = build_model(scene, measurements, name)
     member = model.products  # its TIS(70°) of the products' BRDF ([outputs] fold)
     program = NutsProgram(model, warmup=settings.warmup, target_accept=settings.target_accept)
-    keys = chain_keys(settings.seed, 1, settings.chains)[0]
     output = program.run(
-        model.data, keys, settings.draws, progress=progress, description=f"NUTS {name}"
+        model.data,
+        chain_keys(settings.seed, 1, settings.chains)[0],
+        settings.draws,
+        progress=progress,
+        description=f"NUTS {name}",
     )
     sites = output.sites
     log_lik = loo_terms(model, sites)[0]
     names = (*member.parameters, "sample_sd", "repeatability")
     idata = _idata(sites, log_lik, names)
     summary = az.summary(idata, var_names=[n for n in names if n in sites], kind="diagnostics")
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        loo = az.loo(idata, pointwise=True)
     exact = {}
     if settings.refit:
-        rows = np.flatnonzero(np.asarray(loo.pareto_k) > pareto_k_limit(int(loo.n_samples)))
-        terms = exact_loo(model, rows, program_refit(program, keys, settings.draws))
+        loo = _psis(idata)
+        draws = program_draws(
+            program, output, chains=settings.chains, draws=settings.draws, seed=settings.seed
+        )
+        terms = exact_loo_rows(model, draws, loo.pareto_k, loo.limit)
         exact = {row: term.elpd for row, term in terms.items()}
     refitted = sorted(exact)
     flat = flatten_draws({k: sites[k] for k in member.parameters})
@@ -200,47 +208,39 @@ def fit_family(
     )
 
 
-def _elpd(fit: FamilyResult):
-    """ArviZ's PSIS-LOO of ``fit`` with the refitted rows' exact terms put in, and the
-    largest Pareto k before the refits. ``p_loo`` follows the new elpd: ArviZ defines it as
-    lppd − elpd_loo, with lppd = Σᵢ ln mean_s of the pointwise terms over the full posterior
-    (here the leave-one-out conditionals p(yᵢ | y₋ᵢ, θ_s)), which the refits leave unchanged."""
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        loo = az.loo(fit.idata, pointwise=True)
-    raw_k_max = float(np.max(np.asarray(loo.pareto_k)))
-    if fit.exact_elpd:
-        lppd = float(loo["p_loo"] + loo["elpd_loo"])
-        pointwise = np.asarray(loo.loo_i).copy()
-        for row, value in fit.exact_elpd.items():
-            pointwise[row] = value
-        loo.loo_i.values[:] = pointwise
-        loo["elpd_loo"] = float(pointwise.sum())
-        loo["p_loo"] = lppd - loo["elpd_loo"]
-        loo["se"] = float(np.sqrt(pointwise.size * np.var(pointwise)))
-        pareto_k = np.asarray(loo.pareto_k).copy()
-        pareto_k[list(fit.exact_elpd)] = 0.0  # exact now
-        loo.pareto_k.values[:] = pareto_k
-        loo["warning"] = bool(np.any(pareto_k > pareto_k_limit(int(loo.n_samples))))
-    return loo, raw_k_max
+def _psis(idata: az.InferenceData) -> LeaveOneOut:
+    """The run's PSIS-LOO (:func:`~brdf_infer.posterior.psis_loo`) of a family's stored
+    leave-one-out terms, smoothed with the relative efficiency of its posterior's draws
+    (:func:`~brdf_infer.posterior._loo.relative_efficiency`, as ArviZ's ``loo`` takes it)."""
+    log_lik = np.asarray(idata.log_likelihood["obs"].values)
+    return psis_loo(log_lik, None, relative_efficiency(idata.posterior))
+
+
+def _elpd(fit: FamilyResult) -> LeaveOneOut:
+    """The family's PSIS-LOO with the refitted rows' exact terms put in
+    (:meth:`~brdf_infer.posterior.LeaveOneOut.with_exact`: elpd_loo, its se and p_loo = lppd −
+    elpd_loo follow, lppd = Σᵢ ln mean_s of the pointwise terms over the full posterior, which
+    the refits leave; the Pareto k stay the importance sampling's). The ranking reads the elpd
+    terms only: the refits' LOO-PIT and Monte Carlo errors are not kept (NaN)."""
+    nan = float("nan")
+    return _psis(fit.idata).with_exact(
+        {row: ExactTerm(value, nan, nan) for row, value in fit.exact_elpd.items()}
+    )
 
 
 def rank_families(fits: dict[str, FamilyResult]) -> tuple[list[dict[str, Any]], list[str]]:
-    """ArviZ ``compare`` of the families (best first) and the warnings to show."""
-    elpds = {name: _elpd(fit) for name, fit in fits.items()}
-    loos = {name: loo for name, (loo, _) in elpds.items()}
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        frame = az.compare(loos, ic="loo", method="stacking")
+    """The families ranked by elpd_loo (best first), with the difference of each to the best
+    and its standard error (best − this, ≥ 0, as ArviZ's ``compare`` has ``elpd_diff``) and
+    stacking weights (:func:`~brdf_infer.posterior._loo.rank_models`), and the warnings to
+    show."""
     notes = []
     table = []
-    for name, row in frame.iterrows():
+    for name, loo, d_elpd, dse, weight in rank_models({n: _elpd(f) for n, f in fits.items()}):
         fit = fits[name]
-        k_max = float(np.max(np.asarray(loos[name].pareto_k)))
-        limit = pareto_k_limit(int(loos[name].n_samples))
+        refitted = np.isin(np.arange(loo.pareto_k.size), fit.refitted_rows)
         if fit.refitted_rows:
             notes.append(
-                f"{name}: Pareto k > {limit_text(limit)} for rows {fit.refitted_rows} "
+                f"{name}: Pareto k > {limit_text(loo.limit)} for rows {fit.refitted_rows} "
                 "(LOO by refit there)"
             )
         if fit.sampler_failures:
@@ -251,15 +251,16 @@ def rank_families(fits: dict[str, FamilyResult]) -> tuple[list[dict[str, Any]], 
         table.append(
             {
                 "name": name,
-                "elpd_loo": float(row["elpd_loo"]),
-                "se": float(row["se"]),
-                "d_elpd": float(row["elpd_diff"]),
-                "dse": float(row["dse"]),
-                "weight": float(row["weight"]),
-                "p_loo": float(row["p_loo"]),
-                "pareto_k_max": elpds[name][1],
-                "pareto_k_max_after_refit": k_max,
-                "pareto_k_limit": limit,
+                "elpd_loo": loo.elpd_loo,
+                "se": loo.se,
+                "d_elpd": d_elpd,
+                "dse": dse,
+                "weight": weight,
+                "p_loo": loo.p_loo,
+                "pareto_k_max": float(np.max(loo.pareto_k)),
+                # a refitted row's term is exact: its k counts as 0
+                "pareto_k_max_after_refit": float(np.max(np.where(refitted, 0.0, loo.pareto_k))),
+                "pareto_k_limit": loo.limit,
             }
         )
     return table, notes

@@ -2,7 +2,8 @@
 
 For every instrument model the scene's geometry supports (``point``, Eq. 6 as in the article;
 ``aperture``; ``image``), one NUTS posterior on the same rows and error model: BRDF0, α,
-TIS(70°) and π·BRDF0 with 95 % intervals, PSIS-LOO, and the ray tracer's series at a thinned
+TIS(70°) and π·BRDF0 with 95 % intervals, PSIS-LOO (the run's own, from its summary: exact by
+refit where the run refitted a row), and the ray tracer's series at a thinned
 set of the posterior's draws against the measured values (the Fig. 14 comparison: the paper
 compared the Eq. (2) image ratio, ``image_ratio``; ``simulated`` is dPs/Pi through AD).
 Written as ``instruments.json`` in a run folder; the report shows it.
@@ -46,9 +47,12 @@ def supported_instruments(scene: Scene) -> list[str]:
 def instrument_entry(
     name: str, run_dir: Path, idata: az.InferenceData, summary: PosteriorSummary
 ) -> dict:
-    """One row of the side-by-side table from a ``strumik2024`` posterior run."""
+    """One row of the side-by-side table from a ``strumik2024`` posterior run: its elpd_loo
+    and se those of the run's PSIS-LOO (``summary["predictive"]``,
+    :func:`brdf_infer.posterior.psis_loo`), which also serves a large table's run, whose
+    posterior.nc keeps no pointwise terms."""
     posterior = idata.posterior
-    loo = az.loo(idata)
+    loo = summary["predictive"]
     return {
         "instrument": name,
         "run": str(run_dir),
@@ -56,8 +60,8 @@ def instrument_entry(
         "alpha": interval95(posterior["alpha"]),
         "tis_70deg": summary["tis_70deg"],
         "pi_brdf0": summary["pi_brdf0"],
-        "elpd_loo": float(loo.elpd_loo),
-        "elpd_se": float(loo.se),
+        "elpd_loo": float(loo["elpd_loo"]),
+        "elpd_se": float(loo["se"]),
         "divergences": summary["diagnostics"]["divergences"],
         "r_hat_max": summary["diagnostics"]["r_hat_max"],
     }

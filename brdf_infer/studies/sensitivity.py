@@ -16,11 +16,14 @@ padded to one shape (:mod:`brdf_infer.posterior._padding`: zero calibration colu
 nothing); another error model (``model=spread``) compiles its own.
 
 Each row's pointwise log predictive density is that of its leave-one-out conditional
-(:func:`brdf_infer.posterior.loo_terms`), as in the run's PSIS-LOO; where Pareto k > 0.7 the
+(:func:`brdf_infer.posterior.loo_terms`), and each posterior's PSIS-LOO is the run's
+(:func:`brdf_infer.posterior.psis_loo`, smoothed with the relative efficiency of its draws);
+where Pareto k exceeds its limit (:func:`brdf_infer.verdict.pareto_k_limit` of the draws) the
 row's term is computed exactly by refitting without it, through the same program, by the
-run's own exact LOO (:func:`brdf_infer.posterior.exact_loo`: at most five rows, refits that
-fail their checks refused), as the model comparison does. The TIS follows the
-scene's ``[model] fold`` (its bands' convention).
+run's own exact LOO (:func:`brdf_infer.posterior.exact_loo_rows`: at most five rows, refits
+that fail the one convergence rule refused), as the model comparison does. Δelpd and its se
+are Vehtari, Gelman & Gabry's (2017) Eq. 24 (:func:`brdf_infer.posterior._loo.elpd_difference`).
+The TIS follows the scene's ``[model] fold`` (its bands' convention).
 
 The baseline posterior is also checked for its sensitivity to the prior and to the likelihood
 by power-scaling (:func:`brdf_infer.posterior.power_scaling`): per free parameter, learned
@@ -31,7 +34,6 @@ near 1.
 from __future__ import annotations
 
 import dataclasses
-import functools
 import time
 import tomllib
 import warnings
@@ -211,15 +213,17 @@ class VariantResult:
 
     def as_json(self, baseline: VariantResult) -> dict[str, Any]:
         """The contract's entry: Δelpd and its se against ``baseline`` (pointwise)."""
-        difference = self.pointwise - baseline.pointwise
+        from brdf_infer.posterior._loo import elpd_difference
+
+        d_elpd, dse = elpd_difference(self.pointwise, baseline.pointwise)
         return {
             "name": self.variant.name,
             "changes": self.variant.changes,
             "tis": self.tis,
             "pi_brdf0": self.pi_brdf0,
             "elpd_loo": self.elpd_loo,
-            "d_elpd": float(np.sum(difference)),
-            "dse": float(np.sqrt(difference.size * np.var(difference))),
+            "d_elpd": d_elpd,
+            "dse": dse,
             "diagnostics": self.diagnostics,
         }
 
@@ -250,79 +254,60 @@ class SensitivityResult:
         }
 
 
-def _exact_terms(
-    program, model, pointwise: np.ndarray, rows: list[int], *, settings: SensitivitySettings
-) -> tuple[np.ndarray, list[int]]:
-    """(``pointwise`` with the terms of ``rows`` replaced by their exact leave-one-out elpd,
-    the rows replaced): :func:`brdf_infer.posterior.exact_loo` through the variant's compiled
-    program; a refit refused by its checks, or more rows than a run refits, leaves the PSIS
-    terms."""
-    from brdf_infer.posterior import chain_keys, exact_loo, program_refit
-
-    keys = chain_keys(settings.seed, 1, settings.chains)[0]
-    exact = pointwise.copy()
-    terms = exact_loo(model, rows, program_refit(program, keys, settings.draws))
-    for row, term in terms.items():
-        exact[row] = term.elpd
-    return exact, sorted(terms)
-
-
 def _summarise(
-    scene: Scene,
     changed: Variant,
     model,
-    output,
+    draws,
     angles: list[float],
     started: float,
-    refit=None,
+    refit: bool,
 ) -> VariantResult:
-    """TIS, π·BRDF0, PSIS-LOO (``refit(pointwise, rows)``: exact terms and the rows refitted)
-    and the sampler's health of one variant's draws."""
+    """TIS, π·BRDF0, PSIS-LOO (exact by refit where k̂ exceeds its limit, with ``refit``) and
+    the sampler's health of one variant's draws (:class:`~brdf_infer.posterior.Draws` of its
+    program)."""
     from brdf_infer._internal import arviz as az
     from brdf_infer.posterior import (
         FAMILY_TIS_DRAWS,
         NOISE_SITES,
         draws_physical,
+        exact_loo_rows,
         interval95,
         loo_terms,
+        psis_loo,
         tis_band,
     )
-    from brdf_infer.verdict import pareto_k_limit
+    from brdf_infer.posterior._loo import relative_efficiency
 
-    sites = output.sites
-    log_lik = loo_terms(model, sites)[0]
+    sites = draws.sites
+    log_lik, cdf = loo_terms(model, sites)
     names = [*model.scene.free_parameters, *(n for n in NOISE_SITES if n in sites)]
     idata = az.from_dict(
         posterior={name: sites[name] for name in names},
         log_likelihood={"obs": log_lik},
-        sample_stats={"diverging": output.stats["diverging"]},
+        sample_stats={"diverging": draws.stats["diverging"]},
     )
     with warnings.catch_warnings():  # a high Pareto k is reported in the diagnostics
         warnings.simplefilter("ignore")
-        loo = az.loo(idata, pointwise=True)
         summary = az.summary(idata, var_names=names, kind="diagnostics", round_to="none")
-    pareto_k = np.asarray(loo.pareto_k)
-    limit = pareto_k_limit(int(loo.n_samples))
-    high = [int(row) for row in np.flatnonzero(pareto_k > limit)]
-    pointwise, refitted = np.asarray(loo.loo_i), []
-    if refit is not None and high:
-        pointwise, refitted = refit(pointwise, high)
+    loo = psis_loo(log_lik, cdf, relative_efficiency(idata.posterior))
+    exact = exact_loo_rows(model, draws, loo.pareto_k, loo.limit) if refit else {}
+    refitted = loo.with_exact(exact)
     physical = draws_physical(sites, model.family)
     band = tis_band(model.family, physical, angles, FAMILY_TIS_DRAWS)
     return VariantResult(
         variant=changed,
         tis={key: band[key] for key in ("theta_i_deg", "median", "lo95", "hi95")},
         pi_brdf0=interval95(np.pi * physical["brdf0"]),
-        elpd_loo=float(np.sum(pointwise)),
-        se=float(np.sqrt(pointwise.size * np.var(pointwise))),
-        pointwise=pointwise,
+        elpd_loo=refitted.elpd_loo,
+        se=refitted.se,
+        pointwise=refitted.elpd_i,
         diagnostics={
             "r_hat_max": float(np.max(summary["r_hat"])),
             "ess_bulk_min": float(np.min(summary["ess_bulk"])),
-            "divergences": int(np.sum(output.stats["diverging"])),
-            "pareto_k_max": float(np.max(pareto_k)),
-            "pareto_k_limit": limit,
-            "refitted_rows": refitted,
+            "divergences": int(np.sum(draws.stats["diverging"])),
+            "pareto_k_max": float(np.max(loo.pareto_k)),
+            "pareto_k_limit": loo.limit,
+            "refitted_rows": sorted(exact),
         },
         idata=idata,
         seconds=time.perf_counter() - started,
@@ -367,6 +352,7 @@ def sensitivity(
             ``[errors]`` table, or settings out of range.
     """
     from brdf_infer.posterior import build_posterior_model, chain_keys, programs_by_structure
+    from brdf_infer.posterior._samplers import program_draws
 
     check_scene(scene)
     started = time.perf_counter()
@@ -387,16 +373,10 @@ def sensitivity(
                 data, keys, settings.draws, progress=progress, description=runs[index].name
             )
             model = dataclasses.replace(models[index], data=data)
-            refit = functools.partial(_exact_terms, program, model, settings=settings)
-            results[index] = _summarise(
-                scenes[index],
-                runs[index],
-                model,
-                output,
-                angles,
-                clock,
-                refit if settings.refit else None,
+            draws = program_draws(
+                program, output, chains=settings.chains, draws=settings.draws, seed=settings.seed
             )
+            results[index] = _summarise(runs[index], model, draws, angles, clock, settings.refit)
             if index == 0:
                 scaling = _power_scaling(scene, model, output.sites)
     return SensitivityResult(results[0], results[1:], scaling, time.perf_counter() - started)
