@@ -1,12 +1,12 @@
 """The toolkit's private helpers, shared by its packages: nothing here is public API.
 
-Results folders: ``outlock`` (one writer per results folder, and whether it is complete) over
-``oslock`` (the lock itself on each platform), ``atomic`` (atomic writes); the numerics:
-``precision`` (the float64 guard) and ``cache`` (JAX's persistent compilation cache),
-``sharding`` (a batch axis over every device), ``units`` (degrees and radians); ``processes``
-(which process of a batch over several runs which scene); ``resources`` (the bundled data files);
-``design_target`` (a design target parsed without JAX, read by the scene and the settings below
-``design/``, which is why it is not in ``design/``); ``arviz`` (the one module importing ArviZ).
+Results folders: ``outlock`` (one writer per results folder, and whether it is complete),
+``atomic`` (atomic writes); the numerics: ``precision`` (the float64 guard) and ``cache`` (JAX's
+persistent compilation cache), ``sharding`` (a batch axis over every device), ``units`` (degrees
+and radians); ``shards`` (which scenes a shard of a batch runs); ``resources`` (the bundled data
+files); ``design_target`` (a design target parsed without JAX, read by the scene and the
+settings below ``design/``, which is why it is not in ``design/``); ``arviz`` (the one module
+importing ArviZ).
 
 A helper that one package alone uses lives in that package instead (``cli/_device.py``,
 ``cli/_outdir.py``, ``posterior/_compile_clock.py``, ``workflow/_studies.py``). The modules'

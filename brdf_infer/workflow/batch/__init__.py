@@ -32,12 +32,12 @@ run is refused, not replaced. The rest of a group run through the program of the
 (padded to the same shape, the same keys), so on one CPU device the resumed scenes get the
 draws an uninterrupted batch gives them, bit for bit (in vmap mode, to rounding).
 
-Over several processes (``team``: :class:`Team`, connected by :func:`join_processes`,
-``brdf-infer batch --num-processes N``) scene ``k`` belongs to process ``k mod N``: every
-process loads and groups every scene and runs its own through the group's program, so each
-run folder is written once, by its owner, with the draws a batch in one process gives it;
-process 0 writes ``batch.json`` from every process's part. A process that fails stops the
-others (:class:`PeerFailed`), also one that stops sending heartbeats.
+In shards (``shard``: :class:`Shard`, ``brdf-infer batch --shard
+K/N``, in as many independent processes, on as many hosts as wanted) scene ``k`` belongs to
+shard ``k mod N``: every shard loads and groups every scene and runs its own through the
+group's program, so each run folder is written once, by its shard, with the draws of the whole
+batch in one process. The shards share nothing but the output folder; the one that finds every
+scene complete at its end writes ``batch.json`` (so does a ``--resume`` without ``--shard``).
 
 A scene that fails to load or validate is reported with its error and skipped; it never takes
 the batch down. So is a scene whose rows fail a plausibility check (values that look like
@@ -45,10 +45,11 @@ percent, angles that look like radians; :mod:`brdf_infer.verdict.plausibility`),
 ``BatchSettings(force=True)``: then it runs and its verdict names the check.
 """
 
+from brdf_infer._internal.shards import Shard
 from brdf_infer.scene.settings import (
     BatchSettings as BatchSettings,
 )  # as before: bench imports it here
-from brdf_infer.workflow.batch._batch import Batch, run_batch
+from brdf_infer.workflow.batch._batch import Batch, hold_output, run_batch
 from brdf_infer.workflow.batch._entries import (
     BATCH_FILE,
     INTERRUPTED,
@@ -59,7 +60,6 @@ from brdf_infer.workflow.batch._entries import (
 from brdf_infer.workflow.batch._folders import OLD_MARK, PARTIAL_MARK, remove_stale_partials
 from brdf_infer.workflow.batch._groups import expand_sources, structure_key
 from brdf_infer.workflow.batch._signals import GRACE_SECONDS, run_batch_until_signalled
-from brdf_infer.workflow.batch._team import PeerFailed, Team, join_processes
 
 __all__ = [
     "BATCH_FILE",
@@ -70,11 +70,10 @@ __all__ = [
     "Batch",
     "BatchInterrupted",
     "BatchResult",
-    "PeerFailed",
     "SceneEntry",
-    "Team",
+    "Shard",
     "expand_sources",
-    "join_processes",
+    "hold_output",
     "remove_stale_partials",
     "run_batch",
     "run_batch_until_signalled",

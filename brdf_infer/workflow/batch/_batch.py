@@ -15,9 +15,9 @@ from typing import Any
 import jax
 import numpy as np
 
-from brdf_infer._internal.outlock import note_written, require_complete, writing
+from brdf_infer._internal.outlock import require_complete, shard_lock_file, writing
 from brdf_infer._internal.precision import ensure_float64
-from brdf_infer._internal.processes import Processes
+from brdf_infer._internal.shards import WHOLE, Shard
 from brdf_infer.errors import BadInputError
 from brdf_infer.posterior import (
     Cancelled,
@@ -57,7 +57,6 @@ from brdf_infer.workflow.batch._folders import (
     remove_stale_partials,
 )
 from brdf_infer.workflow.batch._groups import _site_shapes, expand_sources, structure_key
-from brdf_infer.workflow.batch._team import Team
 
 
 def _silent(message: str) -> None:
@@ -68,10 +67,10 @@ class Batch:
     """One batch run (:func:`run_batch`), its state readable from another thread: the entries,
     the groups and the run folders being written.
 
-    With a ``team`` (a batch over several processes) this process runs and writes only the
-    scenes it owns (:meth:`Processes.owns`), through the same padded group programs and keys
-    as a batch in one process; process 0 holds the output folder, removes what killed batches
-    left there, and writes ``batch.json`` from every process's part.
+    A ``shard`` of several runs and writes only the scenes it owns (:meth:`Shard.owns`),
+    through the same padded group programs and keys as the whole batch, and holds the output
+    folder beside the other shards (its own marker); the shard that finds every scene complete
+    at its end writes ``batch.json`` (:meth:`_merge`).
     """
 
     def __init__(
@@ -84,16 +83,13 @@ class Batch:
         progress: Callable[[str], None] = _silent,
         cancel: threading.Event | None = None,
         resume: bool = False,
-        team: Team | None = None,
+        shard: Shard = WHOLE,
     ):
         self.sources, self.out, self.settings = sources, Path(out), settings
         self.resume = resume
-        self.team = team
-        self.processes = team.processes if team is not None else Processes()
+        self.shard = shard
         self.family, self.progress = model, progress
         self.cancel = cancel if cancel is not None else threading.Event()
-        if team is not None:
-            team.cancel = self.cancel  # another process's failure stops this batch
         self._numbers: dict[int, int] = {}  # id(entry) -> its scene number
         self.entries: list[SceneEntry] = []
         self.groups = 0
@@ -105,35 +101,27 @@ class Batch:
     # ------------------------------------------------------------------------------ state
 
     def result(self, interrupted: bool = False) -> BatchResult:
-        """The batch so far; with a team, the scenes the other processes posted included."""
-        remote: dict[int, dict[str, Any]] = {}
-        compile_seconds = self.compile_seconds
-        if self.team is not None:
-            for part in self.team.parts():
-                remote.update({int(k): v for k, v in part["scenes"].items()})
-                compile_seconds += part["compile_seconds"]
+        """The batch so far."""
         return BatchResult(
             entries=self.entries,
             groups=self.groups,
             devices=jax.device_count(),
             seconds=time.perf_counter() - self.started,
-            compile_seconds=compile_seconds,
+            compile_seconds=self.compile_seconds,
             interrupted=interrupted,
-            processes=self.processes.count,
-            remote=remote,
+            shards=self.shard.count,
         )
 
     def write_summary(self, interrupted: bool = False) -> BatchResult:
-        """``batch.json`` (process 0 only: the others' result is returned, not written)."""
+        """``batch.json`` (not by a shard of several: :meth:`_merge` writes theirs)."""
         result = self.result(interrupted)
-        if self.processes.index == 0:
-            self.out.mkdir(parents=True, exist_ok=True)
+        if self.shard.count == 1:
             RunFolder(self.out).write_json(BATCH_FILE, result.as_json())
         return result
 
     def owns(self, entry: SceneEntry) -> bool:
-        """This process runs ``entry`` (always, in a batch of one process)."""
-        return self.processes.owns(self._numbers[id(entry)])
+        """This shard runs ``entry`` (always, in a batch of one shard)."""
+        return self.shard.owns(self._numbers[id(entry)])
 
     def abandon(self) -> None:
         """Remove every run folder still being written (from any thread; the batch is then
@@ -151,9 +139,7 @@ class Batch:
 
     def run(self) -> BatchResult:
         """Sample and write every scene; raises :class:`BatchInterrupted` when cancelled."""
-        # one writer (process 0 for all); an interrupted batch leaves the folder marked
-        first = self.processes.index == 0
-        with writing(self.out, "batch") if first else contextlib.nullcontext():
+        with hold_output(self.out, self.shard):  # an interrupted batch leaves it marked
             return self._run()
 
     def _run(self) -> BatchResult:
@@ -162,8 +148,8 @@ class Batch:
             for number, members in enumerate(groups.values(), start=1):
                 self._check()
                 self._run_group(number, len(groups), members)
-            if self.team is not None:
-                return self._finish_together()
+            if self.shard.count > 1:
+                return self._merge(groups)
         except _Stop:
             self.abandon()
             raise BatchInterrupted(self.write_summary(interrupted=True)) from None
@@ -199,8 +185,8 @@ class Batch:
         for entry, folder in zip(self.entries, _folder_names(self.entries), strict=True):
             entry.out = self.out / folder if entry.error is None else None
         self.groups = len(groups)
-        if self.team is None:  # a team's process 0 did it before the others started
-            remove_stale_partials(self.out)
+        ours = [entry.out.name for entry in self.entries if entry.out and self.owns(entry)]
+        remove_stale_partials(self.out, ours)
         if self.resume:
             for entry, member_model, measurements in (m for g in groups.values() for m in g):
                 if self.owns(entry):
@@ -261,8 +247,8 @@ class Batch:
         ours = [index for index, (entry, _, _) in enumerate(members) if self.owns(entry)]
         todo = [index for index in ours if not members[index][0].done]
         kept = f", {len(ours) - len(todo)} complete already" if len(todo) < len(ours) else ""
-        if self.processes.several:
-            kept += f", {len(ours)} of them here (process {self.processes.index})"
+        if self.shard.count > 1:
+            kept += f", {len(ours)} of them in shard {self.shard}"
         self.progress(
             f"group {number}/{count}: {len(members)} scene(s){kept}, {model_name(first)}{padded}, "
             f"{settings.chains} chains x ({settings.warmup} warmup + {settings.draws} draws)"
@@ -357,26 +343,26 @@ class Batch:
         entry.done = True
         self.progress(f"  {entry.scene.name}: {entry.out}")
 
-    def _finish_together(self) -> BatchResult:
-        """Post this process's part; process 0 waits for every part and writes
-        ``batch.json``, the others wait until it is written."""
-        team = self.team
-        scenes = {
-            str(number): entry.as_json()
-            for number, entry in enumerate(self.entries)
-            if entry.done and self.owns(entry)
-        }
-        team.post_part({"scenes": scenes, "compile_seconds": self.compile_seconds})
-        if self.processes.index != 0:
-            team.wait_for(team.written, self._stop)
-            return self.result()
-        team.wait_for(team.all_parts_posted, self._stop)
-        result = self.write_summary()
-        team.mark_written()
+    def _merge(self, groups: dict[str, list]) -> BatchResult:
+        """A shard's end: when the other shards' scenes are complete in ``out`` too (checked
+        as ``--resume`` checks a folder), ``batch.json`` of the whole batch; else its own
+        scenes' result, ``merged`` False (the last shard to finish writes ``batch.json``)."""
+        for entry, member_model, measurements in (m for g in groups.values() for m in g):
+            if not entry.done:
+                with contextlib.suppress(BadInputError):  # another run: not complete (yet)
+                    self._keep_if_complete(entry, member_model, measurements)
+        result = self.result()
+        if all(entry.done for entry in self.entries if entry.error is None):
+            RunFolder(self.out).write_json(BATCH_FILE, result.as_json())
+            return result
+        missing = sum(not e.done and e.error is None for e in self.entries)
+        self.progress(
+            f"shard {self.shard}: {missing} scene(s) of other shards not complete in {self.out} "
+            "yet; the last shard to finish writes batch.json"
+        )
+        result.entries = [entry for entry in self.entries if self.owns(entry)]
+        result.merged = False
         return result
-
-    def _stop(self) -> None:
-        raise _Stop
 
     def _publish(self, partial: Path, target: Path) -> None:
         """Rename the complete folder ``partial`` to ``target`` (an earlier run's folder there
@@ -393,7 +379,15 @@ class Batch:
                 self._partials.discard(old)
         else:
             os.replace(partial, target)
-        note_written(target)
+
+
+def hold_output(out: Path, shard: Shard = WHOLE, option: str = "out"):
+    """Hold ``out`` for a batch (one writer), or for one of its shards (one writer per
+    shard, beside the others: :mod:`brdf_infer._internal.outlock`)."""
+    if shard.count == 1:
+        return writing(out, "batch", option=option)
+    marker = shard_lock_file(shard.index, shard.count)
+    return writing(out, f"batch --shard {shard}", option=option, marker=marker)
 
 
 class _Stop(Exception):
@@ -413,7 +407,7 @@ def run_batch(
     progress: Callable[[str], None] = _silent,
     cancel: threading.Event | None = None,
     resume: bool = False,
-    team: Team | None = None,
+    shard: Shard = WHOLE,
 ) -> BatchResult:
     """Sample the posterior of every scene in ``sources`` (names, TOML paths or globs) into
     ``out/<scene>/`` and write ``out/batch.json`` (module docstring).
@@ -422,7 +416,7 @@ def run_batch(
         model: the family of every scene (default: each scene's ``[model] family``).
         cancel: when set, the batch stops between sampling chunks and between run folders.
         resume: keep the scenes whose run folders this batch already wrote (module docstring).
-        team: this process's place in a batch over several processes (:class:`Batch`).
+        shard: the scenes to run, for a batch over several shards (:class:`Batch`).
 
     Raises:
         BadInputError: settings out of range, another process writing ``out``, or (``resume``)
@@ -439,6 +433,6 @@ def run_batch(
         progress=progress,
         cancel=cancel,
         resume=resume,
-        team=team,
+        shard=shard,
     )
     return batch.run()

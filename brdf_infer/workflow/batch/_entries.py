@@ -56,9 +56,10 @@ class BatchResult:
     (``interrupted``: the batch was cancelled; entries not ``done`` have no run folder).
 
     Attributes:
-        processes: the processes that ran the batch (:mod:`brdf_infer._internal.processes`).
-        remote: the ``batch.json`` entries of scenes another process ran, by scene number.
-        compile_seconds: [s] compiling, summed over the processes.
+        shards: the shards the batch was run in (``brdf-infer batch --shard K/N``: ``N``).
+        compile_seconds: [s] compiling, in this process.
+        merged: the result of the whole batch (False: a shard's own scenes only, written
+            before the other shards finished; no ``batch.json``).
     """
 
     entries: list[SceneEntry]
@@ -67,22 +68,20 @@ class BatchResult:
     seconds: float
     compile_seconds: float
     interrupted: bool = False
-    processes: int = 1
-    remote: dict[int, dict[str, Any]] = field(default_factory=dict)
+    shards: int = 1
+    merged: bool = True
 
     @property
     def complete(self) -> int:
         """Scenes whose run folder is complete."""
-        done = [entry.done or k in self.remote for k, entry in enumerate(self.entries)]
-        return sum(done)
+        return sum(entry.done for entry in self.entries)
 
     def as_json(self) -> dict[str, Any]:
-        scenes = [self.remote.get(k) or e.as_json() for k, e in enumerate(self.entries)]
         return {
-            "scenes": scenes,
+            "scenes": [entry.as_json() for entry in self.entries],
             "groups": self.groups,
             "devices": self.devices,
-            "processes": self.processes,
+            "shards": self.shards,
             "seconds": self.seconds,
             "compile_seconds": self.compile_seconds,
             "interrupted": self.interrupted,
@@ -107,9 +106,10 @@ class BatchInterrupted(Exception):
         """One line: what stopped the batch and how many scene folders are complete."""
         name = signal.Signals(self.signum).name if self.signum is not None else "cancelled"
         total = sum(entry.error is None for entry in self.result.entries)
+        listed = f" (listed in {BATCH_FILE})" if self.result.shards == 1 else ""
         return (
             f"interrupted ({name}): {self.result.complete} of {total} scene(s) complete in "
-            f"{out} (listed in {BATCH_FILE}); no partial folder left (continue with --resume)"
+            f"{out}{listed}; no partial folder left (continue with --resume)"
         )
 
 

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-import os
+import glob
 import shutil
 from pathlib import Path
 
@@ -29,27 +29,15 @@ def _remove(path: Path) -> None:
         path.unlink(missing_ok=True)
 
 
-def _pid_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
-
-
-def remove_stale_partials(out: Path) -> list[Path]:
-    """Remove run folders left half-written in ``out`` by a batch that was killed outright
-    (SIGKILL, power loss): ``.<scene>.partial-<pid>`` (and ``.<scene>.old-<pid>``, the folder
-    it was replacing) of a process that no longer runs."""
+def remove_stale_partials(out: Path, names: list[str]) -> list[Path]:
+    """Remove the half-written run folders of the scene folders ``names`` in ``out`` that a
+    batch killed outright (SIGKILL, power loss) left: ``.<scene>.partial-<pid>`` (and
+    ``.<scene>.old-<pid>``, the folder it was replacing). Call while holding ``out`` for
+    those scenes (no other process writes them)."""
     removed = []
-    if not out.is_dir():
-        return removed
-    for mark in (PARTIAL_MARK, OLD_MARK):
-        for path in out.glob(f".*{mark}*"):
-            pid = path.name.rsplit(mark, 1)[-1]
-            if pid.isdigit() and (int(pid) == os.getpid() or not _pid_alive(int(pid))):
+    for name in names:
+        for mark in (PARTIAL_MARK, OLD_MARK):
+            for path in out.glob(f".{glob.escape(name)}{mark}*"):
                 _remove(path)
                 removed.append(path)
     return removed

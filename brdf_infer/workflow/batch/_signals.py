@@ -9,10 +9,10 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from brdf_infer._internal.shards import WHOLE, Shard
 from brdf_infer.scene.settings import BatchSettings
 from brdf_infer.workflow.batch._batch import Batch, _silent
 from brdf_infer.workflow.batch._entries import BatchInterrupted, BatchResult
-from brdf_infer.workflow.batch._team import PeerFailed, Team
 
 GRACE_SECONDS = 3.0  # after a signal, how long the batch may take to stop on its own
 
@@ -27,10 +27,9 @@ def run_batch_until_signalled(
     signals: tuple[int, ...] = (signal.SIGINT, signal.SIGTERM),
     grace: float = GRACE_SECONDS,
     resume: bool = False,
-    team: Team | None = None,
+    shard: Shard = WHOLE,
 ) -> BatchResult:
-    """:func:`run_batch` that SIGINT or SIGTERM stops (call from the main thread), or, with a
-    ``team`` of processes, the failure of another process.
+    """:func:`run_batch` that SIGINT or SIGTERM stops (call from the main thread).
 
     The batch runs in a worker thread while this thread waits for it, so a signal is seen at
     once even while a program compiles. The signal sets the batch's cancel event; the batch
@@ -40,18 +39,16 @@ def run_batch_until_signalled(
     the folders being written and writes ``batch.json`` itself, and the exception says so
     (``hard``: the process must end with ``os._exit``: the worker threads cannot be joined).
 
-    Another process's failure stops the batch as a signal does, and raises
-    :class:`PeerFailed` instead.
-
     Raises:
         BatchInterrupted: a signal stopped the batch (``signum``, ``exit_code``, and ``hard``).
-        PeerFailed: another process of the ``team`` failed (the message names it).
     """
-    batch = Batch(sources, out, settings, model=model, progress=progress, resume=resume, team=team)
+    batch = Batch(
+        sources, out, settings, model=model, progress=progress, resume=resume, shard=shard
+    )
     if threading.current_thread() is not threading.main_thread():  # no signals here
         return batch.run()
     outcome: dict[str, Any] = {}
-    received: list[tuple[int | None, float]] = []  # (the signal, None: a peer failed; when)
+    received: list[tuple[int, float]] = []  # (the signal, when)
 
     def on_signal(signum, frame) -> None:
         del frame
@@ -70,9 +67,6 @@ def run_batch_until_signalled(
         worker.start()
         while worker.is_alive():
             worker.join(0.05)
-            if team is not None and team.failure is not None and not received:
-                received.append((None, time.monotonic()))
-                batch.cancel.set()
             if received:
                 deadline = received[0][1] + grace if len(received) == 1 else received[1][1]
                 if time.monotonic() >= deadline:
@@ -84,20 +78,11 @@ def run_batch_until_signalled(
     if worker.is_alive():  # did not stop in time: stop it from here
         interrupted = BatchInterrupted(batch.write_summary(interrupted=True), signum)
         batch.abandon()  # last, so that the process ends right after (a writer may still run)
-        _raise_peer_failure(team, signum, interrupted)
         raise interrupted
     error = outcome.get("error")
-    _raise_peer_failure(team, signum, error)
     if isinstance(error, BatchInterrupted) or (error is None and received):
         result = error.result if error is not None else outcome["result"]
         raise BatchInterrupted(result, signum)
     if error is not None:
         raise error
     return outcome["result"]
-
-
-def _raise_peer_failure(team: Team | None, signum: int | None, error: BaseException | None):
-    """Raise :class:`PeerFailed` when another process's failure (no signal) stopped the
-    batch."""
-    if team is not None and team.failure is not None and signum is None and error is not None:
-        raise PeerFailed(team.failure) from error
