@@ -22,7 +22,15 @@ from brdf_infer.posterior._bands import (
     tis_band,
 )
 from brdf_infer.posterior._likelihood import ModelData, build_model_data
-from brdf_infer.posterior._loo import LeaveOneOut, pointwise_loo_terms, psis_loo
+from brdf_infer.posterior._loo import (
+    ExactTerm,
+    LeaveOneOut,
+    elpd_difference,
+    pointwise_loo_terms,
+    psis_loo,
+    rank_models,
+    relative_efficiency,
+)
 from brdf_infer.posterior._loo_refit import (
     LEFT_OUT_SIGMA,
     exact_loo,
@@ -68,7 +76,14 @@ from brdf_infer.posterior._run import (
     run_posterior,
     run_scene,
 )
-from brdf_infer.posterior._samplers import Draws, Refused, nuts_draws, run_emcee, run_nuts
+from brdf_infer.posterior._samplers import (
+    Draws,
+    Refused,
+    nuts_draws,
+    program_draws,
+    run_emcee,
+    run_nuts,
+)
 from brdf_infer.posterior._targets import (
     NEW_PART_EFFECT,
     QUESTIONS,
@@ -107,6 +122,7 @@ __all__ = [
     "Cancelled",
     "Diagnostics",
     "Draws",
+    "ExactTerm",
     "FlatPotential",
     "Interval",
     "LeaveOneOut",
@@ -128,6 +144,7 @@ __all__ = [
     "diagnostics",
     "draws_params",
     "draws_physical",
+    "elpd_difference",
     "exact_loo",
     "exact_loo_rows",
     "family_draws",
@@ -150,8 +167,11 @@ __all__ = [
     "posterior_settings",
     "power_scaling",
     "prior_draws",
+    "program_draws",
     "programs_by_structure",
     "psis_loo",
+    "rank_models",
+    "relative_efficiency",
     "row_count",
     "run_emcee",
     "run_fingerprint",

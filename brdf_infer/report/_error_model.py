@@ -6,8 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from brdf_infer._internal import arviz as az
-from brdf_infer.posterior import psis_loo
-from brdf_infer.posterior._loo import rank_models, relative_efficiency
+from brdf_infer.posterior import psis_loo, rank_models, relative_efficiency
 from brdf_infer.report import _html
 from brdf_infer.runs.folder import SUMMARY_FILE, VARIANTS_DIR, RunFolder
 from brdf_infer.runs.records import PosteriorSummary

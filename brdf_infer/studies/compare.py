@@ -44,6 +44,7 @@ from brdf_infer.errors import BadInputError
 from brdf_infer.model import check_family_name
 from brdf_infer.posterior import (
     THRESHOLDS,
+    ExactTerm,
     LeaveOneOut,
     NutsProgram,
     build_model,
@@ -52,10 +53,11 @@ from brdf_infer.posterior import (
     flatten_draws,
     interval95,
     loo_terms,
+    program_draws,
     psis_loo,
+    rank_models,
+    relative_efficiency,
 )
-from brdf_infer.posterior._loo import ExactTerm, rank_models, relative_efficiency
-from brdf_infer.posterior._samplers import program_draws
 from brdf_infer.runs.folder import COMPARE_FILE as COMPARE_FILE  # the old name, kept
 from brdf_infer.scene import Scene
 from brdf_infer.scene.settings import CompareSettings

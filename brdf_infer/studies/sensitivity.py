@@ -213,7 +213,7 @@ class VariantResult:
 
     def as_json(self, baseline: VariantResult) -> dict[str, Any]:
         """The contract's entry: Δelpd and its se against ``baseline`` (pointwise)."""
-        from brdf_infer.posterior._loo import elpd_difference
+        from brdf_infer.posterior import elpd_difference
 
         d_elpd, dse = elpd_difference(self.pointwise, baseline.pointwise)
         return {
@@ -274,9 +274,9 @@ def _summarise(
         interval95,
         loo_terms,
         psis_loo,
+        relative_efficiency,
         tis_band,
     )
-    from brdf_infer.posterior._loo import relative_efficiency
 
     sites = draws.sites
     log_lik, cdf = loo_terms(model, sites)
@@ -351,8 +351,12 @@ def sensitivity(
         BadInputError: a scene the study cannot answer for, a variant that is not a valid
             ``[errors]`` table, or settings out of range.
     """
-    from brdf_infer.posterior import build_posterior_model, chain_keys, programs_by_structure
-    from brdf_infer.posterior._samplers import program_draws
+    from brdf_infer.posterior import (
+        build_posterior_model,
+        chain_keys,
+        program_draws,
+        programs_by_structure,
+    )
 
     check_scene(scene)
     started = time.perf_counter()
