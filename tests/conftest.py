@@ -36,6 +36,19 @@ SHARED_FIXTURES = (
     "lya_potentials",
     "image_experiment",
 )
+# Fixtures that sample (a NUTS or emcee run, a batch, a study): their tests are the full tier's
+# (``./dev test --full``); the fast tier reads the committed run folder instead
+# (tests/test_committed_run.py)
+FULL_TIER_FIXTURES = (
+    "nuts_run",
+    "calibration_study",
+    "emcee_run",
+    "batch_run",
+    "abg_run",
+    "lya_runs",
+    "lya_draws",
+    "traced",
+)
 # Fixtures whose tests go to another's group: the sensitivity study's report test needs both
 # the study and ``nuts_run`` (a group of its own would build ``nuts_run`` on a second worker)
 SAME_GROUP = {"calibration_study": "nuts_run"}
@@ -50,6 +63,8 @@ def pytest_collection_modifyitems(items):
     (the groups were silently split across workers)."""
     for item in items:
         names = getattr(item, "fixturenames", ())
+        if any(name in names for name in FULL_TIER_FIXTURES):
+            item.add_marker(pytest.mark.full)
         shared = next((name for name in SHARED_FIXTURES if name in names), None)
         if shared is not None:
             item.add_marker(pytest.mark.xdist_group(SAME_GROUP.get(shared, shared)))

@@ -42,6 +42,7 @@ def _params(draws: dict) -> Params:
 # ------------------------------------------------------------------ the physical prior
 
 
+@pytest.mark.full
 def test_the_physical_prior_has_no_coating_that_scatters_more_than_it_receives(lya):
     model = build_posterior_model(*lya)
     draws = prior_draws(model, 3000, seed=5)
@@ -59,6 +60,7 @@ def test_the_physical_prior_has_no_coating_that_scatters_more_than_it_receives(l
     assert 0.25 < above < 0.42  # 33 % of 20,000 draws when measured
 
 
+@pytest.mark.full
 def test_the_posterior_density_is_zero_beyond_energy_conservation(lya):
     from numpyro.infer.util import log_density
 
@@ -234,6 +236,7 @@ def test_psis_and_a_new_posterior_agree_on_the_width_without_the_calibration(nut
         assert abs(ours[end] - theirs[end]) < MC_BOUND * error, (end, ours[end], theirs[end])
 
 
+@pytest.mark.full
 def test_a_one_sample_scene_names_its_sample_effect_set_by_its_prior(tmp_path, lya):
     rows = [
         line

@@ -53,6 +53,7 @@ def test_only_the_adapter_imports_arviz():
     assert offenders == [], "import ArviZ through brdf_infer/_internal/arviz.py"
 
 
+@pytest.mark.full
 @pytest.mark.parametrize("folder", ["brdf_infer", "tests", "tools"])
 def test_every_arviz_name_used_is_defined_by_the_adapter(folder):
     names = _adapter_names()

@@ -295,6 +295,7 @@ def test_bad_options_are_one_line_usage_errors(capsys):
     expect_bad_input(capsys, "fit", "--method", "magic", match="invalid choice")
 
 
+@pytest.mark.full
 def test_real_process_prints_no_traceback(tmp_path):
     scene = write_scene(tmp_path, with_row("I,1,30,30,abc,1e-5"))
     result = run_cli_process("fit", str(scene))

@@ -155,6 +155,7 @@ def _potential_cases():
     ]
 
 
+@pytest.mark.full
 @pytest.mark.parametrize("case", range(5))
 def test_padding_leaves_the_log_density_exactly(case):
     """The potential of a scene padded to another scene's rows and member columns equals its
@@ -413,6 +414,7 @@ def _check_interrupted_folder(out: Path, code: int, stderr: str) -> int:
     return len(folders)
 
 
+@pytest.mark.full
 def test_sigterm_stops_a_batch_keeping_the_complete_folders(tmp_path):
     """SIGTERM once the first run folder is in place: the batch ends within seconds with
     143, the complete folders intact and nothing half-written."""
@@ -435,6 +437,7 @@ def test_sigterm_stops_a_batch_keeping_the_complete_folders(tmp_path):
     assert 1 <= complete < 12
 
 
+@pytest.mark.full
 def test_sigint_while_sampling_stops_a_batch_at_once(tmp_path):
     """SIGINT while the first group compiles or samples: 130 within seconds, no folder."""
     import signal

@@ -23,6 +23,7 @@ def run_tis(cache: str, *extra: str) -> subprocess.CompletedProcess:
     )
 
 
+@pytest.mark.full
 def test_compiled_programs_are_kept_in_the_cache_folder(tmp_path):
     cache = tmp_path / "cache"
     result = run_tis(str(cache))
@@ -30,6 +31,7 @@ def test_compiled_programs_are_kept_in_the_cache_folder(tmp_path):
     assert any(cache.iterdir())
 
 
+@pytest.mark.full
 @pytest.mark.parametrize("how", ["--no-cache", "off"])
 def test_the_cache_can_be_switched_off(tmp_path, how):
     cache = tmp_path / "cache"

@@ -41,6 +41,7 @@ def test_tis_json_reproduces_table_three_with_fold(capsys):
     np.testing.assert_allclose(default["tis"][-1] * 100, 4.262, atol=5e-4)
 
 
+@pytest.mark.full
 def test_tis_no_fold_and_params_from_fit_json(tmp_path, capsys):
     fit = json_of(capsys, "fit")
     path = tmp_path / "fit.json"
@@ -63,6 +64,7 @@ def test_tis_says_whether_it_folds_and_refuses_both_flags(capsys):
     assert code == 2 and out == "" and "--no-fold" in err
 
 
+@pytest.mark.full
 def test_brdf_is_unfolded_unless_asked_in_plane_and_on_the_hemisphere(capsys):
     """Eq. (10) at θs = 88°: {1 − erf[0.35 (88 − 87)]}/2 = 0.31031 (erf(0.35) = 0.37938)."""
     for where in (["--theta-s", "88"], ["--theta-s", "88", "--phi", "180"]):
@@ -127,6 +129,7 @@ def test_help_lists_the_names_each_option_allows_from_its_registry(capsys, monke
         assert ", ".join(names) in lines[option], lines[option]
 
 
+@pytest.mark.full
 def test_human_tables_show_error_beside_time(capsys):
     code, out, _ = run_cli("tis", "--params", "vis-paper", "--theta-i", "5", "70", capsys=capsys)
     assert code == 0 and "quadrature error" in out and "ms for 2 angles" in out
@@ -134,6 +137,7 @@ def test_human_tables_show_error_beside_time(capsys):
     assert code == 0 and "sigma_E [%]" in out and "time [s]" in out
 
 
+@pytest.mark.full
 @pytest.mark.parametrize(
     "settings",
     [
@@ -236,6 +240,7 @@ def test_run_refuses_unknown_studies_before_any_work(tmp_path, capsys, argv, fie
     assert not out_dir.exists()
 
 
+@pytest.mark.full
 def test_json_stdout_is_one_object_in_a_real_process():
     result = run_cli_process("tis", "--theta-i", "0", "--json")
     assert result.returncode == 0, result.stderr
@@ -255,6 +260,7 @@ def test_single_scene_commands_compute_on_the_cpu_and_batch_on_the_default_devic
         assert jnp.zeros(1).devices() == {jax.devices()[0]}
 
 
+@pytest.mark.full
 def test_a_reader_that_leaves_early_is_not_an_error():
     """``brdf-infer ... | head``: stdout closed before the table is written ends quietly with
     exit code 0 (a BrokenPipeError is an OSError; it must not be reported as bad input)."""

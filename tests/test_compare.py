@@ -61,6 +61,7 @@ def synthetic(scene, measurements, truth: str, seed: int):
     return dataclasses.replace(measurements, reflectance=reflectance, reflectance_err=errors_column)
 
 
+@pytest.mark.full
 @pytest.mark.parametrize("truth", [pytest.param("abg", marks=pytest.mark.slow), "strumik2024"])
 def test_compare_ranks_the_family_that_generated_the_data_first(lya, truth):
     scene, measurements = lya
@@ -90,6 +91,7 @@ def assert_png_shows_the_comparison(path, models: int) -> None:
     assert len(np.unique(image[..., :3].reshape(-1, 3), axis=0)) > 2
 
 
+@pytest.mark.full
 def test_compare_command_json_contract_and_files(tmp_path, capsys):
     """At the settings of ``SMALL`` the two families' NUTS programs are the suite's (the lya
     posterior's and the ABg run's): one chain of 100 draws costs no compilation of its own.
@@ -194,6 +196,7 @@ def test_scene_lists_the_families_run_compares(lya, tmp_path):
     assert load_scene(path).studies.compare == ("strumik2024", "abg")
 
 
+@pytest.mark.full
 def test_a_row_with_the_left_out_sigma_carries_no_information(lya):
     """The exact-refit device: with σ = LEFT_OUT_SIGMA on row i the likelihood of all rows
     differs from that of the other rows alone by a constant in the parameters, so the refit
@@ -382,6 +385,7 @@ def test_a_row_with_pareto_k_above_0_7_is_refitted_on_a_single_series_scene(tmp_
     )
 
 
+@pytest.mark.full
 def test_fit_lsq_of_another_family_gives_its_parameters_in_json(capsys):
     code, out, err = run_cli("fit", "--method", "lsq", "--model", "abg", "--json", capsys=capsys)
     assert code == 0, err
@@ -404,6 +408,7 @@ def test_fit_lsq_of_another_family_gives_its_parameters_in_json(capsys):
     assert payload["sigma_scaled"] == pytest.approx(payload["sigma"], rel=1e-6)
 
 
+@pytest.mark.full
 def test_fit_lsq_of_another_family_states_its_quality_beside_its_table(capsys):
     code, out, err = run_cli("fit", "--method", "lsq", "--model", "abg", capsys=capsys)
     assert code == 0, err
@@ -432,6 +437,7 @@ def _family_scene(lya, tmp_path, family_name: str):
     return path
 
 
+@pytest.mark.full
 def test_scene_model_family_is_what_fit_uses(lya, tmp_path, capsys):
     path = _family_scene(lya, tmp_path, "lambertian")
     code, out, err = run_cli("fit", str(path), "--method", "lsq", "--json", capsys=capsys)

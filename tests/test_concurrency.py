@@ -101,6 +101,7 @@ def test_posterior_does_not_deadlock(tmp_path):
     assert (tmp_path / "out-posterior" / "posterior.nc").is_file()
 
 
+@pytest.mark.full
 def test_two_threads_evaluating_the_compiled_posterior_do_not_deadlock(tmp_path):
     """The deadlock's own pattern on the project's programs: two threads each executing the
     posterior's jitted, vmapped constraining map and potential many times."""

@@ -36,6 +36,7 @@ CONTRACT_KEYS = {
 }
 
 
+@pytest.mark.full
 def test_new_row_predictive_is_the_dense_gaussian_conditional():
     """μ_c + w_c·m_z and d_c + B Bᵀ equal the conditional of the new rows given the measured
     ones, computed from the dense joint covariance [W; W_new][W; W_new]ᵀ + diag(D, d)."""
@@ -55,6 +56,7 @@ def test_new_row_predictive_is_the_dense_gaussian_conditional():
     np.testing.assert_allclose(covariance, conditional, rtol=1e-10)
 
 
+@pytest.mark.full
 def test_expected_variance_matches_the_normal_closed_form():
     """θ ~ N(0, 1) draws, a new row y = θ + N(0, σ²): E[Var(θ | y)] = σ²/(1 + σ²) for one row,
     σ²/(2 + σ²) for two; the importance estimate, the linear one and the EIG (½ ln(1 + k/σ²))

@@ -6,10 +6,13 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 REPO = Path(__file__).resolve().parents[1]
 README = REPO / "README.md"
 
 
+@pytest.mark.full
 def test_the_site_builds_strictly(tmp_path):
     """mkdocs.yml sets ``strict: true``; ``--strict`` says so again should the file lose it."""
     built = subprocess.run(

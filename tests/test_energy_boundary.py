@@ -66,6 +66,7 @@ def test_the_tis_is_proportional_to_brdf0_so_energy_conservation_bounds_ln_brdf0
     assert np.array_equal(kept, log_brdf0 <= bound)
 
 
+@pytest.mark.full
 def test_the_map_below_the_bound_is_smooth_increasing_and_finite_everywhere():
     """y = bound − s·softplus((bound − x)/s): x within s·e^(−(bound − x)/s) far below, below
     the bound everywhere, increasing, its log-slope the log of its derivative (forward
@@ -107,6 +108,7 @@ def test_the_map_below_the_bound_is_smooth_increasing_and_finite_everywhere():
     np.testing.assert_allclose(np.exp(below_bound(inside, bound, s)[1]), numeric, rtol=1e-4)
 
 
+@pytest.mark.full
 def test_every_point_the_sampler_can_reach_is_a_coating_that_conserves_energy(lya):
     """Points of the whitened model's flat space, its whitened coefficients near and far
     (±5, ±1000) and the other coordinates within ±5: every one constrains to a coating the
@@ -132,6 +134,7 @@ def test_every_point_the_sampler_can_reach_is_a_coating_that_conserves_energy(ly
     assert all(np.all(np.isfinite(np.asarray(g))) for g in bound_gradient)
 
 
+@pytest.mark.full
 @pytest.mark.parametrize("planted", [False, True], ids=["as built", "map without Jacobian"])
 def test_the_whitened_density_is_the_truncated_posterior_at_and_beyond_the_bound(
     lya, monkeypatch, planted
@@ -167,6 +170,7 @@ def test_the_whitened_density_is_the_truncated_posterior_at_and_beyond_the_bound
         np.testing.assert_allclose(errors, 0.0, rtol=0, atol=1e-8)
 
 
+@pytest.mark.full
 def test_the_test_points_lie_below_at_and_beyond_the_bound_before_the_map(lya, monkeypatch):
     """The points of the density test cover the boundary: unmapped (the map an identity),
     their ln BRDF0 lies below its bound for u₀ ≤ 30 and beyond it for u₀ ≥ 60."""

@@ -231,6 +231,7 @@ def test_old_options_reproduce_the_old_likelihood_bit_for_bit(lya):
     assert np.array_equal(g_rot, jax.jvp(ln_r_at, (theta_i, theta_s), (ones, -ones))[1])
 
 
+@pytest.mark.full
 def test_potential_gradients_are_finite_under_every_option(lya):
     """One compiled potential and gradient (the options are data): finite at spread-out
     points for every calibration, coupling and images-per-row value."""
@@ -312,6 +313,7 @@ def test_one_degree_at_80_85_gives_the_measured_quantity_sigma():
     assert float(brdf_s) == pytest.approx(by_theta_s_brdf, rel=1e-9)
 
 
+@pytest.mark.full
 def test_loo_conditionals_match_the_partitioned_normal():
     rng = np.random.default_rng(0)
     n, k = 9, 4

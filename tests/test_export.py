@@ -264,6 +264,7 @@ def _abg_tis_scipy(a: float, b: float, g: float, aoi: float) -> float:
     return a * value
 
 
+@pytest.mark.full
 def test_abg_fits_preserve_the_tis_and_report_their_error(tmp_path, capsys):
     payload = export_json(
         capsys, "--params", "uv-paper", "--format", "abg", "--theta-i", "0", "40", "80",
@@ -304,6 +305,7 @@ def test_more_draws_than_the_run_has_is_a_clear_error(nuts_run, tmp_path, capsys
     assert code == 2 and "--draws" in err and draws in err and not out.exists()
 
 
+@pytest.mark.full
 def test_a_grid_too_coarse_for_its_tis_is_warned_about(tmp_path, capsys):
     """Planted fault for the table-integral check: 45° azimuth and 10° radial steps miss the
     TIS by 17 % at θi = 85°."""

@@ -151,6 +151,7 @@ def test_envelope_files_say_they_are_pointwise_envelopes(nuts_run, tmp_path, cap
             )
 
 
+@pytest.mark.full
 def test_a_pointwise_median_warns_with_its_cause_and_a_finer_grid_keeps_it(
     mixed_run, tmp_path, capsys
 ):

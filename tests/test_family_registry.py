@@ -61,6 +61,7 @@ def test_the_check_finds_a_planted_branch(tmp_path):
     ]
 
 
+@pytest.mark.full
 @pytest.mark.parametrize("fold", [False, True])
 def test_eq7_family_is_eq7_along_the_shared_path(fold):
     """The registry's ``strumik2024`` gives Eqs. (7), (8), (9) exactly (the same functions)."""

@@ -226,6 +226,7 @@ def _family_sbc(sigma_scale: float = 1.0):
     return run_sbc(scene, scene.load_measurements(), settings, model="abg")
 
 
+@pytest.mark.full
 def test_sbc_of_another_family_ranks_its_own_parameters():
     """Six replicates cannot test uniformity, but they can see a posterior on one side of
     the truth: four or more of six ranks at 0 or 20 happen with probability 1.0e-3 per

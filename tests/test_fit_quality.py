@@ -36,6 +36,7 @@ def test_p_value_is_the_chi2_survival_function(chi2, dof):
     )
 
 
+@pytest.mark.full
 def test_given_sigma_poor_is_rare_on_a_right_model_and_the_rule_with_sigma_half_their_size():
     """χ² of 36 standard normal residuals: the right σ are called poor at the rate
     P(χ²₃₆ > 72) = 3.4e-4 ≤ 0.001; σ planted a factor 2 too small at P(χ²₃₆ > 18) = 0.994,
@@ -65,6 +66,7 @@ def test_repeatability_interval_is_the_closed_form_with_equal_variances():
     assert (check.low > line) == (check.p_value < 0.025)
 
 
+@pytest.mark.full
 def test_repeatability_interval_covers_the_truth_95_percent_of_the_time():
     """Rows with unequal known variances, a true σ_rep = 0.1 and 6 of 40 dof taken by a
     linear fit: the interval covers 0.1 in 95 % of 400 sets, within 2 binomial sd + 0.01."""
@@ -87,6 +89,7 @@ def test_repeatability_interval_covers_the_truth_95_percent_of_the_time():
     assert abs(covered / 400 - 0.95) < 2 * math.sqrt(0.95 * 0.05 / 400) + 0.01
 
 
+@pytest.mark.full
 def test_residual_trends_are_uniform_on_a_right_model_and_find_a_planted_trend():
     """A linear model of 42 rows in two series with correlated noise (a shared series
     factor): the joint F-test p-values of 2000 right data sets are uniform (KS p > 0.001),
@@ -223,6 +226,7 @@ def _quality(scene, data, init=None) -> FitQuality:
     )
 
 
+@pytest.mark.full
 def test_the_bundled_fit_is_ok(lya):
     """Eq. (7) on the bundled rows: σ_rep 0.057, its interval below the 0.13 line, no trend."""
     scene, rows = lya
@@ -233,6 +237,7 @@ def test_the_bundled_fit_is_ok(lya):
     assert quality.verdict == "no misfit detected", quality.statement
 
 
+@pytest.mark.full
 def test_a_vendor_like_28_percent_misfit_is_poor(lya):
     """A 28 % lognormal misfit per row on top of the generative noise (a vendor table's
     scatter about its model): every one of 4 fits is poor by its repeatability (over 20

@@ -161,6 +161,7 @@ def test_bsdf_export_says_whether_it_folds_and_that_it_is_no_measurement(tmp_pat
     assert code == 0 and json.loads(out)["tis"] == contents["tis"].tolist()
 
 
+@pytest.mark.full
 def test_abg_export_says_whether_it_folds(tmp_path, capsys):
     argv = ["--params", "uv-paper", "--format", "abg", "--theta-i", "0", "40", "80"]
     payload = json_of(capsys, "export", *argv, "--fold", "--out", str(tmp_path))

@@ -253,6 +253,7 @@ def _planted(tmp_path: Path, module: str, source: str) -> Path:
     return copy
 
 
+@pytest.mark.full
 @pytest.mark.parametrize(
     ("module", "source"),
     [
@@ -268,6 +269,7 @@ def test_a_planted_back_import_is_found(tmp_path, module, source):
     assert cycle is not None and module in cycle
 
 
+@pytest.mark.full
 @pytest.mark.parametrize(
     ("module", "source", "found"),
     [
@@ -297,6 +299,7 @@ def test_a_planted_private_import_is_found(tmp_path, module, source, found):
     assert any(found in c.written for c in crossings), crossings
 
 
+@pytest.mark.full
 @pytest.mark.parametrize(
     ("module", "source"),
     [

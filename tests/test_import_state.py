@@ -8,6 +8,8 @@ import json
 import subprocess
 import sys
 
+import pytest
+
 PROBE = """
 import json, sys
 import jax
@@ -25,6 +27,7 @@ print(json.dumps({"same": before == after, "old": old}))
 """
 
 
+@pytest.mark.full
 def test_importing_the_package_changes_nothing_in_the_process():
     """A fresh interpreter: ``sys.meta_path``, ``jax_enable_x64`` and the compilation-cache
     settings are the same after importing the package and three of its subpackages as

@@ -75,6 +75,7 @@ def refit(run, variant):
     )
 
 
+@pytest.mark.full
 def test_the_variant_without_the_calibration_by_importance_agrees_with_its_own_nuts(lya_runs):
     """The π·BRDF0 interval, end by end and its spread, within Monte Carlo error of the
     variant's own NUTS run (:func:`disagreements`)."""
@@ -87,6 +88,7 @@ def test_the_variant_without_the_calibration_by_importance_agrees_with_its_own_n
     assert disagreements(sampled, own, variant) == []
 
 
+@pytest.mark.full
 def test_the_refit_without_its_weights_is_the_run_and_disagrees(lya_runs, monkeypatch):
     """Planted fault: the importance weights ignored (uniform, k̂ 0): the proposal is kept
     and its draws come as they are, the run's Student-t: the run's own spread, wider than the
@@ -109,6 +111,7 @@ def without_angle_errors(lya_runs, lya):
     return far, run_nuts(far, seed=1, progress=False, program=run.program, **REDUCED_NUTS)
 
 
+@pytest.mark.full
 def test_a_variant_far_from_the_run_is_reached_by_newton_steps(lya_runs, without_angle_errors):
     """The far variant's π·BRDF0 within Monte Carlo error of its own NUTS run."""
     _, run, _, _ = lya_runs
@@ -118,6 +121,7 @@ def test_a_variant_far_from_the_run_is_reached_by_newton_steps(lya_runs, without
     assert disagreements(sampled, own, far) == []
 
 
+@pytest.mark.full
 def test_without_the_newton_steps_the_far_variant_is_refused(lya_runs, without_angle_errors):
     """Planted fault: no move to the variant's mode; the moment adaptations alone end at
     k̂ ≈ 1.6, which the threshold refuses (the caller then samples the variant anew)."""
@@ -146,6 +150,7 @@ def test_the_sample_size_sets_the_pareto_k_threshold():
     assert laplace.pareto_k_limit(4000) == laplace.PARETO_K_LIMIT
 
 
+@pytest.mark.full
 def test_the_answer_records_of_a_large_table_read_thinned_draws(lya_runs, lya, monkeypatch):
     """On a table beyond LOO_VALUES the width and learned records read the draws PSIS-LOO
     reads (here forced to 250 a chain on the bundled rows): the run's own intervals stay

@@ -45,6 +45,7 @@ def test_broadcasts_over_a_batch_of_parameter_sets():
     assert_allclose(values[1], brdf_inplane(60.0, 45.0, VIS_PAPER))
 
 
+@pytest.mark.full
 def test_fold_is_erfc_over_two_and_finite_far_in_both_tails():
     theta = np.array([0.0, 80.0, 87.0, 90.0])
     expected = [math.erfc(0.35 * (t - 87.0)) / 2 for t in theta]
@@ -91,6 +92,7 @@ def test_log_brdf_finite_where_brdf_overflows():
     assert all(np.isfinite(g) for g in jax.grad(log_brdf_inplane, argnums=2)(80.0, 80.0, huge))
 
 
+@pytest.mark.full
 def test_gradients_agree_with_finite_differences():
     def scaled(theta_i, theta_s, unit):
         return log_brdf_inplane(theta_i, theta_s, params_from_unit_scale(unit, UV_PAPER), True)

@@ -50,6 +50,7 @@ def traced(lya):
     return trace, predicted
 
 
+@pytest.mark.full
 @pytest.mark.parametrize(
     ("instrument", "value", "error"),
     [
@@ -84,6 +85,7 @@ def test_kernel_and_ray_tracer_both_see_the_offsets_from_eq6(traced):
         assert row["image_ratio"] > row["simulated"] * 1.2, row
 
 
+@pytest.mark.full
 @pytest.mark.parametrize("instrument", ["aperture", "image"])
 def test_pencil_beam_limit_reduces_to_eq6(instrument):
     """A point source, pinhole beam and pinhole AD: Σ w_k BRDF_k = BRDF·Ω·cos θs (Eq. 6).
@@ -116,6 +118,7 @@ def test_pencil_beam_limit_reduces_to_eq6(instrument):
         np.testing.assert_allclose(got, expected, atol=1e-5)
 
 
+@pytest.mark.full
 @pytest.mark.parametrize("instrument", ["aperture", "image"])
 def test_compressed_kernel_matches_its_full_cubature(lya, instrument):
     """16 nodes per row against the Sobol nodes they summarise, for two parameter sets unlike
@@ -146,6 +149,7 @@ def test_compressed_kernel_matches_its_full_cubature(lya, instrument):
             assert abs(compressed / full - 1) < 5e-3, (index, params)
 
 
+@pytest.mark.full
 def test_kernel_prediction_gradient_matches_finite_differences(lya):
     scene, measurements = lya
     model = build_observation_model(check_instrument(scene, "aperture"), measurements)
@@ -214,6 +218,7 @@ def test_aperture_kernel_loses_what_the_sample_and_the_cusp_lose(lya):
         assert lower <= ratio[k] <= upper, (k, lower, float(ratio[k]), upper)
 
 
+@pytest.mark.full
 def test_kernels_only_touch_raw_reflectance_rows(lya):
     """A scene of the bundled rows and a ``brdf`` series (one in-plane row, one out of the
     plane): under either kernel the raw rows go through it and the BRDF rows keep Eq. (7)/(8)
@@ -284,6 +289,7 @@ def test_scene_switch_and_its_errors(tmp_path, capsys):
     assert code == 2 and "instrument.nodes" in err
 
 
+@pytest.mark.full
 def test_predict_json_contract(lya, capsys):
     scene, measurements = lya
     code, out, _ = run_cli(
@@ -309,6 +315,7 @@ def test_predict_json_contract(lya, capsys):
     np.testing.assert_allclose([r["predicted"] for r in point["rows"]], expected, rtol=1e-12)
 
 
+@pytest.mark.full
 def test_ray_tracer_honours_the_scenes_fold_switch(lya):
     """Eq. (10)'s folding changes the traced series only where the scene turns it on."""
     scene, measurements = lya

@@ -19,6 +19,7 @@ def image_experiment(lya):
     )
 
 
+@pytest.mark.full
 def test_traced_truth_is_the_kernels_quantity(lya):
     """The ray tracer's image ratio of every row (both series, each with its own geometry)
     is what the image kernel predicts, within its Monte Carlo error (1σ ≈ 1.3 % per

@@ -160,6 +160,7 @@ def test_a_proposal_too_narrow_is_refused_and_the_run_samples_with_nuts(lya, mon
     assert any("sampling with NUTS" in line for line in heard)
 
 
+@pytest.mark.full
 def test_a_second_mode_as_low_as_the_first_is_refused(lya, monkeypatch):
     """Planted fault: two of the four mode searches end 50 standard deviations away at the
     same potential; the fit must name a second mode rather than sample one."""
@@ -178,6 +179,7 @@ def test_a_second_mode_as_low_as_the_first_is_refused(lya, monkeypatch):
     assert fit.refusal is not None and "second mode" in fit.refusal
 
 
+@pytest.mark.full
 def test_the_report_of_a_laplace_run_says_what_it_checked(laplace_run):
     """The thresholds in words are Laplace's, the diagnostics give the importance record,
     and no trace or rank plot follows chains that are slices of one weighted set."""

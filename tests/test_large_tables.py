@@ -71,6 +71,7 @@ def test_leave_one_out_conditionals_hold_no_rows_by_rows_matrix():
     assert scratch < 256 * rows * 8, scratch  # linear; rows × rows would be 3.2e9
 
 
+@pytest.mark.full
 def test_leave_one_out_terms_by_blocks_of_draws_are_those_of_one_block(lya, monkeypatch):
     scene, measurements = lya
     model = build_model(scene, measurements)
@@ -90,6 +91,7 @@ def test_leave_one_out_terms_by_blocks_of_draws_are_those_of_one_block(lya, monk
         np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-300)
 
 
+@pytest.mark.full
 def test_repeated_draws_are_computed_once_and_their_terms_are_those_of_every_draw(lya):
     """A Laplace run's resampled draws repeat: the leave-one-out terms and the joint
     likelihood are computed on the distinct draws and spread back; the same values as draw by
@@ -135,6 +137,7 @@ def test_posterior_nc_keeps_every_draw_of_a_small_run_and_bounded_values_of_a_ta
     assert results.stored_log_likelihood(large) == {}
 
 
+@pytest.mark.full
 def test_prior_draws_of_the_posterior_sites_are_the_same_draws_without_the_rows(lya):
     """The answer records draw 4000 prior draws: with every row's simulated ``obs`` that is
     4000 × rows values twice over (3.8 GB for a 60 000-row table); asked for the posterior's

@@ -42,6 +42,7 @@ def _property(name: str):
     return every_input
 
 
+@pytest.mark.full
 @pytest.mark.parametrize("name", sorted(LOADERS))
 def test_generated_inputs_end_in_a_result_or_one_line_and_exit_2(name):
     _property(name)()

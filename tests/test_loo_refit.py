@@ -29,6 +29,7 @@ def lya_draws(lya):
     return model, draws, psis_loo(log_lik, cdf, 1.0)  # reff 1: the smoothing's tail length
 
 
+@pytest.mark.full
 def test_a_refit_without_a_row_gives_its_psis_term_where_psis_is_reliable(lya_draws):
     """Where k̂ is below its limit PSIS-LOO is reliable, so the refit's exact term must agree
     with it within their Monte Carlo error (each estimate's standard error: PSIS's by the delta

@@ -46,6 +46,7 @@ def _grouped_factor(rng, rows: int, groups: int, extra: int) -> np.ndarray:
     return np.concatenate([0.3 * members, 0.2 * rng.normal(size=(rows, extra))], axis=1)
 
 
+@pytest.mark.full
 @pytest.mark.parametrize("extra", [0, 2])
 @pytest.mark.parametrize("groups", [0, 3])
 def test_density_and_loo_with_only_disjoint_or_no_shared_columns(groups, extra):
@@ -76,6 +77,7 @@ def test_density_and_loo_with_only_disjoint_or_no_shared_columns(groups, extra):
     np.testing.assert_allclose(np.asarray(sd), 1 / np.sqrt(np.diag(precision)), rtol=1e-11)
 
 
+@pytest.mark.full
 def test_cholesky_and_triangular_solves_match_numpy():
     rng = np.random.default_rng(1)
     matrix = _spd(rng, 7)
@@ -105,6 +107,7 @@ def test_block_cholesky_with_a_diagonal_leading_block_matches_numpy():
     )
 
 
+@pytest.mark.full
 @pytest.mark.parametrize("disjoint", [0, 6])
 def test_low_rank_normal_matches_scipy_and_its_gradient_finite_differences(disjoint):
     rng = np.random.default_rng(3)
@@ -181,6 +184,7 @@ def lya_potentials():
     return model, FlatPotential(model)
 
 
+@pytest.mark.full
 def test_potential_equals_the_earlier_lapack_implementation(lya_potentials, monkeypatch):
     model, flat = lya_potentials
     rng = np.random.default_rng(5)
@@ -193,6 +197,7 @@ def test_potential_equals_the_earlier_lapack_implementation(lya_potentials, monk
     np.testing.assert_allclose(ours, reference, rtol=1e-10)
 
 
+@pytest.mark.full
 def test_compiled_posterior_programs_call_no_lapack(lya_potentials):
     model, flat = lya_potentials
     z = jnp.zeros(flat.dimension)
@@ -207,6 +212,7 @@ def test_compiled_posterior_programs_call_no_lapack(lya_potentials):
         assert not {c for c in calls if "lapack" in c}, (name, calls)
 
 
+@pytest.mark.full
 def test_masked_rows_leave_the_likelihood_exactly():
     rng = np.random.default_rng(6)
     factor = _grouped_factor(rng, 12, 3, 2)
@@ -234,6 +240,7 @@ def test_masked_rows_leave_the_likelihood_exactly():
     np.testing.assert_allclose(float(padded), float(full), rtol=1e-12)
 
 
+@pytest.mark.full
 def test_the_density_over_sample_scales_is_scipys_at_every_scale():
     """:func:`log_density_over_scales` (the rows read once, a (q, q) factorisation per τ)
     against scipy's dense normal with W's first columns multiplied by each τ."""

@@ -30,6 +30,7 @@ def test_internal_coordinates_round_trip():
     assert np.all(np.abs(z) < 10), "internal coordinates are O(1) for the bundled coating"
 
 
+@pytest.mark.full
 def test_bundled_scene_beats_the_paper_coefficients_and_starts_agree(lya, lya_fit):
     scene, measurements = lya
     model = build_observation_model(scene, measurements).with_sigma(lya_fit.row_sigma)
@@ -52,12 +53,14 @@ def test_bundled_scene_reports_unidentified_theta_s0_with_finite_output(lya_fit)
     assert_allclose(np.diag(lya_fit.correlation), np.ones(6), rtol=0)
 
 
+@pytest.mark.full
 @pytest.mark.parametrize("solver", ["gauss-newton", "dogleg"])
 def test_other_solvers_reach_the_same_optimum(lya, lya_fit, solver):
     result = fit_lsq(*lya, solver=solver, starts=8)
     assert result.cost == pytest.approx(lya_fit.cost, rel=1e-6)
 
 
+@pytest.mark.full
 @pytest.mark.parametrize("truth", [UV_PAPER, VIS_PAPER], ids=["uv-paper", "vis-paper"])
 def test_noise_free_synthetic_scene_recovered_exactly_from_poor_start(lya, truth):
     scene, measurements = lya
@@ -111,6 +114,7 @@ def test_the_scene_family_given_explicitly_is_the_default_fit(lya, lya_fit):
     assert explicit.params == lya_fit.params
 
 
+@pytest.mark.full
 def test_another_family_is_weighted_as_eq7_is(lya, lya_fit):
     """One least squares for every family: the same row σ (the value's own, Paule–Mandel σ_rep
     where learned, the angle terms), so χ²/dof is 1 for ABg too and its misfit shows as a
@@ -150,6 +154,7 @@ def coverage_floor(replicates: int, nominal: float, quantities: int, alpha: floa
     return int(stats.binom.ppf(per_quantity, replicates, nominal))
 
 
+@pytest.mark.full
 @pytest.mark.parametrize("truth", [UV_PAPER, VIS_PAPER], ids=["uv-paper", "vis-paper"])
 def test_noisy_synthetic_scenes_covered_by_two_sigma(lya, truth):
     """With 6.5 % noise, 20 seeds: each parameter within 2σ in at least its binomial floor.
@@ -212,6 +217,7 @@ def test_fewer_points_than_parameters_is_a_clear_error(lya):
         fit_lsq(scene, few)
 
 
+@pytest.mark.full
 def test_fixed_parameters_are_not_fitted(lya):
     result = fit_lsq(load_scene("lya-fixed"), lya[1], starts=4)
     assert (result.params.alpha, result.params.theta_s0) == (4.5, -12.0)
@@ -220,6 +226,7 @@ def test_fixed_parameters_are_not_fitted(lya):
     assert not any("theta_s0" in warning for warning in result.warnings)
 
 
+@pytest.mark.full
 def test_cli_lsq_json_contract(capsys):
     code, out, err = run_cli("fit", "--method", "lsq", "--starts", "4", "--json", capsys=capsys)
     assert code == 0, err

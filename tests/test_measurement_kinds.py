@@ -124,6 +124,7 @@ def test_every_family_is_recovered_from_out_of_plane_brdf_rows_by_lsq_and_nuts(t
         assert low <= value <= high, (parameter, low, high)
 
 
+@pytest.mark.full
 def test_a_bsdf_table_as_measurements_returns_the_parameters_that_made_it(tmp_path, capsys):
     """Export a parameter set as .BSDF, read it back as a scene's measurements (with trailing
     tabs on header lines, as vendor files have them) and fit: the parameters come back to the

@@ -54,6 +54,7 @@ def model_covariance(model, truth: dict) -> np.ndarray:
     return np.diag(diagonal) + factor @ factor.T
 
 
+@pytest.mark.full
 def test_latent_angle_simulator_is_the_linearised_one_to_first_order_only(lya):
     """The study's latent-angle simulator (ln R at the perturbed angles) against the likelihood's
     linearised angle terms, with every other noise source off and the same standard normal
@@ -135,6 +136,7 @@ def repeated(truths: list[dict], count: int) -> dict[str, np.ndarray]:
     return {name: np.repeat([t[name] for t in truths], count) for name in truths[0]}
 
 
+@pytest.mark.full
 def test_left_out_calibration_is_variance_the_simulated_data_have_and_the_fit_lacks(lya):
     """Data simulated as the scene is built (a 6.5 % calibration per series), angles off, at
     one truth through the study's simulator: their covariance (4000 data sets) is the error
@@ -163,6 +165,7 @@ def test_left_out_calibration_is_variance_the_simulated_data_have_and_the_fit_la
     assert excess == pytest.approx(2 * 0.065**2, rel=0.15)
 
 
+@pytest.mark.full
 def test_posterior_truths_are_distinct_draws_of_the_run_at_every_drawn_site(lya, monkeypatch):
     """The posterior block's truths are ``count`` different draws of the NUTS run, pooled over
     its chains, each one draw at every site the simulator draws (the parameters and the noise

@@ -65,6 +65,7 @@ def planted_runs(tmp_path_factory):
     return found
 
 
+@pytest.mark.full
 def test_a_coating_of_another_shape_is_never_green(planted_runs):
     summary, stdout, code, stderr = planted_runs[False]
     assert code == 3, stderr  # --strict-model: written, then the exit code says rejected
@@ -79,6 +80,7 @@ def test_a_coating_of_another_shape_is_never_green(planted_runs):
     assert "verdict: the model does not follow the data" in stdout
 
 
+@pytest.mark.full
 def test_mirrored_rows_are_never_green_and_named_by_their_sign_convention(planted_runs):
     summary, _, code, _ = planted_runs[True]
     assert code == 3
@@ -87,6 +89,7 @@ def test_mirrored_rows_are_never_green_and_named_by_their_sign_convention(plante
     assert "sign convention of theta_s_deg" in summary["verdict"]["lines"][0]
 
 
+@pytest.mark.full
 def test_without_strict_model_a_rejected_model_exits_0(tmp_path, capsys):
     scene = write_paint_scene(tmp_path)
     argv = ["posterior", str(scene), *PLANTED, "--out", str(tmp_path / "out"), "--json"]
@@ -135,6 +138,7 @@ def test_a_parameter_piled_at_its_bound_fails_and_one_inside_passes(lya):
     assert entry["statistic"] == 1.0
 
 
+@pytest.mark.full
 def test_the_loo_pit_check_stays_quiet_on_uniform_pits_and_finds_a_narrow_predictive():
     rng = np.random.default_rng(7)
     false_alarms = sum(not loo_pit_check(rng.uniform(size=42))["ok"] for _ in range(400))
@@ -160,6 +164,7 @@ def lya_point(lya):
     return model, sites, np.asarray(parts.mean[0]), np.linalg.cholesky(covariance)
 
 
+@pytest.mark.full
 def test_the_residual_trend_check_stays_quiet_on_its_own_noise_and_finds_a_series_offset(
     lya, lya_point
 ):
@@ -213,6 +218,7 @@ def _trend_setting(measurements):
     return rows, groups, noise, absorbed
 
 
+@pytest.mark.full
 def test_the_detectable_trend_is_detected_at_the_stated_power(lya):
     """The noncentral-F sizes (:func:`detectable_trends`) against a simulation: a θs trend and
     a series offset of the stated size in noise of the stated covariance are found by the
@@ -233,6 +239,7 @@ def test_the_detectable_trend_is_detected_at_the_stated_power(lya):
             assert low <= found / 400 <= high, (name, multiple, found)
 
 
+@pytest.mark.full
 @pytest.mark.parametrize("planted", [False, True], ids=["as built", "repeatability of rows alone"])
 def test_a_learned_repeatability_keeps_the_trend_test_at_its_stated_power(lya, planted):
     """Least squares learns the repeatability; the trend test must not shrink the stated
@@ -275,6 +282,7 @@ def test_a_learned_repeatability_keeps_the_trend_test_at_its_stated_power(lya, p
         assert 0.72 <= found[1.0] <= 0.88, found
 
 
+@pytest.mark.full
 def test_the_detectable_scatter_is_found_at_the_stated_power():
     """The repeatability check against rows with the stated misfit (:func:`detectable_scatter`)
     on top of the expected repeatability: poor in ≈ 80 % of 400 sets (binomial sd 2 %); with
@@ -295,6 +303,7 @@ def test_the_detectable_scatter_is_found_at_the_stated_power():
         assert low <= poor / 400 <= high, (size, poor)
 
 
+@pytest.mark.full
 @pytest.mark.parametrize("rows", [42, 500])
 def test_the_detectable_spread_is_detected_at_about_the_stated_power(rows):
     """LOO-PIT of rows scattering f times the predictive sd, f = :func:`detectable_spread`:

@@ -13,6 +13,7 @@ NOTEBOOKS = sorted((REPO / "notebooks").glob("*.ipynb"))
 PLOTTING = re.compile(r"plt\.|plot_\w+\(|\.plot\(|\.semilogy\(|\.pcolormesh\(")
 
 
+@pytest.mark.full
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.name for p in NOTEBOOKS])
 def test_notebook_runs_and_every_plotting_cell_shows_a_figure(path):
     notebook = nbformat.read(path, as_version=4)

@@ -16,6 +16,7 @@ from brdf_infer.studies.synthetic import write_hemisphere_scene
 from tests.helpers import MC_BOUND, SUITE_WARMUP, assert_allclose, lya_scene_text
 
 
+@pytest.mark.full
 def test_a_draws_width_factor_scales_delta_phi_and_enters_its_tis():
     """TIS of draws with their own Δφ factor equals TIS at each draw's scaled constants, and a
     factor of 1 is the article's; a wider lobe scatters more at 70° (Eq. 9)."""
@@ -65,6 +66,7 @@ def test_the_bundled_band_carries_the_out_of_plane_width_set_by_its_prior(nuts_r
     assert fixed["variance_share"] > 0.5
 
 
+@pytest.mark.full
 def test_fixing_the_width_reproduces_the_band_the_article_implies(lya, tmp_path):
     """The scene key fixing Δφ at the article's gives the TIS(70°) band of a run that knows
     no other Δφ (5.95-7.45 % in the run before the width was uncertain, 4 × 1000 draws) within

@@ -50,6 +50,7 @@ def _one_error_line(code: int, out: str, err: str) -> str:
     return lines[0]
 
 
+@pytest.mark.full
 def test_one_writer_per_folder_and_a_dead_writers_folder_is_incomplete(tmp_path, capsys):
     """While another process writes the folder a second writer (run) is refused at once and a
     reader (tis --run) is told it is being written; once that process is killed, every reader
@@ -137,6 +138,7 @@ def test_claims_are_re_entrant_within_a_process(tmp_path):
     assert not (folder / LOCK_FILE).exists() and folder.is_dir()
 
 
+@pytest.mark.full
 def test_a_shard_and_a_plain_writer_refuse_each_other_and_shards_share_a_folder(tmp_path):
     """The shards of a batch each hold their own marker: two shards write one folder side by
     side, a plain writer is refused while one runs (and refuses them), and a shard that died
@@ -191,6 +193,7 @@ def _other(folder, claim: str) -> str:
     return result.stdout
 
 
+@pytest.mark.full
 def test_without_fcntl_the_package_imports_and_the_marker_still_says_incomplete(tmp_path):
     """Where ``fcntl`` is missing (Windows): a writer warns that a second writer is not
     refused, a writer that stopped on an error after writing leaves the folder incomplete,

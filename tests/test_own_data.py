@@ -57,6 +57,7 @@ def documented_scene_folder(tmp_path):
     return tmp_path / "scene.toml"
 
 
+@pytest.mark.full
 def test_documented_scene_example_loads_and_predicts_its_rows(tmp_path, capsys):
     """The documented scene is valid as printed and its model predicts every row (`predict`
     with the article's parameters); the run to a report, which compiles a sampler and a fit of
@@ -208,6 +209,7 @@ def test_a_sigma_column_in_percent_stops_run_before_any_work_naming_the_sigma_co
     assert "warning" not in err and not out.exists()
 
 
+@pytest.mark.full
 def test_a_sigma_column_in_percent_can_be_insisted_on(tmp_path, capsys):
     """``--force`` goes past the σ check as past the other plausibility checks, and names it."""
     scene = own_scene(tmp_path, "brdf", [5.0] * 4)

@@ -80,6 +80,7 @@ def test_sigma_e_is_reported_as_reproduced_not_as_published(lya):
     assert paper_fit(scene, measurements).sigma_e == pytest.approx(expected, rel=1e-8)
 
 
+@pytest.mark.full
 def test_reproduced_fit_gives_the_quoted_tis_at_70_deg(lya):
     """Sec. 7: "For θi = 70 deg, we obtained a TIS estimation of ∼5.8 %" (Eqs. 7 and 8; the
     article does not say whether Eq. (10)'s folding is included: checked here folded, the
@@ -96,6 +97,7 @@ def test_reproduced_fit_gives_the_quoted_tis_at_70_deg(lya):
         assert abs(float(tis(70.0, params, True)) - 0.058) <= bound, params
 
 
+@pytest.mark.full
 def test_other_selections_do_not_reproduce_the_paper(lya):
     for name in ("samples", "samples-no-repeats"):
         fitted = paper_fit(*lya, selection=name).params

@@ -109,6 +109,7 @@ def test_a_fit_that_scatters_more_than_it_receives_stops_run_before_sampling(tmp
     assert not out.exists()
 
 
+@pytest.mark.full
 @pytest.mark.usefixtures("width_refit_off")  # every variant's k̂ > 0.7: three new samplers
 def test_a_forced_percent_run_has_one_red_verdict_on_stdout_and_in_its_report(tmp_path, capsys):
     scene = bundled_copy(tmp_path, "percent", scale=PERCENT)

@@ -74,6 +74,7 @@ def test_the_two_samplers_agree_within_their_monte_carlo_error(nuts_run, emcee_r
         assert difference <= MC_BOUND * error, (name, difference / error)
 
 
+@pytest.mark.full
 def test_whitening_keeps_the_target_exactly(lya):
     """log p(u) of the whitened model = log p(c(u)) of the direct model + ln|det ∂c/∂u|, the
     Jacobian taken independently by forward-mode differentiation of c(u)."""
@@ -170,6 +171,7 @@ def test_tis_from_run_json_contract(nuts_run, capsys):
     assert payload["lo95"][3] <= payload["median"][3] <= payload["hi95"][3]
 
 
+@pytest.mark.full
 def test_posterior_recovers_parameters_simulated_from_the_generative_model(lya):
     """One data set drawn from the scene's own error model at uv-paper: every parameter's
     truth inside its central 99 % interval (calibration as such is SBC's job,
@@ -266,6 +268,7 @@ def test_emcee_resume_after_kill_reproduces_the_uninterrupted_run(tmp_path):
 
 # the emcee tests of 18 walkers on lya (these two, test_posterior_records' emcee run) share one
 # compiled program: on one worker, one compile
+@pytest.mark.full
 @pytest.mark.xdist_group("emcee18")
 def test_sigterm_leaves_a_resumable_checkpoint_and_exit_130(tmp_path):
     command = emcee_command(200000, "--out", str(tmp_path))
@@ -331,6 +334,7 @@ def test_the_earlier_spread_error_model_stays_reachable(lya, capsys, tmp_path):
     assert json.loads(idata.posterior.attrs["error_model"])["model"] == "spread"
 
 
+@pytest.mark.full
 @pytest.mark.xdist_group("emcee18")
 def test_resume_refuses_a_checkpoint_another_run_wrote(lya, tmp_path, capsys):
     """A checkpoint of lya is not resumed as lya-fixed (other scene text, priors and
@@ -397,6 +401,7 @@ def test_bad_sampler_settings_are_clear_errors(lya, capsys):
     assert code == 2 and "no checkpoint to resume from" in err and out == ""
 
 
+@pytest.mark.full
 def test_chains_side_by_side_give_the_draws_of_chains_one_after_another(lya):
     """Threads share the one compiled program and each chain keeps its key: bit for bit."""
     import threading

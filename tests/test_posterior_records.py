@@ -18,6 +18,7 @@ def test_a_nuts_runs_files_are_its_records(nuts_run):
 # 18 walkers on lya (2 × its 9 sampled dimensions): the emcee programs (MAP search, potential)
 # of test_posterior's emcee18 tests, which compile the data in; in their group, one compile for
 # the three
+@pytest.mark.full
 @pytest.mark.xdist_group("emcee18")
 def test_an_emcee_runs_summary_is_its_record(lya, tmp_path):
     run = run_posterior(

@@ -25,6 +25,7 @@ def _python(code: str, **environment: str) -> subprocess.CompletedProcess:
     )
 
 
+@pytest.mark.full
 def test_importing_the_package_changes_no_jax_setting(tmp_path):
     result = _python(
         """
@@ -43,6 +44,7 @@ def test_importing_the_package_changes_no_jax_setting(tmp_path):
     assert result.stdout.splitlines() == ["False None", f"float64 {tmp_path / 'cache'}"]
 
 
+@pytest.mark.full
 def test_an_entry_point_refuses_float32_in_one_line_and_switches_nothing():
     """``load_scene`` in float32 (no JAX array yet, or one made) refuses in one line naming
     ``brdf_infer.use_float64()`` and leaves ``jax_enable_x64`` and the cache as they were;
@@ -75,6 +77,7 @@ def test_an_entry_point_refuses_float32_in_one_line_and_switches_nothing():
     assert lines[4] == "lya"
 
 
+@pytest.mark.full
 def test_the_command_line_switches_float64_on(capsys):
     jax.config.update("jax_enable_x64", False)
     try:

@@ -72,6 +72,7 @@ def test_vanishing_detector_aperture_converges_to_the_point_estimate(lya, theta_
     assert errors[2] < 1e-3
 
 
+@pytest.mark.full
 def test_naive_and_next_event_estimators_agree_within_monte_carlo_error(lya):
     scene = lya[0]
     setup, limiting = build_setup(scene)
@@ -155,6 +156,7 @@ def test_the_sample_clips_the_footprint_at_grazing_incidence(lya):
 SIGMA_E_UV = 0.064  # the article's fit error at 121.6 nm, mean |ln(fitted/measured)| (Sec. 5.3)
 
 
+@pytest.mark.full
 def test_uv_paper_image_ratio_follows_table_2_as_figure_14_shows(lya):
     """Fig. 14 plots the measured raw reflectance of series II against the simulated image
     ratio (Sec. 6: both images averaged over the same rectangle on the light spot, then
@@ -217,6 +219,7 @@ def test_posterior_trace_has_a_band_around_its_median(lya, nuts_run):
         assert band["lo95"] < band["hi95"]
 
 
+@pytest.mark.full
 def test_cli_json_contract(capsys):
     code, out, err = run_cli("raytrace", "--json", "--rays", "4096", capsys=capsys)
     assert code == 0, err
@@ -232,6 +235,7 @@ def test_cli_json_contract(capsys):
     }
 
 
+@pytest.mark.full
 def test_cli_writes_figures_and_warns_when_no_ray_arrives(tmp_path, capsys):
     code, _, err = run_cli(
         "raytrace", "--rays", "200", "--estimator", "naive", "--out", str(tmp_path), capsys=capsys
@@ -297,6 +301,7 @@ def test_scene_raytrace_table_errors_name_the_key(tmp_path, table, field, capsys
     assert code == 2 and field in err, err
 
 
+@pytest.mark.full
 def test_configurations_traced_together_are_those_traced_alone(lya):
     """The configuration axis (one vmapped call per chunk) keeps each configuration's own
     random stream: the same estimates as tracing it alone, to rounding."""
@@ -338,6 +343,7 @@ _SHARDED_TRACE = textwrap.dedent(
 )
 
 
+@pytest.mark.full
 def test_configuration_axis_sharded_over_two_forced_cpu_devices(tmp_path):
     """All 18 configurations in one call, nine on each of two devices: the values of one
     device (which traces them a few at a time)."""

@@ -175,6 +175,7 @@ def _tiny_band() -> dict:
     }
 
 
+@pytest.mark.full
 def test_deliberately_bad_run_lists_its_failures(lya, tmp_path, capsys):
     # warmup as in the shared reduced run, so its compiled program is reused; 20 draws fail;
     # no refits of the error-model variants (20 draws: every k̂ > 0.7, three more samplers)
@@ -189,6 +190,7 @@ def test_deliberately_bad_run_lists_its_failures(lya, tmp_path, capsys):
     assert "do not trust" in (tmp_path / "report.html").read_text()
 
 
+@pytest.mark.full
 @pytest.mark.usefixtures("width_refit_off")  # 20 draws: every variant's k̂ > 0.7
 def test_a_run_started_with_a_relative_scene_path_is_read_from_any_directory(
     tmp_path, capsys, monkeypatch
@@ -324,6 +326,7 @@ def test_report_draws_the_pareto_k_its_run_recorded_and_computes_none(nuts_run, 
     assert not (run / "figures" / "pareto_k.png").exists()
 
 
+@pytest.mark.full
 @pytest.mark.parametrize("models", [1, 2])
 def test_the_loo_pit_figure_keeps_its_titles_inside(models):
     """The title over one panel (the run alone) wraps instead of running off the figure."""

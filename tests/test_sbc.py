@@ -110,6 +110,7 @@ def family_wise_bound(simulations: int) -> float:
     return 0.01 + 3 * np.sqrt(0.01 * 0.99 / simulations)
 
 
+@pytest.mark.full
 @pytest.mark.parametrize("replicates", [N, 20])
 def test_family_wise_error_of_the_verdict_on_uniform_null_ranks_is_within_mc_error_of_one_percent(
     replicates,
@@ -126,6 +127,7 @@ def test_family_wise_error_of_the_verdict_on_uniform_null_ranks_is_within_mc_err
     assert rate <= family_wise_bound(2000), rate
 
 
+@pytest.mark.full
 def test_family_wise_bound_fails_a_bonferroni_over_the_quantities_only(monkeypatch):
     """The planted fault: each quantity's three tests at 0.01/9 instead of 0.01/27 fails the
     null verdict 3.1 % of the time at N = 200 (seed 12, 1500 runs: 3.13 %), 3 sd of 0.45 %
@@ -152,6 +154,7 @@ def run_sbc_command(tmp_path, capsys, *argv: str) -> dict:
     return json.loads(out)
 
 
+@pytest.mark.full
 def test_sbc_command_passes_lya_fixed_as_built_without_ranking_its_fixed_parameters(
     tmp_path, capsys
 ):
@@ -177,6 +180,7 @@ def test_sbc_command_passes_lya_fixed_as_built_without_ranking_its_fixed_paramet
     assert "It cannot see a wrong model" in page and "Planted fault" not in page
 
 
+@pytest.mark.full
 def test_sbc_passes_with_the_out_of_plane_width_free_and_ranks_it(tmp_path, capsys):
     """``lya-fixed`` with Eq. (8)'s out-of-plane width left uncertain (its scene key removed:
     the default prior, ln s ~ N(0, 0.25)): the width's factor is ranked and SBC passes at 40
@@ -238,6 +242,7 @@ def test_bundled_scene_is_calibrated_and_each_planted_fault_is_flagged(lya, plan
     assert result.passed == (not planted), result.failures
 
 
+@pytest.mark.full
 def test_planted_jacobian_fault_drops_exactly_the_whitening_log_jacobian(lya):
     """The faulty density of the whitened coordinates u is the direct density at c(u), without
     ln|det ∂c/∂u| (taken independently by forward-mode differentiation of c(u)); the dropped

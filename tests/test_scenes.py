@@ -103,6 +103,7 @@ def test_vis_scene_points_are_the_published_532nm_model():
     np.testing.assert_allclose(rows.reflectance, expected, rtol=5e-7)
 
 
+@pytest.mark.full
 def test_table_three_model_row_from_the_published_532nm_coefficients():
     """TIS (Eq. 9) of vis-paper with Eqs. (8) and (10), as Table 3 computes it, against its
     printed model row 0.81, 1.09, 1.68, 4.0 %. Allowed: half a unit of each printed value plus
@@ -145,6 +146,7 @@ def test_folding_is_compiled_in_only_when_the_scene_turns_it_on(lya, tmp_path):
     assert "erf" in jaxpr
 
 
+@pytest.mark.full
 def test_fit_and_tis_import_neither_matplotlib_nor_arviz():
     code = (
         "import sys, io, contextlib\n"
@@ -162,6 +164,7 @@ def test_fit_and_tis_import_neither_matplotlib_nor_arviz():
     assert result.stdout.strip() == "[]"
 
 
+@pytest.mark.full
 def test_scene_without_out_of_plane_builds_no_hemisphere_product(lya, tmp_path):
     scene, measurements = lya
     text = scene.path.read_text().replace(
@@ -204,6 +207,7 @@ def test_unknown_keys_and_wrong_types_name_the_key(tmp_path, addition, match):
         load_scene(path)
 
 
+@pytest.mark.full
 def test_unphysical_tis_is_reported(tmp_path, capsys):
     path = tmp_path / "bright.json"
     path.write_text(
@@ -216,6 +220,7 @@ def test_unphysical_tis_is_reported(tmp_path, capsys):
     assert json.loads(out)["tis"][0] > 1 and "not physical" in err
 
 
+@pytest.mark.full
 def test_scene_switches_off_angle_errors_and_the_sample_effect(lya, tmp_path):
     scene, measurements = lya
     text = scene.path.read_text().replace(

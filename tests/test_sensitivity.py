@@ -156,6 +156,7 @@ def test_power_scaling_covers_every_free_quantity(calibration_study, lya):
         assert values["prior"] >= 0 and values["likelihood"] >= 0
 
 
+@pytest.mark.full
 def test_power_scaling_components_are_the_models_log_density(lya):
     """The log prior and the joint log likelihood per draw add up to NumPyro's log joint
     density of the unwhitened model (its sample sites are the prior's coordinates) at every
@@ -219,6 +220,7 @@ def test_the_report_of_a_run_folder_shows_the_study(calibration_study, nuts_run,
     assert "calibration=none" in html and "power scaling" in html
 
 
+@pytest.mark.full
 def test_cli_json_contract_and_files(tmp_path, capsys):
     """Two variants that change data of the compiled likelihood only, so every posterior runs
     the suite's lya program (the spread variant, a program of its own, runs in the slow main-job

@@ -51,6 +51,7 @@ def all_finite(tree) -> bool:
     return all(bool(np.all(np.isfinite(leaf))) for leaf in jax.tree_util.tree_leaves(tree))
 
 
+@pytest.mark.full
 @given(
     params=parameters(), theta_i=st.sampled_from([0.0, 18.0, 45.0, 80.0, 89.999]), data=st.data()
 )
@@ -63,6 +64,7 @@ def test_log_brdf_and_its_gradient_are_finite_everywhere(params, theta_i, data):
         assert np.isfinite(value) and all_finite(grads), (params, theta_i, theta_s, fold)
 
 
+@pytest.mark.full
 @given(
     params=parameters(),
     theta_i=st.floats(0.0, 89.9),
@@ -94,6 +96,7 @@ def test_log_brdf_is_finite_where_brdf_overflows_and_underflows():
 # exp of the exponent overflows (ln TIS ≈ 740): only log_tis is representable.
 @example(params=Params(1.0, 0.0, 0.0, 2.1856210873284875e-27, 12.0, -56.0), theta_i=60.0)
 # TIS ≈ 2e282 is finite, its gradient in paper units (∂/∂a2 ~ 1e24 × TIS) is not.
+@pytest.mark.full
 @example(params=Params(1.0, 0.0, 8.7245e-23, 1.3329e-24, 10.75, -38.0), theta_i=78.0)
 def test_tis_is_bounded_by_pi_times_the_brdf_range_and_finite(params, theta_i):
     """TIS = ∫ BRDF cos θ dω lies between π·min and π·max of the BRDF over the hemisphere.
@@ -119,6 +122,7 @@ def test_tis_is_bounded_by_pi_times_the_brdf_range_and_finite(params, theta_i):
             assert all_finite(gradient)
 
 
+@pytest.mark.full
 def test_tis_of_a_constant_brdf_is_pi_brdf0_and_folding_removes_the_hand_computed_part():
     """A constant BRDF scatters TIS = π·BRDF0 (Eq. 9: ∫cos θ dω = π). Eq. (7) is constant at
     θi = 0 (every term of its exponent carries θi) and for a1 = a2 = a3 = 0 at every θi:
@@ -145,6 +149,7 @@ def test_tis_of_a_constant_brdf_is_pi_brdf0_and_folding_removes_the_hand_compute
         assert float(tis(angle, flat, True)) == pytest.approx(hand - loss, rel=1e-10), angle
 
 
+@pytest.mark.full
 @given(
     params=parameters(coefficient=5.0), theta_i=st.floats(1.0, 85.0), theta_s=st.floats(-85.0, 85.0)
 )
@@ -165,6 +170,7 @@ def test_likelihood_finite_for_extreme_parameters(lya):
     assert np.isfinite(value) and all_finite(grads)
 
 
+@pytest.mark.full
 def test_near_collinear_a2_a3_is_reported_with_finite_output(lya):
     """Data at a single incidence angle cannot separate a2 (θi) from a3 (θi²)."""
     scene, measurements = lya
@@ -174,6 +180,7 @@ def test_near_collinear_a2_a3_is_reported_with_finite_output(lya):
     assert any("singular" in w or "ill-conditioned" in w for w in result.warnings), result.warnings
 
 
+@pytest.mark.full
 @given(
     params=parameters(),
     a=st.floats(0.01, 100.0),
@@ -193,6 +200,7 @@ def test_steep_folding_constants_stay_finite(params, a, theta_sf, theta, theta_i
     assert not np.isnan(float(tis(theta_i, params, True, constants)))  # +inf beyond 1e308
 
 
+@pytest.mark.full
 def test_ln_cos_theta_s_is_finite_past_grazing_with_a_finite_gradient():
     """A latent scattering angle pushed past 90° (``angle_method = "latent"``) gives the
     grazing limit's ln cos θs and a zero slope, never NaN; below the limit it is ln cos θs."""

@@ -70,12 +70,14 @@ def lya():
     return replace(scene, errors=errors), scene.load_measurements()
 
 
+@pytest.mark.full
 def test_the_labs_rows_follow_the_likelihoods_gaussian(lya):
     scene, measurements = lya
     p_mean, p_covariance = _p_values(_whitened_draws(scene, scene, measurements, LABS))
     assert p_mean > 1e-3 and p_covariance > 1e-3, (p_mean, p_covariance)
 
 
+@pytest.mark.full
 def test_a_lab_without_the_calibration_effect_fails_the_check(lya):
     scene, measurements = lya
     no_calibration = replace(scene, errors=replace(scene.errors, calibration="none"))
@@ -83,6 +85,7 @@ def test_a_lab_without_the_calibration_effect_fails_the_check(lya):
     assert min(p_mean, p_covariance) < 1e-3, (p_mean, p_covariance)
 
 
+@pytest.mark.full
 def test_a_later_call_continues_a_session_and_a_new_series_starts_one(lya):
     scene, measurements = lya
     params = Params(*(TRUTH[n] for n in PARAM_NAMES))
@@ -98,6 +101,7 @@ def test_a_later_call_continues_a_session_and_a_new_series_starts_one(lya):
     assert added == {("rotation", "II", str(row.sample[0]), 33.0)}
 
 
+@pytest.mark.full
 def test_at_the_articles_one_degree_the_linearisation_misses_the_grazing_rows():
     """At 1° angle errors ln cos θs bends within the error near grazing: the mean of the lab's
     θs = 85° rows lies about 0.3 of their sd below the linearised likelihood's (measured −0.31

@@ -39,6 +39,7 @@ def _direction(aoi: int, azimuth: int, radial: int) -> tuple[float, float, float
     return theta_i, float(theta), float(phi)
 
 
+@pytest.mark.full
 def test_a_planted_dropout_is_flagged_named_and_left_out(tables):
     rows = tables[True][1]
     screening = rows.screening
@@ -54,6 +55,7 @@ def test_a_planted_dropout_is_flagged_named_and_left_out(tables):
     assert len(tables[False][1]) == len(rows) + 1  # the one row it left out
 
 
+@pytest.mark.full
 def test_an_unplanted_table_flags_no_dropout(tables):
     """The same table without its dropout, and noise-free or noisier versions of it (5–20 %
     log-normal, other seeds): no cell is flagged."""

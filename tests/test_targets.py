@@ -36,6 +36,7 @@ from tests.test_families import PHYSICAL
 # ---------------------------------------------------------------- a sample effect is a factor
 
 
+@pytest.mark.full
 @pytest.mark.parametrize("name", ["strumik2024", *PHYSICAL])
 def test_a_sample_effect_multiplies_the_brdf_and_the_tis_of_every_family(name):
     """e^u on every ln R of a sample is e^u on its BRDF everywhere and on its TIS: scaling a
@@ -114,6 +115,7 @@ def _draws_near_truth(model, count: int, seed: int) -> dict[str, np.ndarray]:
     return sites
 
 
+@pytest.mark.full
 def test_the_sample_effects_conditional_is_the_dense_gaussian_conditional(tmp_path):
     """Mean and covariance of u | θ, y from the low-rank conjugate formula match the joint
     normal of (u, y) written out densely, for three samples (one of a single row) and two
@@ -218,6 +220,7 @@ def _fake_run(folder: Path, tau: np.ndarray) -> Path:
     return folder
 
 
+@pytest.mark.full
 def test_a_run_of_the_coating_gives_tau_its_prior(tmp_path):
     """``sample_sd_from`` reads the run's τ draws into a kernel density of ln τ, the prior the
     model samples: its quantiles are the run's (a skewed posterior stays skewed), and the

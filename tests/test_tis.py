@@ -110,6 +110,7 @@ def test_uv_tis_at_normal_incidence_and_70_deg_as_in_section_7():
     assert 0.0007 < values[False] - values[True] < 0.0005 + 0.0008
 
 
+@pytest.mark.full
 @pytest.mark.parametrize("fold", [False, True])
 def test_converged_at_default_nodes_with_small_error_estimate(fold):
     theta_i = jnp.array([0.0, 30.0, 70.0, 89.0])
@@ -119,6 +120,7 @@ def test_converged_at_default_nodes_with_small_error_estimate(fold):
     assert np.all(error < 1e-10 * value)
 
 
+@pytest.mark.full
 def test_batched_over_parameter_sets_and_angles():
     draws = Params(*(np.array([u, v, u]) for u, v in zip(UV_PAPER, VIS_PAPER, strict=True)))
     theta_i = np.array([[5.0, 30.0], [50.0, 70.0]])
