@@ -181,7 +181,7 @@ def write_speed_report(out: Path, quick: bool, progress=print) -> Path:
         "One value-and-gradient of the potential (42 rows, covariance D + W Wᵀ with 12 "
         "columns) inside a compiled `fori_loop`, best of 5 repetitions, compile time "
         "excluded. The whitened model solves its linear regression at every evaluation "
-        "(brdf_infer.posterior._lowrank: no LAPACK calls).",
+        "(brdf_infer._internal.lowrank: no LAPACK calls).",
         "",
         markdown_table(GRADIENT_HEADERS, gradients),
         "",

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
+from brdf_infer._internal.lowrank import leave_one_out_conditionals
 from brdf_infer.errors import BadInputError
 from brdf_infer.model import log_aperture_factor, log_brdf_inplane
 from brdf_infer.model.error_model import (
@@ -21,7 +22,6 @@ from brdf_infer.model.error_model import (
 )
 from brdf_infer.model.params import PAPER_CONSTANTS, UV_PAPER
 from brdf_infer.posterior._loo import loo_pit, uniformity_p_value
-from brdf_infer.posterior._lowrank import leave_one_out_conditionals
 from brdf_infer.posterior._model import build_posterior_model
 from brdf_infer.predict.observations import log_reflectance_at
 from brdf_infer.tables.measurements import Measurements

@@ -37,3 +37,18 @@ def test_importing_the_package_changes_nothing_in_the_process():
     ).stdout
     result = json.loads(out.strip().splitlines()[-1])
     assert result == {"same": True, "old": False}
+
+
+def test_the_top_level_names_the_python_guides_entry_points():
+    """``brdf_infer.NAME`` is the entry point where it lives, for every name of ``__all__``;
+    an unknown name is an AttributeError naming it."""
+    import importlib
+
+    import brdf_infer
+
+    for name, module in brdf_infer._ENTRY_POINTS.items():
+        assert getattr(brdf_infer, name) is getattr(importlib.import_module(module), name)
+    assert all(hasattr(brdf_infer, name) for name in brdf_infer.__all__)
+    assert sorted(dir(brdf_infer)) == sorted(brdf_infer.__all__)
+    with pytest.raises(AttributeError, match="'no_such_entry'"):
+        brdf_infer.no_such_entry  # noqa: B018

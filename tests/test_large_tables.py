@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 
 from brdf_infer._internal import arviz as az
+from brdf_infer._internal.lowrank import leave_one_out_conditionals
 from brdf_infer.posterior import _blocks as blocks
 from brdf_infer.posterior import _results as results
 from brdf_infer.posterior._loo import loo_pit, psis_loo, relative_efficiency
-from brdf_infer.posterior._lowrank import leave_one_out_conditionals
 from brdf_infer.posterior._power_scaling import log_likelihood_draws
 from brdf_infer.posterior._prior import prior_draws
 from brdf_infer.posterior._run import build_model, predictive_checks

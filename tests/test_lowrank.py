@@ -1,4 +1,4 @@
-"""The fused small linear algebra of the posterior (brdf_infer.posterior._lowrank).
+"""The fused small linear algebra of the posterior (brdf_infer._internal.lowrank).
 
 Checked against NumPy/SciPy, the posterior's potential against the earlier implementation
 (LAPACK Cholesky and NumPyro's LowRankMultivariateNormal, kept here as the reference), the
@@ -18,9 +18,7 @@ import pytest
 from jax.test_util import check_grads
 from scipy import stats
 
-from brdf_infer.posterior import _likelihood as likelihood
-from brdf_infer.posterior import _model as posterior_model
-from brdf_infer.posterior._lowrank import (
+from brdf_infer._internal.lowrank import (
     BlockCholesky,
     cholesky,
     leave_one_out_conditionals,
@@ -29,6 +27,8 @@ from brdf_infer.posterior._lowrank import (
     solve_lower,
     solve_upper_transposed,
 )
+from brdf_infer.posterior import _likelihood as likelihood
+from brdf_infer.posterior import _model as posterior_model
 from brdf_infer.posterior._model import build_posterior_model
 from brdf_infer.posterior._potential import FlatPotential
 from brdf_infer.scene import load_scene

@@ -59,7 +59,7 @@ from jax.scipy.special import logsumexp
 # XLA's intra-op pool and wait for it, and two of them running at once can each hold a pool
 # thread the other waits for (a hang of `design --budget 8`, seen in gdb: dpotrf and dtrsm in
 # ParallelBatchMap, every other pool thread idle)
-from brdf_infer.posterior import cholesky, solve_lower, solve_upper_transposed
+from brdf_infer._internal.lowrank import cholesky, solve_lower, solve_upper_transposed
 
 ESS_FLOOR = 30.0  # mean Kish ESS below which the linear-Gaussian estimate is used
 

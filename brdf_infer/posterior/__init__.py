@@ -37,7 +37,6 @@ from brdf_infer.posterior._loo_refit import (
     exact_loo_rows,
     without_row,
 )
-from brdf_infer.posterior._lowrank import cholesky, solve_lower, solve_upper_transposed
 from brdf_infer.posterior._model import LINEAR, NOISE_SITES, PosteriorModel, build_posterior_model
 from brdf_infer.posterior._model_check import model_check, posterior_checks
 from brdf_infer.posterior._nuts import (
@@ -138,7 +137,6 @@ __all__ = [
     "build_model_data",
     "build_posterior_model",
     "chain_keys",
-    "cholesky",
     "chosen_target",
     "complete_run",
     "diagnostics",
@@ -180,8 +178,6 @@ __all__ = [
     "run_nuts",
     "run_posterior",
     "run_scene",
-    "solve_lower",
-    "solve_upper_transposed",
     "stack_data",
     "target_log_factor",
     "tis_band",

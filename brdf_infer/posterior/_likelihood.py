@@ -12,8 +12,8 @@ import jax.numpy as jnp
 import numpyro
 import numpyro.distributions as dist
 
+from brdf_infer._internal.lowrank import low_rank_normal_log_density
 from brdf_infer.model.error_model import ErrorSettings, NoiseLayout, NoiseScales, noise_layout
-from brdf_infer.posterior._lowrank import low_rank_normal_log_density
 from brdf_infer.predict.observations import Observations, build_observation_model
 from brdf_infer.scene import Scene
 from brdf_infer.tables.measurements import Measurements
@@ -72,7 +72,7 @@ def observe(
 def disjoint_columns(data: ModelData) -> int:
     """The leading columns of the rows' covariance factor W whose rows do not overlap: one per
     physical sample (each row belongs to one sample), so the capacitance's leading block is
-    diagonal (:class:`brdf_infer.posterior._lowrank.BlockCholesky`)."""
+    diagonal (:class:`brdf_infer._internal.lowrank.BlockCholesky`)."""
     return data.noise.sample_members.shape[-1]
 
 
@@ -83,7 +83,7 @@ def mask_rows(keep: jnp.ndarray, factor: jnp.ndarray, diagonal: jnp.ndarray):
 
 
 class LowRankNormal(dist.Distribution):
-    """N(mean, D + W Wᵀ) over the rows, its log density in fused XLA ops (:mod:`._lowrank`).
+    """N(mean, D + W Wᵀ) over the rows, its log density in fused XLA ops (``_internal.lowrank``).
 
     Rows outside ``keep`` (masked: W row 0, D = 1, mean = the observed value) are left out of
     the 2π normalisation, so they leave the log density exactly.

@@ -26,7 +26,7 @@ from scipy import stats
 from scipy.special import logsumexp
 
 from brdf_infer._internal import arviz as az
-from brdf_infer.posterior._lowrank import leave_one_out_conditionals
+from brdf_infer._internal.lowrank import leave_one_out_conditionals
 from brdf_infer.verdict import PARETO_K_LIMIT, pareto_k_limit
 
 
@@ -35,7 +35,7 @@ def pointwise_loo_terms(
     y, means, factors, diagonals, disjoint: int = 0
 ) -> tuple[jnp.ndarray, jnp.ndarray]:
     """(log p(yᵢ | y₋ᵢ, θ_s), P(ỹᵢ ≤ yᵢ | y₋ᵢ, θ_s)) for every draw s and row i
-    (``disjoint``: leading columns of W with non-overlapping rows, see :mod:`._lowrank`)."""
+    (``disjoint``: leading columns of W with non-overlapping rows, see ``_internal.lowrank``)."""
 
     def one(mean, factor, diagonal):
         conditional_mean, conditional_sd = leave_one_out_conditionals(

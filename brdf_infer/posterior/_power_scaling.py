@@ -32,12 +32,12 @@ import jax.numpy as jnp
 import numpy as np
 
 from brdf_infer._internal import arviz as az
+from brdf_infer._internal.lowrank import log_density_over_scales, low_rank_normal_log_density
 from brdf_infer.model import energy_log_factor
 from brdf_infer.model.coordinates import ANGLE_SCALE_DEG
 from brdf_infer.model.params import DPHI_NAME, PARAM_NAMES, Params
 from brdf_infer.posterior._blocks import factor_columns, over_draw_blocks
 from brdf_infer.posterior._likelihood import disjoint_columns, noise_prior
-from brdf_infer.posterior._lowrank import log_density_over_scales, low_rank_normal_log_density
 from brdf_infer.posterior._model import (
     DPHI_SITE,
     ENERGY_SITE,
@@ -118,7 +118,7 @@ def sample_scale_likelihoods(
 ) -> np.ndarray | None:
     """ln p(y | θ, τ) of every draw of ``sites`` (draws on the leading axis) at every τ of
     ``scales`` (k,), τ the sample-to-sample scale ``sample_sd``: shape (draws, k), the rows
-    read once per draw (:func:`~._lowrank.log_density_over_scales`: τ multiplies W's sample
+    read once per draw (``lowrank.log_density_over_scales``: τ multiplies W's sample
     columns only). None where τ also enters D (a sample of one row) or the error model is
     ``spread``: the caller evaluates :func:`log_likelihood_draws` at each τ instead."""
     noise = model.data.noise
@@ -140,7 +140,7 @@ def sample_scale_likelihoods(
 
 @functools.cache
 def _scales_program(scaled: int):
-    """:func:`~._lowrank.log_density_over_scales` vmapped over draws and jitted, once per
+    """``lowrank.log_density_over_scales`` vmapped over draws and jitted, once per
     number of sample columns."""
     return jax.jit(
         jax.vmap(

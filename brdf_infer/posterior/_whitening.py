@@ -7,15 +7,15 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
-from brdf_infer.model import positive_power
-from brdf_infer.model.coordinates import ANGLE_SCALE_DEG
-from brdf_infer.model.priors import Prior
-from brdf_infer.posterior._lowrank import (
+from brdf_infer._internal.lowrank import (
     Whitened,
     cholesky,
     solve_lower,
     solve_upper_transposed,
 )
+from brdf_infer.model import positive_power
+from brdf_infer.model.coordinates import ANGLE_SCALE_DEG
+from brdf_infer.model.priors import Prior
 from brdf_infer.predict.observations import Observations
 
 
@@ -40,7 +40,7 @@ def whitened_coefficients(
     design, target, factor, diagonal, prior_mean, prior_sd, standard, disjoint: int = 0
 ):
     """c = m + L⁻ᵀ u and ln|∂c/∂u| for the regression target = design·c + noise,
-    Cov(noise) = D + W Wᵀ (Woodbury: the capacitance's small Cholesky, :mod:`._lowrank`).
+    Cov(noise) = D + W Wᵀ (Woodbury: the capacitance's small Cholesky, ``_internal.lowrank``).
 
     With the posterior precision P = L Lᵀ = diag(1/sd²) + Xᵀ Σ⁻¹ X and the right-hand side
     r = mean/sd² + Xᵀ Σ⁻¹ y, m = P⁻¹ r, so c = L⁻ᵀ (L⁻¹ r + u) with one solve each way.
