@@ -251,7 +251,7 @@ def test_family_sbc_with_a_planted_sigma_fault_fails_the_same_check():
 
 
 def test_another_familys_run_files_are_the_posterior_records(abg_run):
-    from brdf_infer.posterior import Bands, PosteriorSummary
+    from brdf_infer.runs.records import Bands, PosteriorSummary
     from tests.helpers import record_mismatches
 
     out, summary = abg_run

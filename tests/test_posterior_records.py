@@ -4,7 +4,8 @@ import json
 
 import pytest
 
-from brdf_infer.posterior import Bands, PosteriorSummary, run_posterior
+from brdf_infer.posterior import run_posterior
+from brdf_infer.runs.records import Bands, PosteriorSummary
 from tests.helpers import record_mismatches
 
 

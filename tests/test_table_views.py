@@ -175,8 +175,9 @@ def test_the_residual_map_has_a_panel_per_angle_and_marks_what_was_left_out(tabl
 
 @pytest.mark.slow  # a NUTS run of its own program (≈ 1–2 min on two cores)
 def test_a_run_of_the_vendor_table_records_names_and_shows_what_it_left_out(tables, tmp_path):
-    from brdf_infer.posterior import PosteriorSummary, run_posterior
+    from brdf_infer.posterior import run_posterior
     from brdf_infer.report import write_report
+    from brdf_infer.runs.records import PosteriorSummary
     from tests.helpers import record_mismatches
 
     scene, rows = tables[True]
