@@ -48,6 +48,7 @@ FULL_TIER_FIXTURES = (
     "lya_runs",
     "lya_draws",
     "traced",
+    "lya_fit",
 )
 # Fixtures whose tests go to another's group: the sensitivity study's report test needs both
 # the study and ``nuts_run`` (a group of its own would build ``nuts_run`` on a second worker)

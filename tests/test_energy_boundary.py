@@ -53,6 +53,7 @@ def _without_the_maps_jacobian(monkeypatch) -> None:
 # ------------------------------------------------------------------ the bound and the map
 
 
+@pytest.mark.full
 def test_the_tis_is_proportional_to_brdf0_so_energy_conservation_bounds_ln_brdf0(lya):
     """max ln TIS = ln BRDF0 + (LOG_TIS_LIMIT − bound) for prior draws on both sides of the
     boundary, and the check keeps a coating exactly when ln BRDF0 ≤ bound."""

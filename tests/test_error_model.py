@@ -345,6 +345,7 @@ def test_loo_pit_flags_a_predictive_of_the_wrong_width(width, calibrated):
     assert (p > 0.01) == calibrated, p
 
 
+@pytest.mark.full
 def test_generative_model_has_the_sample_and_repeatability_scales(lya):
     model = build_posterior_model(*lya)
     trace = jax.jit(lambda: _sites(model))()

@@ -168,6 +168,7 @@ def test_a_pointwise_median_warns_with_its_cause_and_a_finer_grid_keeps_it(
         assert "finer --radial-step" not in err
 
 
+@pytest.mark.full
 def test_a_grid_too_coarse_for_a_tis_quantile_table_is_warned_and_the_advice_works(
     mixed_run, tmp_path, capsys
 ):

@@ -199,6 +199,7 @@ def _aperture_ratio_bounds(scene, series: str, theta_i: float, theta_s: float):
     return _disk_in_strip(half / blurred) * rim_weight, _disk_in_strip(half / radius) * 1.005
 
 
+@pytest.mark.full
 def test_aperture_kernel_loses_what_the_sample_and_the_cusp_lose(lya):
     """dPs/Pi over Eq. (6) on every row within the hand-computed bounds of
     :func:`_aperture_ratio_bounds` (series I at 80°: 0.58 ≤ 0.62 ≤ 0.70, the 25.4-mm sample

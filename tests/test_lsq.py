@@ -130,6 +130,7 @@ def test_another_family_is_weighted_as_eq7_is(lya, lya_fit):
         _ = abg.params
 
 
+@pytest.mark.full
 def test_zero_residual_with_scaled_covariance_is_handled(lya):
     scene, measurements = lya
     data = synthetic_measurements(scene, measurements, UV_PAPER)

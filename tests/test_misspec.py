@@ -197,6 +197,7 @@ def test_posterior_truths_are_distinct_draws_of_the_run_at_every_drawn_site(lya,
         posterior_truths(*lya, 22, 3, run)
 
 
+@pytest.mark.full
 def test_data_simulated_at_truths_have_their_mean_and_the_error_models_covariance(lya):
     """:func:`simulate_at` at two truths (3000 data sets each, angles off): every truth site
     comes back as it was set, the physical parameters follow from it, and each truth's data

@@ -98,6 +98,7 @@ def test_without_strict_model_a_rejected_model_exits_0(tmp_path, capsys):
     assert not json.loads(stdout)["model_check"]["ok"]
 
 
+@pytest.mark.full
 def test_the_sign_check_finds_mirrored_rows_only(tmp_path, lya):
     assert mirrored_sign_words(lya[1]) is None  # no row on the backward side
     from brdf_infer.scene import load_scene
@@ -193,6 +194,7 @@ def test_the_residual_trend_check_stays_quiet_on_its_own_noise_and_finds_a_serie
     assert not entry["ok"] and "series" in entry["words"], entry
 
 
+@pytest.mark.full
 def test_draws_that_are_all_alike_leave_the_residual_trend_check_nothing_absorbed(lya, lya_point):
     """A posterior whose draws are one point (a degenerate resampling) moves no parameter, so
     no parameter absorbs a trend: the check tests every trend column instead of failing to

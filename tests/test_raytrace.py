@@ -45,6 +45,7 @@ def _thin_beam(scene):
     return replace(scene, raytrace=settings)
 
 
+@pytest.mark.full
 @pytest.mark.parametrize(("theta_i", "delta"), [(45.0, 0.0), (75.0, -15.0), (80.0, 5.0)])
 def test_vanishing_detector_aperture_converges_to_the_point_estimate(lya, theta_i, delta):
     """dPs/Pi → BRDF·Ω·cos θs as d → 0; the difference is the BRDF's variation across AD
@@ -106,6 +107,7 @@ def test_a_million_rays_give_below_one_percent_error_per_configuration(lya):
         assert row["image_ratio_se"] / row["image_ratio"] < 0.01, row
 
 
+@pytest.mark.full
 def test_reference_beam_through_the_detector_aperture_matches_the_projected_beam(lya):
     """Point source: the beam at AD (470 mm) is the last beam aperture scaled by 470/211, so
     AD passes (r_AD / (r_A3·470/211))² of it."""

@@ -279,6 +279,7 @@ def test_planted_jacobian_fault_drops_exactly_the_whitening_log_jacobian(lya):
         assert abs(float(log_jacobian)) > 1.0, float(log_jacobian)
 
 
+@pytest.mark.full
 def test_planted_prior_fault_moves_every_free_prior_by_one_sd(lya):
     """The faulty density differs from the scene's by the log ratio of the moved and the
     scene's priors at the same point (SciPy's normal and truncated normal, independently); fixed

@@ -84,6 +84,7 @@ def test_the_dropout_rule_spares_slopes_and_table_edges():
     assert flagged[2, 4] and flagged.sum() == 1
 
 
+@pytest.mark.full
 def test_zero_cells_are_counted_once_with_the_detection_limit(tables):
     rows = tables[True][1]
     above = [cell for cell in vendor.ZERO_CELLS if _direction(*cell)[1] < 90.0]
@@ -124,6 +125,7 @@ def _band(angles) -> dict:
     }
 
 
+@pytest.mark.full
 def test_the_in_plane_figure_shows_in_plane_rows_only(tables):
     from brdf_infer.report._figures import brdf_bands
 
