@@ -12,7 +12,8 @@ compiles the program itself: never a hang, never a wrong program (tested: four p
 once on one fresh folder, repeated, finish with the same results; every entry cut in half is
 compiled again). An entry a killed process left half-written stays (JAX does not replace an
 entry) and costs that compilation and the warning in later runs, until the folder is cleared.
-The project writes nothing of its own into the folder.
+The project's own entries are the traced programs of :mod:`brdf_infer._internal.stored_programs`
+in ``programs/`` (written atomically: a reader sees a whole file or none).
 """
 
 from __future__ import annotations

@@ -41,6 +41,7 @@ The likelihood's pieces are in :mod:`._likelihood`, the whitening's in :mod:`._w
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -401,6 +402,30 @@ class PosteriorModel:
         count = next(iter(physical.values())).shape[0]
         scales = drawn_noise_scales(self.errors, data.noise, sites, count)
         return _draw_parts_program(self)(physical, scales, data)
+
+
+def model_identity(model: PosteriorModel) -> tuple:
+    """Every value of ``model`` a compiled program of it may close over, for the key of a
+    stored program (:mod:`brdf_infer._internal.stored_programs`): its scene, its family's
+    fields but for its functions (whose code the key's source digest covers), its options, its
+    row labels and its data's values (an argument of the programs, kept in the key so that
+    nothing the rows shape can be baked in unseen)."""
+    family = tuple(
+        (field.name, getattr(model.family, field.name))
+        for field in dataclasses.fields(model.family)
+        if not callable(getattr(model.family, field.name))
+    )
+    return (
+        model.scene,
+        family,
+        model.whiten,
+        model.sample_names,
+        model.row_samples,
+        model.row_series,
+        model.sigma_scale,
+        model.drop_log_jacobian,
+        tuple(jax.tree_util.tree_leaves(model.data)),
+    )
 
 
 def _draw_parts_program(model: PosteriorModel):

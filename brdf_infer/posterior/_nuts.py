@@ -28,14 +28,23 @@ from dataclasses import dataclass
 import jax
 import jax.numpy as jnp
 import numpy as np
-from numpyro.infer.hmc import hmc
+from numpyro.infer.hmc import HMCState, hmc
+from numpyro.infer.hmc_util import HMCAdaptState
 
 from brdf_infer._internal.sharding import gather_batch, shard_batch
+from brdf_infer._internal.stored_programs import (
+    Unkeyable,
+    canonical_bytes,
+    compile_stored,
+    register_tree_types,
+)
+from brdf_infer.model.error_model import NoiseLayout
 from brdf_infer.posterior._compile_clock import compile_clock
 from brdf_infer.posterior._likelihood import ModelData
-from brdf_infer.posterior._model import PosteriorModel
+from brdf_infer.posterior._model import PosteriorModel, model_identity
 from brdf_infer.posterior._padding import pad_datasets
 from brdf_infer.posterior._potential import FlatPotential
+from brdf_infer.predict.observations import Observations
 
 INIT_CANDIDATES = 16
 # XLA's CPU backend (jaxlib 0.10) hands large fused loops to YNNPACK; when two threads run one
@@ -46,6 +55,8 @@ CPU_COMPILER_OPTIONS = {"xla_cpu_experimental_ynn_fusion_type": ""}
 CHUNK = 50  # iterations per compiled call: one program whatever the number of draws
 CONSTRAIN_BLOCK = 250  # draws per call of the constraining program (NutsProgram._constrained)
 _STATISTICS = ("diverging", "potential_energy", "energy", "accept_prob", "num_steps")
+# the named tuples of the programs' arguments and results, which a stored program names
+register_tree_types((HMCState, HMCAdaptState, ModelData, Observations, NoiseLayout))
 
 
 @dataclass
@@ -104,6 +115,8 @@ class NutsProgram:
         }
         self._compiled: dict = {}
         self._lock = threading.Lock()
+        # the module constants the programs close over (a stored program's key holds them)
+        self._constants = (INIT_CANDIDATES, CHUNK, CONSTRAIN_BLOCK)
 
     @property
     def target_accept(self) -> float:
@@ -144,21 +157,41 @@ class NutsProgram:
 
     # ---------------------------------------------------------------- compiled
 
-    def _compile(self, name: str, function: Callable, *arguments):
+    def _compile(self, name: str, function: Callable, *arguments, stored: bool = False):
+        """``function`` compiled for ``arguments``, once per program; ``stored``: loaded without
+        tracing where a run stored it (:mod:`brdf_infer._internal.stored_programs`, keyed on
+        the model and the sampler's settings, what else ``function`` closes over). The
+        vmapped programs of a batch are not stored: their arguments' shardings depend on the
+        devices a run is given."""
         key = (name, *(jax.tree_util.tree_structure(a) for a in arguments), _shapes(arguments))
         with self._lock:
             if key not in self._compiled:
                 self._compiled[key] = (
-                    jax.jit(function).lower(*arguments).compile(_compiler_options())
+                    self._stored(name, function, arguments)
+                    if stored
+                    else jax.jit(function).lower(*arguments).compile(_compiler_options())
                 )
             return self._compiled[key]
+
+    def _stored(self, name: str, function: Callable, arguments: tuple):
+        try:
+            identity = canonical_bytes(
+                (name, model_identity(self.model), self._kernel_options, self._constants)
+            )
+        except Unkeyable:  # a scene value without a faithful text: traced every run
+            return jax.jit(function).lower(*arguments).compile(_compiler_options())
+        return compile_stored(
+            function, arguments, identity=identity, compiler_options=_compiler_options()
+        )
 
     def _chain(self, key, data: ModelData, total: int, on_chunk=None, cancel=None) -> list:
         """One chain of ``total`` iterations in chunks of :data:`CHUNK` (the last one's surplus
         is dropped): records (iterations, ...). Stops between chunks once ``cancel`` is set."""
         chunk = CHUNK
-        state = self._compile("start", self._start, key, data)(key, data)
-        steps = self._compile("steps", lambda s, d: self._steps(s, d, chunk), state, data)
+        state = self._compile("start", self._start, key, data, stored=True)(key, data)
+        steps = self._compile(
+            "steps", lambda s, d: self._steps(s, d, chunk), state, data, stored=True
+        )
         parts, done = [], 0
         while done < total:
             if cancel is not None and cancel.is_set():
@@ -205,7 +238,7 @@ class NutsProgram:
         padded = np.concatenate([rows, np.repeat(rows[-1:], -count % CONSTRAIN_BLOCK, axis=0)])
         constrain = jax.vmap(self.flat.constrain, (0, None))
         block = jnp.asarray(padded[:CONSTRAIN_BLOCK])
-        program = self._compile("constrain", constrain, block, data)
+        program = self._compile("constrain", constrain, block, data, stored=True)
         parts = [
             jax.device_get(program(jnp.asarray(padded[k : k + CONSTRAIN_BLOCK]), data))
             for k in range(0, len(padded), CONSTRAIN_BLOCK)
