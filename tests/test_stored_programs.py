@@ -144,3 +144,20 @@ def test_a_warm_nuts_program_is_loaded_and_draws_what_the_traced_one_drew(tmp_pa
     changed = _lya_model(alpha=1.5)
     with pytest.raises(AssertionError, match="traced"):  # another prior: not the stored one
         NutsProgram(changed, warmup=30).run(changed.data, keys, 20, workers=1)
+
+
+def test_a_stored_function_compiles_once_per_shape_and_loads_warm(tmp_path, monkeypatch):
+    from brdf_infer._internal.stored_programs import StoredFunction
+
+    monkeypatch.setattr(stored_programs, "_folder", lambda: tmp_path)
+    x, longer = jnp.linspace(0.0, 1.0, 5), jnp.linspace(0.0, 1.0, 7)
+    function = StoredFunction(_scaled(2.0), ("scaled", 2.0))
+    np.testing.assert_allclose(function(x), 2.0 * np.sin(x), rtol=1e-15)
+    np.testing.assert_allclose(function(longer), 2.0 * np.sin(longer), rtol=1e-15)
+    assert function.compiled(x) is function.compiled(x)
+    assert len(list(tmp_path.glob(f"*{stored_programs.SUFFIX}"))) == 2
+    _no_tracing(monkeypatch)
+    warm = StoredFunction(_scaled(2.0), ("scaled", 2.0))
+    np.testing.assert_allclose(warm(longer), 2.0 * np.sin(longer), rtol=1e-15)
+    with pytest.raises(AssertionError, match="traced"):
+        StoredFunction(_scaled(3.0), ("scaled", 3.0))(x)

@@ -32,6 +32,7 @@ import dataclasses
 import functools
 import hashlib
 import sys
+import threading
 from collections.abc import Callable, Sequence
 from enum import Enum
 from pathlib import Path
@@ -202,3 +203,39 @@ def _load(path: Path, arguments: Sequence[Any]) -> export.Exported | None:
 def _shape_dtype(leaf) -> tuple[tuple[int, ...], np.dtype]:
     dtype = leaf.dtype if hasattr(leaf, "dtype") else np.result_type(leaf)
     return tuple(np.shape(leaf)), np.dtype(dtype)
+
+
+class StoredFunction:
+    """``function`` compiled once per tree and shapes of its arguments by
+    :func:`compile_stored`: a drop-in for ``jax.jit(function)`` whose warm runs load the
+    traced program. ``identity``: the values ``function`` closes over (with a name that
+    tells it from other programs), keyed by :func:`canonical_bytes`; an :class:`Unkeyable`
+    one leaves the function traced every run."""
+
+    def __init__(self, function: Callable, identity: Any, compiler_options: dict | None = None):
+        self._function = function
+        self._identity = identity
+        self._options = compiler_options
+        self._compiled: dict = {}
+        self._lock = threading.Lock()
+
+    def __call__(self, *arguments):
+        return self.compiled(*arguments)(*arguments)
+
+    def compiled(self, *arguments) -> Callable:
+        """The compiled program for arguments of these shapes (loaded, or traced once)."""
+        leaves, treedef = jax.tree_util.tree_flatten(arguments)
+        key = (treedef, tuple(map(_shape_dtype, leaves)))
+        with self._lock:
+            if key not in self._compiled:
+                self._compiled[key] = self._build(arguments)
+            return self._compiled[key]
+
+    def _build(self, arguments: tuple) -> Callable:
+        try:
+            identity = canonical_bytes(self._identity)
+        except Unkeyable:
+            return jax.jit(self._function).lower(*arguments).compile(self._options)
+        return compile_stored(
+            self._function, arguments, identity=identity, compiler_options=self._options
+        )

@@ -35,6 +35,7 @@ import numpy as np
 import optimistix as optx
 
 from brdf_infer._internal.precision import ensure_float64
+from brdf_infer._internal.stored_programs import StoredFunction, register_tree_types
 from brdf_infer.errors import BadInputError
 from brdf_infer.fit._reweighting import REWEIGHT_TOLERANCE as REWEIGHT_TOLERANCE
 from brdf_infer.fit._reweighting import Reweighting
@@ -54,11 +55,14 @@ from brdf_infer.fit.quality import (
 )
 from brdf_infer.model import FAMILY_NAMES, ModelFamily, family
 from brdf_infer.model.error_model import noise_layout
-from brdf_infer.model.params import Params
+from brdf_infer.model.params import HemisphereConstants, Params
 from brdf_infer.predict.observations import Observations, build_observation_model, log_reflectance
 from brdf_infer.scene import Scene
 from brdf_infer.scene.settings import LSQ_STARTS
 from brdf_infer.tables.measurements import Measurements
+
+# the named tuples of the solver's arguments, which its stored program names
+register_tree_types((FreeTransform, Observations, HemisphereConstants))
 
 SOLVERS = {
     "lm": optx.LevenbergMarquardt,
@@ -181,7 +185,8 @@ def _batched_solver(
     solver: str, rtol: float, atol: float, max_steps: int, free_index, name: str, fold: bool
 ):
     """Compiled-once solver of the family ``name``: (u0 batch, data, transform, constants) →
-    (z_free, cost, status); Eq. (10)'s constants are an argument, not part of the program."""
+    (z_free, cost, status); Eq. (10)'s constants are an argument, not part of the program,
+    which a warm run loads without tracing (:mod:`brdf_infer._internal.stored_programs`)."""
     method = SOLVERS[solver](rtol=rtol, atol=atol)
 
     def solve_one(u0, data, transform, constants):
@@ -196,7 +201,8 @@ def _batched_solver(
         status = jnp.where(jnp.any(jnp.stack(matches)), jnp.argmax(jnp.stack(matches)), -1)
         return transform.to_free(solution.value), cost, status
 
-    return jax.jit(jax.vmap(solve_one, in_axes=(0, None, None, None)))
+    identity = ("least squares", solver, rtol, atol, max_steps, free_index, name, fold)
+    return StoredFunction(jax.vmap(solve_one, in_axes=(0, None, None, None)), identity)
 
 
 def fit_lsq(
@@ -293,7 +299,7 @@ def _solve_reweighted(solve, u0, model, space: FitSpace, reweight: Reweighting) 
     transform, constants = space.transform, space.member.constants
     arguments = (model.data, transform, constants)
     clock = time.perf_counter()
-    compiled = solve.lower(u0, *arguments).compile()
+    compiled = solve.compiled(u0, *arguments)
     compile_seconds = time.perf_counter() - clock
     clock = time.perf_counter()
     settled = False

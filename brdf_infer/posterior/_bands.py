@@ -8,10 +8,13 @@ is in the BRDF and the TIS alike. ``"fold"`` in the bands says which."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from brdf_infer._internal.stored_programs import StoredFunction
 from brdf_infer.model import ModelFamily
 from brdf_infer.model.params import Params
 from brdf_infer.runs.records import Bands
@@ -62,7 +65,9 @@ def _program(kind: str, family: ModelFamily, make):
     repeated in one process hold flat memory."""
     programs = family.__dict__.setdefault("_programs", {})
     if kind not in programs:
-        programs[kind] = jax.jit(make(family))
+        fields = [(f.name, getattr(family, f.name)) for f in dataclasses.fields(family)]
+        constants = [(name, value) for name, value in fields if not callable(value)]
+        programs[kind] = StoredFunction(make(family), ("bands " + kind, constants))
     return programs[kind]
 
 

@@ -40,8 +40,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from brdf_infer._internal import arviz as az
+from brdf_infer._internal.stored_programs import StoredFunction
 from brdf_infer.posterior._compile_clock import compile_clock
-from brdf_infer.posterior._model import PosteriorModel
+from brdf_infer.posterior._model import PosteriorModel, model_identity
 from brdf_infer.posterior._nuts import same_structure
 from brdf_infer.posterior._potential import FlatPotential
 from brdf_infer.posterior._samplers import Draws, Refused
@@ -126,9 +127,13 @@ def _student_t_log_density(points, centre, lower) -> np.ndarray:
     return constant - 0.5 * (nu + dimension) * np.log1p(squared / nu)
 
 
-def _mapped(function: Callable) -> Callable:
-    """``function(point, data)`` over a leading axis of points, compiled: ``lax.map``."""
-    return jax.jit(lambda points, data: jax.lax.map(lambda point: function(point, data), points))
+def _mapped(function: Callable, identity: tuple) -> Callable:
+    """``function(point, data)`` over a leading axis of points, compiled (``lax.map``) and
+    stored for warm runs under ``identity``, the values it closes over
+    (:class:`~brdf_infer._internal.stored_programs.StoredFunction`)."""
+    return StoredFunction(
+        lambda points, data: jax.lax.map(lambda point: function(point, data), points), identity
+    )
 
 
 def _positive_definite(matrix: np.ndarray) -> bool:
@@ -177,10 +182,11 @@ class LaplaceProgram:
         # one point at a time (lax.map), not vmapped: the same numbers to rounding, but on a
         # CPU (1986 rows, warm cache) the vmapped BFGS loop traced 2.4× and ran 2.7× longer,
         # the vmapped gradient ran 1.5× longer
-        self._search = _mapped(search)
-        self._gradients = _mapped(jax.grad(flat.potential))
-        self._potentials = _mapped(flat.potential)
-        self._constrain = _mapped(flat.constrain)
+        identity = (model_identity(model), SEARCH_TOLERANCE, SEARCH_STEPS)
+        self._search = _mapped(search, ("laplace search", *identity))
+        self._gradients = _mapped(jax.grad(flat.potential), ("laplace gradient", *identity))
+        self._potentials = _mapped(flat.potential, ("laplace potential", *identity))
+        self._constrain = _mapped(flat.constrain, ("laplace constrain", *identity))
         rows = int(np.shape(model.data.mask)[0])
         self.block = int(np.clip(2 ** int(np.log2(max(1, BLOCK_CELLS // rows))), 8, 256))
 

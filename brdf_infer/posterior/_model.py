@@ -51,6 +51,7 @@ import numpy as np
 import numpyro
 import numpyro.distributions as dist
 
+from brdf_infer._internal.stored_programs import StoredFunction
 from brdf_infer.errors import BadInputError
 from brdf_infer.model import (
     BOUND_GAP,
@@ -432,10 +433,12 @@ def _draw_parts_program(model: PosteriorModel):
     """:meth:`PosteriorModel.likelihood_parts` vmapped over draws and jitted, once per model
     object and kept on it (``_draw_parts``; a model holds arrays, so it cannot key a cache):
     the program goes when the model goes. The data are an argument, not a constant, so one
-    compilation serves every data set of a shape."""
+    compilation serves every data set of a shape; a warm run loads it without tracing
+    (:class:`~brdf_infer._internal.stored_programs.StoredFunction`)."""
     if "_draw_parts" not in model.__dict__:
-        model.__dict__["_draw_parts"] = jax.jit(
-            jax.vmap(lambda p, s, d: model.likelihood_parts(p, s, d), (0, 0, None))
+        model.__dict__["_draw_parts"] = StoredFunction(
+            jax.vmap(lambda p, s, d: model.likelihood_parts(p, s, d), (0, 0, None)),
+            ("likelihood parts", model_identity(model)),
         )
     return model.__dict__["_draw_parts"]
 

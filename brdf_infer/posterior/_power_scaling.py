@@ -33,6 +33,7 @@ import numpy as np
 
 from brdf_infer._internal import arviz as az
 from brdf_infer._internal.lowrank import log_density_over_scales, low_rank_normal_log_density
+from brdf_infer._internal.stored_programs import StoredFunction
 from brdf_infer.model import energy_log_factor
 from brdf_infer.model.coordinates import ANGLE_SCALE_DEG
 from brdf_infer.model.params import DPHI_NAME, PARAM_NAMES, Params
@@ -44,6 +45,7 @@ from brdf_infer.posterior._model import (
     LINEAR,
     LINEAR_SITES,
     PosteriorModel,
+    model_identity,
     prior_distribution,
 )
 
@@ -70,7 +72,10 @@ def log_prior_draws(model: PosteriorModel, sites: dict[str, np.ndarray]) -> np.n
     if model.family.paper_parameters:
         needed |= set(model.family.parameters)
     used = {k: jnp.asarray(v) for k, v in sites.items() if k in needed}
-    return np.asarray(jax.jit(lambda s: _log_prior(model, names, s))(used))
+    program = StoredFunction(
+        lambda s: _log_prior(model, names, s), ("log prior", model_identity(model), names)
+    )
+    return np.asarray(program(used))
 
 
 def _log_prior(model: PosteriorModel, names: list[str], sites: dict) -> jnp.ndarray:
@@ -142,11 +147,12 @@ def sample_scale_likelihoods(
 def _scales_program(scaled: int):
     """``lowrank.log_density_over_scales`` vmapped over draws and jitted, once per
     number of sample columns."""
-    return jax.jit(
+    return StoredFunction(
         jax.vmap(
             lambda y, m, w, d, s: log_density_over_scales(y, m, w, d, scaled, s),
             (None, 0, 0, 0, None),
-        )
+        ),
+        ("density over scales", scaled),
     )
 
 
@@ -155,11 +161,12 @@ def _density_program(disjoint: int):
     """ln N(y; μ, D + W Wᵀ) of every draw (leading axis of μ, W, D), jitted once per number
     of disjoint columns (y an argument: one program for every data set of a shape; run
     eagerly it costs 6× more per call, and :func:`~._width._scale_marginal` calls it 24×)."""
-    return jax.jit(
+    return StoredFunction(
         jax.vmap(
             lambda y, m, w, d: low_rank_normal_log_density(y, m, w, d, disjoint=disjoint),
             (None, 0, 0, 0),
-        )
+        ),
+        ("density", disjoint),
     )
 
 

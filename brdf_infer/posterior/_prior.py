@@ -21,8 +21,9 @@ import jax.numpy as jnp
 import numpy as np
 from numpyro.infer import Predictive
 
+from brdf_infer._internal.stored_programs import StoredFunction
 from brdf_infer.model import conserves_energy
-from brdf_infer.posterior._model import ENERGY_SITE, PosteriorModel
+from brdf_infer.posterior._model import ENERGY_SITE, PosteriorModel, model_identity
 
 MAX_BATCHES = 50  # of twice the draws asked for; the bundled priors accept 63 %
 
@@ -40,7 +41,8 @@ def _simulated(
         draws = predictive(k, mode="simulate")
         return {n: v for n, v in draws.items() if wanted is None or n in wanted}
 
-    draws = jax.device_get(jax.jit(simulate)(key))
+    identity = ("prior", model_identity(model), count, None if wanted is None else sorted(wanted))
+    draws = jax.device_get(StoredFunction(simulate, identity)(key))
     return {name: values for name, values in draws.items() if name != ENERGY_SITE}
 
 
