@@ -24,9 +24,11 @@ PROCESS_HEADERS = [
     "wall, end to end [s]",
     "CPU user+sys [s]",
     "start-up: interpreter and imports [s]",
-    "compile [s]",
+    "paper fit and least squares [s]",
+    "compile and loading programs [s]",
     "sampling [s]",
-    "after sampling [s]",
+    "records after sampling [s]",
+    "report [s]",
     "scene, writing, exit [s]",
     "min bulk ESS",
     "divergences",
@@ -48,22 +50,27 @@ class ProcessRow:
     summary: dict
     cpu: float = float("nan")  # user + sys of the process [s]
     startup: float = float("nan")  # interpreter and imports [s] (:func:`startup_seconds`)
+    steps: dict | None = None  # a run's steps [s] (fits, posterior, studies, report)
 
     def cells(self) -> list[str]:
         seconds = self.summary["seconds"]
         ess = self.summary["diagnostics"]["ess_bulk_min"]
         # the run's "total" spans building the model to the summary; the rest of the wall
         # beyond the start-up is parsing, the scene, writing the files and exiting
-        rest = self.wall - self.startup - seconds["total"]
+        steps = self.steps or {}
+        fits, report = steps.get("fits"), steps.get("report")
+        rest = self.wall - self.startup - seconds["total"] - (fits or 0.0) - (report or 0.0)
         return [
             f"`brdf-infer {self.command}`",
             self.cache,
             f"{self.wall:.1f}",
             f"{self.cpu:.1f}",
             f"{self.startup:.1f}",
+            "–" if fits is None else f"{fits:.1f}",
             f"{seconds['compile']:.1f}",
             f"{seconds['sampling']:.1f}",
             f"{sum(seconds['after_sampling'].values()):.2f}",
+            "–" if report is None else f"{report:.1f}",
             f"{rest:.1f}",
             f"{ess:.0f}",
             str(self.summary["diagnostics"]["divergences"]),
@@ -84,8 +91,9 @@ def process_rows(scene_name: str = "lya", progress=print) -> list[ProcessRow]:
                 out = base / f"{command}-{state}"
                 wall, cpu, payload = timed_process([command, scene_name], cache, out)
                 summary = payload if command == "posterior" else payload["posterior"]
+                steps = None if command == "posterior" else payload.get("steps")
                 name = f"{command} {scene_name}"
-                rows.append(ProcessRow(name, state, wall, summary, cpu, startup))
+                rows.append(ProcessRow(name, state, wall, summary, cpu, startup, steps))
     return rows
 
 
@@ -166,9 +174,11 @@ def write_speed_report(out: Path, quick: bool, progress=print) -> Path:
         "`run` is the scene's one posterior with the paper fit, least squares and the report "
         "(no `[studies]` in the bundled scene). ESS per wall second divides the smallest bulk "
         "ESS by the whole wall time. The wall splits into the start-up (a fresh interpreter "
-        "importing the CLI and the posterior, best of 3), compile (warm: tracing and loading "
-        "the cached programs), sampling, the steps after sampling (next table) and the rest: "
-        "parsing, loading the scene, writing the files, exiting.",
+        "importing the CLI and the posterior, best of 3), `run`'s paper fit and least "
+        "squares, the sampler's compile (warm: loading its stored traced programs, "
+        "`programs/` of the cache, and their compiled form from XLA's cache), sampling, the "
+        "records after sampling (next table), `run`'s report, and the rest: parsing, loading "
+        "the scene and building the model, writing the files, exiting.",
         "",
         markdown_table(PROCESS_HEADERS, [row.cells() for row in processes]),
         "",

@@ -18,6 +18,7 @@ import numpy as np
 from brdf_infer._internal import arviz as az
 from brdf_infer._internal.outlock import writing
 from brdf_infer._internal.precision import ensure_float64
+from brdf_infer._internal.step_clock import StepClock
 from brdf_infer.errors import BadInputError
 from brdf_infer.model import check_family_name
 from brdf_infer.model.error_model import ERROR_MODELS, ErrorSettings, calibration_group_names
@@ -439,19 +440,6 @@ def _sample(
     )
 
 
-class _StepClock:
-    """Wall time of consecutive steps [s], by name."""
-
-    def __init__(self):
-        self.steps: dict[str, float] = {}
-        self._last = time.perf_counter()
-
-    def lap(self, name: str) -> None:
-        now = time.perf_counter()
-        self.steps[name] = now - self._last
-        self._last = now
-
-
 def _tis_70(bands: Bands) -> dict | None:
     """TIS(70°)'s median, 68 % and 95 % intervals from the bands (None: no TIS band)."""
     if "tis" not in bands:
@@ -488,7 +476,7 @@ def complete_run(
     time). The bands, ``tis_70deg`` and ``pi_brdf0`` describe the scene's ``[outputs]
     target`` (:mod:`._targets`); ``targets`` holds all three."""
     scene, name = model.scene, model.family.name
-    clock = _StepClock()
+    clock = StepClock()
     log_lik, cdf, thinning = _loo_terms(model, result, len(measurements))
     clock.lap("loo_terms")
     idata = inference_data(model, result, seed, log_lik if thinning == 1 else None)

@@ -39,6 +39,7 @@ from typing import Any
 import numpy as np
 
 from brdf_infer._internal.precision import ensure_float64
+from brdf_infer._internal.step_clock import StepClock
 from brdf_infer.runs.folder import FIT_LSQ_FILE, FIT_PAPER_FILE, RunFolder
 from brdf_infer.runs.folder import STUDIES_FILE as STUDIES_FILE  # the old name, kept
 from brdf_infer.runs.records import PosteriorSummary
@@ -105,6 +106,9 @@ class RunResult:
         posterior: the posterior summary (``summary.json``).
         comparison: the PSIS-LOO comparison (``compare.json``), where the scene asks for one.
         seconds: wall time.
+        steps: wall time of each step [s]: ``fits`` (the checks of the rows and the
+            settings, the paper fit and least squares),
+            ``posterior``, ``studies`` (none: 0) and ``report``.
     """
 
     out: Path
@@ -116,6 +120,7 @@ class RunResult:
     posterior: PosteriorSummary
     comparison: dict[str, Any] | None
     seconds: float
+    steps: dict[str, float] = dataclasses.field(default_factory=dict)
 
     def as_json(self) -> dict[str, Any]:
         payload = {
@@ -127,6 +132,7 @@ class RunResult:
             "lsq": self.lsq,
             "posterior": self.posterior,
             "seconds": self.seconds,
+            "steps": self.steps,
         }
         if self.comparison is not None:
             payload["comparison"] = self.comparison
@@ -354,7 +360,7 @@ def _run(
     from brdf_infer.posterior import build_model
     from brdf_infer.verdict.plausibility import measurement_checks, require_plausible
 
-    start = time.perf_counter()
+    clock = StepClock()
     name = settings.model or scene.model.family
     studies = settings.studies if settings.studies is not None else scene.studies
     chosen = None
@@ -367,8 +373,7 @@ def _run(
     # an unknown family fails before any work; the studies written for Eq. (7) need its family
     eq7 = build_model(scene, measurements, name).family.paper_parameters
     error_models = [m for m in studies.error_models if m != scene.errors.model]
-    instruments = [m for m in studies.instruments if m != scene.instrument.model]
-    instruments = instruments if eq7 else []
+    instruments = [m for m in studies.instruments if m != scene.instrument.model] if eq7 else []
     traces = studies.raytrace and scene.raytrace is not None and eq7
     sensitive = studies.sensitivity and eq7
     designed = bool(studies.design) and eq7
@@ -376,8 +381,17 @@ def _run(
     implausible = measurement_checks(scene, measurements)
     require_plausible(implausible, settings.force)
     steps = 4 + len(error_models) + bool(instruments) + traces + bool(studies.compare)
-    steps += sensitive + designed
-    job = Job(scene, measurements, out, settings, progress, name, studies, eq7, steps)
+    job = Job(
+        scene,
+        measurements,
+        out,
+        settings,
+        progress,
+        name,
+        studies,
+        eq7,
+        steps + sensitive + designed,
+    )
     paper = _paper_fit(job, implausible)
     lsq = _least_squares(job, implausible, paper)
     forced = _write_fits(job, implausible, paper, lsq)
@@ -394,7 +408,9 @@ def _run(
         "seed": settings.seed,
         "model": name,
     }
+    clock.lap("fits")
     posterior = _posterior(job, options, forced, lsq)
+    clock.lap("posterior")
     for error_model in error_models:
         error_model_posterior(job, error_model, options, forced)
     if instruments:
@@ -407,7 +423,9 @@ def _run(
         sensitivity_study(job)
     if designed:
         design_study(job)
+    clock.lap("studies")
     report, verdict = _report(job, example)
+    clock.lap("report")
     return RunResult(
         out=out,
         report=report,
@@ -417,7 +435,8 @@ def _run(
         lsq=lsq,
         posterior=posterior.summary,
         comparison=comparison,
-        seconds=time.perf_counter() - start,
+        seconds=sum(clock.steps.values()),
+        steps=clock.steps,
     )
 
 
