@@ -35,6 +35,7 @@ DEG = math.pi / 180.0
 PARAMETER_SITES = ("alpha", "t_s0", "log_brdf0", "b1", "b2", "b3")
 PRIOR_NAMES = ("alpha", "theta_s0", "brdf0", "a1", "a2", "a3")  # the scene's name of each site
 PRIOR_KINDS = ("fixed", "normal", "truncated_normal", "uniform")
+DPHI_SITE = "log_dphi_scale"  # brdf_infer.posterior._model.DPHI_SITE: ln of Eq. (8)'s Δφ factor
 
 
 def missing_peers() -> list[str]:
@@ -67,6 +68,8 @@ def model_arrays(scene, measurements) -> dict[str, np.ndarray]:
         raise NotImplementedError("the PyMC peer model has no rows out of the plane")
     if errors.angles_on and errors.angle_method != "linearised":
         raise NotImplementedError("the PyMC peer model linearises the angle errors")
+    if errors.sample_sd_log_kde is not None:
+        raise NotImplementedError("the PyMC peer model has no τ prior from another run")
     theta_i, theta_s = np.asarray(rows.theta_i_deg), np.asarray(rows.theta_s_deg)
     # parts that do not depend on the parameters: ln Ω (+ ln cos θs), Eq. (10)'s fold, and their
     # derivatives in θs (ln Ω is constant in the angles; ln cos θs only on raw-reflectance rows)
@@ -85,7 +88,10 @@ def model_arrays(scene, measurements) -> dict[str, np.ndarray]:
             0.0,
         )
     priors = []
-    for name in PRIOR_NAMES:
+    # Eq. (8)'s out-of-plane width, a parameter where uncertain: a prior-only dimension here
+    # (every row lies in the plane, where Δφ does not enter), sampled by both models alike
+    widths = ("dphi_scale",) if model.family.dphi_free else ()
+    for name in (*PRIOR_NAMES, *widths):
         prior = scene.priors[name]
         scale = ANGLE_SCALE_DEG if name == "theta_s0" else 1.0
         priors.append(
@@ -103,17 +109,15 @@ def model_arrays(scene, measurements) -> dict[str, np.ndarray]:
         "generative": float(generative),
         "angles": float(errors.angles_on),
         # half-normal prior scale of a learned scale, NaN where fixed (at "fixed_*")
-        "sample_sd_prior": errors.sample_sd_prior if generative and errors.hierarchical else np.nan,
-        "fixed_sample_sd": 0.0,
+        "sample_sd_prior": errors.sample_sd_prior if errors.learns_sample_sd else np.nan,
+        "fixed_sample_sd": 0.0 if errors.learns_sample_sd else float(errors.stated_sample_sd),
         "repeatability_prior": (
             errors.repeatability_sd_prior if generative and errors.learns_repeatability else np.nan
         ),
         "fixed_repeatability": (
             0.0 if not generative or errors.learns_repeatability else float(errors.repeatability)
         ),
-        "rotation_deg": errors.rotation_deg if errors.angles_on else 0.0,
-        "camera_deg": errors.camera_deg if errors.angles_on else 0.0,
-    }
+    }  # σ_cal, σ_rot and σ_cam per row are the noise layout's (0 where off)
     return {
         "t": theta_i / ANGLE_SCALE_DEG,
         "theta_s_internal": theta_s / ANGLE_SCALE_DEG,
@@ -159,9 +163,10 @@ def pymc_model_from_arrays(arrays: dict[str, np.ndarray]):
                 upper=high if math.isfinite(high) else None,
             )
 
-        alpha, t_s0, log_brdf0, b1, b2, b3 = (
-            parameter(site, prior) for site, prior in zip(PARAMETER_SITES, a["priors"], strict=True)
-        )
+        sites = zip(PARAMETER_SITES, a["priors"], strict=False)  # Eq. (8)'s width after them
+        alpha, t_s0, log_brdf0, b1, b2, b3 = (parameter(site, prior) for site, prior in sites)
+        if len(a["priors"]) > len(PARAMETER_SITES):  # Eq. (8)'s width: its prior only
+            parameter(DPHI_SITE, a["priors"][len(PARAMETER_SITES)])
         # Eq. (7) in internal coordinates: ln BRDF0 + b1 t x' + (b2 t + b3 t²) x'^α, x' > 0
         t = a["t"]
         x = a["theta_s_internal"] - t_s0
@@ -183,12 +188,12 @@ def pymc_model_from_arrays(arrays: dict[str, np.ndarray]):
             g_rot, g_cam = d_i + a["theta_s_per_rotation"] * d_s, d_s
         else:
             g_rot = g_cam = pt.zeros_like(mean)
-        calibration = float(a["calibration_sd"])
-        rotation = float(a["rotation_deg"]) * g_rot
+        calibration = a["calibration_sd"]  # per row, as the rotation and camera scales
+        rotation = a["rotation_deg"] * g_rot
         diagonal = (
             a["sigma_row"] ** 2
             + repeatability**2
-            + (g_cam * float(a["camera_deg"])) ** 2
+            + (g_cam * a["camera_deg"]) ** 2
             + a["sample_alone"] * sample_sd**2
             + a["calibration_alone"] * calibration**2
             + a["rotation_alone"] * rotation**2
@@ -200,7 +205,7 @@ def pymc_model_from_arrays(arrays: dict[str, np.ndarray]):
         covariance = (
             pt.diag(diagonal)
             + sample_sd**2 * samples
-            + calibration**2 * calibrations
+            + np.outer(calibration, calibration) * calibrations
             + pt.outer(rotation, rotation) * rotations
         )
         pm.MvNormal("obs", mu=mean, cov=covariance, observed=y)

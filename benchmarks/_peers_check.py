@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from benchmarks._peers import PARAMETER_SITES, pymc_model
+from benchmarks._peers import DPHI_SITE, PARAMETER_SITES, pymc_model
 
 POINTS = 20  # of the log-density check
 
@@ -26,7 +26,7 @@ def check_points(scene, measurements, count: int = POINTS, seed: int = 0) -> lis
 
     model = build_posterior_model(scene, measurements, reparametrise=False)
     sites = _site_names(model)
-    free = [site for site in PARAMETER_SITES if site in sites]
+    free = [site for site in (*PARAMETER_SITES, DPHI_SITE) if site in sites]
     noise = [site for site in ("sample_sd", "repeatability") if site in sites]
     candidates = Predictive(model, num_samples=8 * count, return_sites=[*free, *noise])(
         jax.random.PRNGKey(seed), model.data, mode="simulate"
@@ -41,7 +41,8 @@ def check_points(scene, measurements, count: int = POINTS, seed: int = 0) -> lis
     centre = dict(
         zip(("log_brdf0", "b1", "b2", "b3", "alpha", "t_s0"), to_internal(UV_PAPER), strict=True)
     )
-    spreads = {"alpha": 0.3, "t_s0": 0.03}  # others: 5 % of the value
+    centre[DPHI_SITE] = 0.0  # the article's Δφ
+    spreads = {"alpha": 0.3, "t_s0": 0.03, DPHI_SITE: 0.25}  # others: 5 % of the value
     rng = np.random.default_rng(seed)
     points = []
     for k in range(count):
