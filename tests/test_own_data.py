@@ -2,6 +2,7 @@
 scene names its problems before any work."""
 
 import json
+from pathlib import Path
 
 import pytest
 
@@ -87,10 +88,15 @@ def test_documented_scene_example_runs_to_a_report(tmp_path, capsys):
         "150",
         "--draws",
         "300",
+        "--json",
         capsys=capsys,
     )
     assert code == 0, err
-    assert (out / "report.html").is_file() and "report:" in stdout
+    payload = json.loads(stdout)
+    assert Path(payload["report"]) == out / "report.html" and (out / "report.html").is_file()
+    steps = payload["steps"]  # each step's wall time, adding up to the job's
+    assert set(steps) == {"fits", "posterior", "studies", "report"}
+    assert min(steps.values()) >= 0.0 and sum(steps.values()) == pytest.approx(payload["seconds"])
 
 
 @pytest.mark.parametrize(

@@ -161,3 +161,20 @@ def test_a_stored_function_compiles_once_per_shape_and_loads_warm(tmp_path, monk
     np.testing.assert_allclose(warm(longer), 2.0 * np.sin(longer), rtol=1e-15)
     with pytest.raises(AssertionError, match="traced"):
         StoredFunction(_scaled(3.0), ("scaled", 3.0))(x)
+
+
+def test_a_program_export_refuses_is_compiled_and_not_stored(tmp_path):
+    """LAPACK's ``ormqr`` (lineax's QR solve, as in the least-squares solver on some tables)
+    has no export compatibility guarantee, and lineax's checks are host callbacks: jax.export
+    refuses both."""
+    import lineax
+
+    matrix = jnp.asarray(np.random.default_rng(0).normal(size=(6, 3)))
+    target = matrix @ jnp.array([1.0, -2.0, 0.5])
+
+    def solve(a, b):
+        return lineax.linear_solve(lineax.MatrixLinearOperator(a), b, lineax.QR()).value
+
+    program = compile_stored(solve, (matrix, target), identity=b"qr", folder=tmp_path)
+    np.testing.assert_allclose(program(matrix, target), [1.0, -2.0, 0.5], atol=1e-12)
+    assert not list(tmp_path.glob(f"*{stored_programs.SUFFIX}"))

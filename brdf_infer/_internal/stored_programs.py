@@ -21,8 +21,9 @@ everything that shapes it:
 
 A file that cannot be read or deserialised, or whose arguments do not match, is traced anew and
 replaced. Both paths compile the exported program, so a warm run's draws are those of a cold
-run bit for bit. A program whose tree holds a type :mod:`jax.export` cannot serialise is
-compiled as before and not stored.
+run bit for bit. A program :mod:`jax.export` refuses — a tree type it cannot name, or a LAPACK
+call without its compatibility guarantee (the least-squares solver's QR on some tables), a host
+callback — is compiled as before and not stored.
 """
 
 from __future__ import annotations
@@ -169,10 +170,10 @@ def compile_stored(
     path = folder / f"{program_key(identity, arguments)}{SUFFIX}"
     exported = _load(path, arguments)
     if exported is None:
-        exported = export.export(jax.jit(function))(*arguments)
         try:
+            exported = export.export(jax.jit(function))(*arguments)
             serialised = exported.serialize()
-        except ValueError:  # a tree type export cannot name: compiled, not stored
+        except (ValueError, NotImplementedError):  # export refuses it: compiled, not stored
             return jax.jit(function).lower(*arguments).compile(compiler_options)
         with contextlib.suppress(OSError):  # a read-only cache: traced again next time
             atomic_write_bytes(path, bytes(serialised))
