@@ -91,7 +91,7 @@ def process_rows(scene_name: str = "lya", progress=print) -> list[ProcessRow]:
                 out = base / f"{command}-{state}"
                 wall, cpu, payload = timed_process([command, scene_name], cache, out)
                 summary = payload if command == "posterior" else payload["posterior"]
-                steps = None if command == "posterior" else payload.get("steps")
+                steps = None if command == "posterior" else payload.get("step_seconds")
                 name = f"{command} {scene_name}"
                 rows.append(ProcessRow(name, state, wall, summary, cpu, startup, steps))
     return rows

@@ -94,7 +94,7 @@ def test_documented_scene_example_runs_to_a_report(tmp_path, capsys):
     assert code == 0, err
     payload = json.loads(stdout)
     assert Path(payload["report"]) == out / "report.html" and (out / "report.html").is_file()
-    steps = payload["steps"]  # each step's wall time, adding up to the job's
+    steps = payload["step_seconds"]  # each step's wall time, adding up to the job's
     assert set(steps) == {"fits", "posterior", "studies", "report"}
     assert min(steps.values()) >= 0.0 and sum(steps.values()) == pytest.approx(payload["seconds"])
 

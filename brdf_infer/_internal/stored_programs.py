@@ -36,6 +36,7 @@ import sys
 import threading
 from collections.abc import Callable, Sequence
 from enum import Enum
+from importlib import metadata
 from pathlib import Path
 from typing import Any
 
@@ -104,15 +105,10 @@ def _feed(hasher, value: Any) -> None:
 @functools.cache
 def environment_digest() -> bytes:
     """The versions and the source digest every key holds (module docstring)."""
-    import jaxlib
-    import numpyro
-
     hasher = hashlib.sha256()
-    stamp = (
+    stamp = (  # the versions by their metadata: fit and tis import no NumPyro
         sys.version,
-        jax.__version__,
-        jaxlib.__version__,
-        numpyro.__version__,
+        *(metadata.version(package) for package in ("jax", "jaxlib", "numpyro")),
         jax.default_backend(),
         bool(jax.config.jax_enable_x64),
     )

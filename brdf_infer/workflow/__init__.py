@@ -106,8 +106,8 @@ class RunResult:
         posterior: the posterior summary (``summary.json``).
         comparison: the PSIS-LOO comparison (``compare.json``), where the scene asks for one.
         seconds: wall time.
-        steps: wall time of each step [s]: ``fits`` (the checks of the rows and the
-            settings, the paper fit and least squares),
+        steps: wall time of each step [s] (``step_seconds`` in the JSON): ``fits`` (the
+            checks of the rows and the settings, the paper fit and least squares),
             ``posterior``, ``studies`` (none: 0) and ``report``.
     """
 
@@ -132,7 +132,7 @@ class RunResult:
             "lsq": self.lsq,
             "posterior": self.posterior,
             "seconds": self.seconds,
-            "steps": self.steps,
+            "step_seconds": self.steps,
         }
         if self.comparison is not None:
             payload["comparison"] = self.comparison
