@@ -178,3 +178,20 @@ def test_a_program_export_refuses_is_compiled_and_not_stored(tmp_path):
     program = compile_stored(solve, (matrix, target), identity=b"qr", folder=tmp_path)
     np.testing.assert_allclose(program(matrix, target), [1.0, -2.0, 0.5], atol=1e-12)
     assert not list(tmp_path.glob(f"*{stored_programs.SUFFIX}"))
+
+
+@pytest.mark.full
+def test_a_loaded_start_with_a_traced_step_program_samples(tmp_path, monkeypatch):
+    """A start program stored without its step program (another process stored one and not
+    yet the other): the step program is traced though NumPyro's init_kernel never ran here."""
+    from brdf_infer.posterior._nuts import NutsProgram, chain_keys
+
+    monkeypatch.setattr(stored_programs, "_folder", lambda: tmp_path)
+    model = _lya_model()
+    keys = chain_keys(0, 1, 1)[0]
+    traced = NutsProgram(model, warmup=30).run(model.data, keys, 20, workers=1)
+    files = sorted(tmp_path.glob(f"*{stored_programs.SUFFIX}"), key=lambda p: p.stat().st_mtime)
+    files[1].unlink()  # the step program (stored after the start program)
+    again = NutsProgram(model, warmup=30).run(model.data, keys, 20, workers=1)
+    for name, values in traced.sites.items():
+        np.testing.assert_array_equal(again.sites[name], values)

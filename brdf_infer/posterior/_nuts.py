@@ -115,6 +115,7 @@ class NutsProgram:
         }
         self._compiled: dict = {}
         self._lock = threading.Lock()
+        self._kernel_ready = False  # whether init_kernel ran (traced) in this process
         # the module constants the programs close over (a stored program's key holds them)
         self._constants = (INIT_CANDIDATES, CHUNK, CONSTRAIN_BLOCK)
 
@@ -141,6 +142,7 @@ class NutsProgram:
         return lambda z: self.flat.potential(z, data)
 
     def _start(self, key, data: ModelData):
+        self._kernel_ready = True  # NumPyro's init_kernel sets what sample_kernel reads
         candidates_key, kernel_key = jax.random.split(key)
         start = self.flat.best_of_uniform(candidates_key, data, INIT_CANDIDATES)
         return self._init_kernel(
@@ -148,6 +150,9 @@ class NutsProgram:
         )
 
     def _steps(self, state, data: ModelData, length: int):
+        if not self._kernel_ready:  # the start program was loaded, not traced: trace it here
+            jax.eval_shape(self._start, jnp.zeros(2, jnp.uint32), data)
+
         def step(state, _):
             state = self._sample_kernel(state, model_args=(data,))
             record = (state.z, *(getattr(state, k) for k in _STATISTICS))
