@@ -2,8 +2,12 @@
 
 from __future__ import annotations
 
+import gc
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from concurrent.futures import Future, ThreadPoolExecutor
+from contextlib import contextmanager
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from brdf_infer._internal import arviz as az
@@ -18,7 +22,7 @@ from brdf_infer.posterior import (
     run_measurements,
     run_scene,
 )
-from brdf_infer.report import _figures, _html, _noise
+from brdf_infer.report import _chains, _figures, _html, _noise
 from brdf_infer.report._compare import compare_section
 from brdf_infer.report._design import design_section
 from brdf_infer.report._error_model import (
@@ -29,9 +33,10 @@ from brdf_infer.report._error_model import (
 )
 from brdf_infer.report._export import export_section, load_exports, plot_export
 from brdf_infer.report._instruments import instruments_section
-from brdf_infer.report._raytrace import figure_png, plot_detector_images, plot_raytrace
+from brdf_infer.report._raytrace import plot_detector_images, plot_raytrace
 from brdf_infer.report._results import fold_note, result_box, tis_fold, tis_table
 from brdf_infer.report._run_tables import run_section, summary_table
+from brdf_infer.report._saver import FigureSaver
 from brdf_infer.report._sensitivity import sensitivity_section
 from brdf_infer.report._table_views import residual_hemisphere, value_words
 from brdf_infer.report._traces import raytrace_table
@@ -86,16 +91,51 @@ def write_report(run: Path, progress=print) -> tuple[Path, Verdict]:
     ensure_float64()  # the rows are predicted again: float32 would not carry the model
     require_complete(run)
     folder = RunFolder(run)
-    loaded = _load(folder)
-    with writing(run, "report", option="RUN_DIR", adds=True):
-        return _write_report(folder, loaded, started, progress)
+    with _collection_deferred(), FigureSaver(progress) as saver:  # it starts while we read
+        loaded = _load(folder)
+        with writing(run, "report", option="RUN_DIR", adds=True):
+            return _write_report(folder, loaded, saver, started, progress)
 
 
-Figure = tuple[str, str, bytes]  # name, caption, PNG
+@contextmanager
+def _collection_deferred() -> Iterator[None]:
+    """No cyclic garbage collection inside: reading the run and drawing every figure leave
+    objects in reference cycles, and each full collection scans all of the process's objects
+    (≈ 3·10⁵ with JAX and the run loaded, ≈ 0.2 s); the cycles (≈ 40 MB for the bundled scene)
+    are left to the first collection after the report. Enabled again on the way out, if it
+    was."""
+    enabled = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if enabled:
+            gc.enable()
+
+
 AddFigure = Callable[[str, str, Callable[[], object]], None]  # name, caption, make the figure
 
 
-def _write_report(run: RunFolder, loaded, started: float, progress) -> tuple[Path, Verdict]:
+@dataclass
+class Figures:
+    """The report's figures in the order drawn: their captions by name, their PNGs saved by
+    ``saver`` (while the tables are written)."""
+
+    saver: FigureSaver
+    captions: dict[str, str] = field(default_factory=dict)
+
+    def shown(self, *names: str) -> list[str]:
+        """The HTML of the figures named, in the order they were drawn."""
+        return [
+            _html.figure(self.saver.png(name), caption)
+            for name, caption in self.captions.items()
+            if name in names
+        ]
+
+
+def _write_report(
+    run: RunFolder, loaded, saver: FigureSaver, started: float, progress
+) -> tuple[Path, Verdict]:
     idata, summary, bands = loaded
     attrs = idata.posterior.attrs
     scene = run_scene(attrs)  # what the run sampled, not the scene file as it is now
@@ -104,20 +144,25 @@ def _write_report(run: RunFolder, loaded, started: float, progress) -> tuple[Pat
     rows = scene.load_measurements() if rows is None else rows  # a run from before they were
     loo = summary["predictive"]  # PSIS-LOO as the run computed it
     verdict = Verdict.from_json(summary["verdict"])  # recorded when the run completed
-    figures: list[Figure] = []
+    figures = Figures(saver)
 
     def add(name: str, caption: str, make) -> None:
         progress(f"  figure: {name}")
-        figures.append((name, caption, figure_png(make())))
+        figures.captions[name] = caption
+        saver.save(name, make())
 
-    _fit_figures(add, run, idata, summary, bands, scene, rows, loo)
-    _product_figures(add, idata, bands, scene, member, physical)
+    with ThreadPoolExecutor(1) as background:  # the maps' values while other figures are drawn
+        maps = (
+            background.submit(_figures.hemisphere_values, member, physical)
+            if scene.outputs.maps and member.hemispheric(scene.model.out_of_plane)
+            else None
+        )
+        _fit_figures(add, run, idata, summary, bands, scene, rows, loo)
+        _product_figures(add, bands, scene, member, physical, maps)
     exports = load_exports(run)
     _export_figure(add, exports, idata, scene, member.paper_parameters)
     traces = run.traces()
     _raytrace_figures(add, traces, load_detector_images(run.path))
-    for name, _, png in figures:
-        run.write_bytes(f"{FIGURE_DIR}/{name}.png", png)
 
     sections = [
         *_answer(run, verdict, summary, bands, scene, rows, member, figures),
@@ -127,6 +172,8 @@ def _write_report(run: RunFolder, loaded, started: float, progress) -> tuple[Pat
         *_diagnostics(run, idata, summary, loo, figures),
         *_products(run, bands, exports, traces, figures),
     ]
+    for name in figures.captions:
+        run.write_bytes(f"{FIGURE_DIR}/{name}.png", saver.png(name))
     title = f"brdf_infer report: {scene.name}, {member.name} ({attrs['sampler']})"
     document = _html.page(title, sections)
     path = run.write_bytes(REPORT_FILE, document.encode())
@@ -161,16 +208,16 @@ def _fit_figures(add: AddFigure, run: RunFolder, idata, summary, bands, scene, r
             "trace",
             "Trace plots in the sampler's well-conditioned coordinates (ln BRDF0, b1–b3, α, "
             "θs0 and the sampled noise scales).",
-            lambda: _figures.trace(idata),
+            lambda: _chains.trace(idata),
         )
         add(
             "rank",
             "Rank plots: chains that mix give flat histograms.",
-            lambda: _figures.rank(idata),
+            lambda: _chains.rank(idata),
         )
-    add("pair", "Pair plot; divergent transitions marked.", lambda: _figures.pair(idata))
+    add("pair", "Pair plot; divergent transitions marked.", lambda: _chains.pair(idata))
     if "energy" in idata.sample_stats:
-        add("energy", "NUTS energy plot.", lambda: _figures.energy(idata))
+        add("energy", "NUTS energy plot.", lambda: _chains.energy(idata))
     add(
         "predictive",
         f"Posterior predictive against the measured {value_words(rows.quantity)} of the rows in "
@@ -213,8 +260,11 @@ def _fit_figures(add: AddFigure, run: RunFolder, idata, summary, bands, scene, r
         add("pareto_k", "PSIS-LOO Pareto k per measurement.", lambda: _figures.pareto_k(loo))
 
 
-def _product_figures(add: AddFigure, idata, bands, scene, member, physical) -> None:
-    """The TIS band and the hemisphere maps, where the run has them."""
+def _product_figures(
+    add: AddFigure, bands, scene, member, physical, maps: Future[_figures.HemisphereMaps] | None
+) -> None:
+    """The TIS band and the hemisphere maps (their values computed in ``maps``), where the run
+    has them."""
     if "tis" in bands:
         add(
             "tis_band",
@@ -223,13 +273,13 @@ def _product_figures(add: AddFigure, idata, bands, scene, member, physical) -> N
             + f"; {fold_statement(tis_fold(bands))}.",
             lambda: _figures.tis_band(bands, scene.load_tis_reference()),
         )
-    if scene.outputs.maps and member.hemispheric(scene.model.out_of_plane):
+    if maps is not None:
         add(
             "hemisphere",
             "Hemisphere maps (cf. Fig. 9): posterior median BRDF on one logarithmic colour scale "
             "(top) and the relative width of its 95 % band (bottom); "
             f"{fold_statement(member.fold)}.",
-            lambda: _figures.hemisphere_maps(member, physical),
+            lambda: _figures.hemisphere_maps(member, physical, maps=maps.result()),
         )
 
 
@@ -270,11 +320,6 @@ def _raytrace_figures(add: AddFigure, traces: list[dict], images: dict | None) -
         )
 
 
-def _shown(figures: list[Figure], *names: str) -> list[str]:
-    """The HTML of the figures named, in the order they were drawn."""
-    return [_html.figure(png, caption) for name, caption, png in figures if name in names]
-
-
 def _thresholds(summary) -> str:
     """The thresholds the run's verdict applied, in words (the leave-one-out terms' k̂ limit
     that of the draws PSIS-LOO read: ``pareto_k_limit``)."""
@@ -293,7 +338,9 @@ def _thresholds(summary) -> str:
     )
 
 
-def _answer(run: RunFolder, verdict, summary, bands, scene, rows, member, figures) -> list[str]:
+def _answer(
+    run: RunFolder, verdict, summary, bands, scene, rows, member, figures: Figures
+) -> list[str]:
     """The verdict and the answer first, with the BRDF bands and the studies left out."""
     return [
         _html.verdict_box(verdict),
@@ -301,7 +348,7 @@ def _answer(run: RunFolder, verdict, summary, bands, scene, rows, member, figure
         model_check_table(summary.get("model_check")),
         result_box(summary, bands, tis_angles(scene, rows), member),
         fold_note(bands, scene.outputs.reference_params is not None) if "tis" in bands else "",
-        *_shown(figures, "brdf_bands"),
+        *figures.shown("brdf_bands"),
         _studies_line(run),
     ]
 
@@ -376,29 +423,29 @@ def _sampler_line(summary) -> str:
     )
 
 
-def _diagnostics(run: RunFolder, idata, summary, loo, figures) -> list[str]:
+def _diagnostics(run: RunFolder, idata, summary, loo, figures: Figures) -> list[str]:
     """The sampler's diagnostics, the fit against the data and the error model."""
     return [
         "<h2>Diagnostics</h2>",
         _sampler_line(summary),
-        *_shown(figures, "trace", "rank", "pair", "energy"),
+        *figures.shown("trace", "rank", "pair", "energy"),
         "<h2>Fit against the data</h2>",
-        *_shown(figures, "predictive", "residual_map", "pareto_k"),
+        *figures.shown("predictive", "residual_map", "pareto_k"),
         "<h2>Error model</h2>",
         error_model_table(summary),
-        *_shown(figures, "loo_pit", "spread_check"),
+        *figures.shown("loo_pit", "spread_check"),
         loo_table(loo),
         variants_comparison(run, idata),
     ]
 
 
-def _products(run: RunFolder, bands, exports, traces, figures) -> list[str]:
+def _products(run: RunFolder, bands, exports, traces, figures: Figures) -> list[str]:
     """The products (TIS, maps, exports) and the studies written beside the run."""
     return [
         "<h2>Products</h2>",
-        *_shown(figures, "tis_band", "hemisphere"),
+        *figures.shown("tis_band", "hemisphere"),
         tis_table(bands) if "tis" in bands else "",
-        *export_section(exports, figures),
+        *export_section(exports, figures.shown("export")),
         *compare_section(run),
         *sensitivity_section(run),
         *design_section(run),
@@ -407,7 +454,7 @@ def _products(run: RunFolder, bands, exports, traces, figures) -> list[str]:
             [
                 "<h2>Ray-tracing validation (Sec. 6)</h2>",
                 raytrace_table(traces),
-                *_shown(figures, "raytrace", "detector_images"),
+                *figures.shown("raytrace", "detector_images"),
             ]
             if traces
             else []

@@ -133,8 +133,9 @@ def abg_table(rows: list[dict]) -> str:
     )
 
 
-def export_section(exports: list[dict], figures) -> list[str]:
-    """The Export section: where the files are, the table plot and the ABg table."""
+def export_section(exports: list[dict], figure: list[str]) -> list[str]:
+    """The Export section: where the files are, the table plot (``figure``: its HTML, if
+    drawn) and the ABg table."""
     if not exports:
         return []
     parts = ["<h2>Export</h2>"]
@@ -151,5 +152,4 @@ def export_section(exports: list[dict], figures) -> list[str]:
             parts.append(f"<p>{_html.escape(_MEANINGS)}.</p>")
         if entry["format"] == "abg" and entry.get("rows"):
             parts.append(abg_table(entry["rows"]))
-    parts += [_html.figure(png, caption) for name, caption, png in figures if name == "export"]
-    return parts
+    return parts + figure

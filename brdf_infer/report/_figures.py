@@ -1,167 +1,32 @@
-"""Figures of the diagnostic report; each returns a matplotlib Figure with units on every axis."""
+"""Figures of the diagnostic report; each returns a matplotlib Figure with units on every axis,
+laid out by fixed margins (:mod:`brdf_infer.report._canvas`)."""
 
 from __future__ import annotations
 
-import json
+from typing import NamedTuple
 
 import jax
-import matplotlib.pyplot as plt
+import jax.numpy as jnp
+import matplotlib
 import numpy as np
-from matplotlib.colors import BoundaryNorm, ListedColormap
+from matplotlib.cm import ScalarMappable
+from matplotlib.colors import BoundaryNorm, ListedColormap, LogNorm, Normalize
+from matplotlib.figure import Figure
 
 from brdf_infer._internal import arviz as az
-from brdf_infer.model import ModelFamily, brdf_inplane, family, run_family_name
-from brdf_infer.model.params import PARAM_NAMES, PARAMETER_SETS
+from brdf_infer.model import ModelFamily, brdf_inplane
+from brdf_infer.model.params import PARAMETER_SETS
+from brdf_infer.report._canvas import Margins, colour_bar_axis, panels
 from brdf_infer.report._table_views import in_plane, panel_grid, value_label
 from brdf_infer.runs.records import Bands
 from brdf_infer.scene import Scene
 from brdf_infer.verdict import PARETO_K_LIMIT, limit_text
 
 MAP_THETA_I_DEG = (5.0, 30.0, 50.0, 70.0)
+MAX_LEGEND_ANGLES = 8  # the predictive figure's legend; a colour bar beyond
 
 
-# The sampler's well-conditioned coordinates (brdf_infer.model.coordinates) and noise scales, with
-# their units: what the trace and pair plots show (in paper units a2, a3 are spikes).
-SAMPLER_COORDINATES = {
-    "log_brdf0": "ln BRDF0 [ln sr⁻¹]",
-    "b1": "b1 = a1·90² [-]",
-    "b2": "b2 = a2·90^(1+α) [-]",
-    "b3": "b3 = a3·90^(2+α) [-]",
-    "alpha": "α [-]",
-    "theta_s0": "θs0 [deg]",
-    "sample_sd": "sample sd τ [ln R]",
-    "repeatability": "repeatability [ln R]",
-}
-_PAPER_NAME = {"log_brdf0": "brdf0", "b1": "a1", "b2": "a2", "b3": "a3"}
-
-
-SHORT_NAMES = {
-    "log_brdf0": "ln BRDF0",
-    "b1": "b1",
-    "b2": "b2",
-    "b3": "b3",
-    "alpha": "α",
-    "theta_s0": "θs0 [deg]",
-    "sample_sd": "τ",
-    "repeatability": "σ_rep",
-}
-COORDINATE_NOTE = (
-    "ln BRDF0 [ln sr⁻¹]; b1 = a1·90², b2 = a2·90^(1+α), b3 = a3·90^(2+α) [-]; α [-]; θs0 [deg]; "
-    "sample sd τ and repeatability σ_rep [ln R]"
-)
-
-
-def _family(idata: az.InferenceData) -> ModelFamily:
-    """The run's model family."""
-    return family(run_family_name(idata.posterior.attrs))
-
-
-def sampled_coordinates(idata: az.InferenceData) -> list[str]:
-    """The run's free coordinates (also a chain that never moved is shown)."""
-    member = _family(idata)
-    noise = [name for name in ("sample_sd", "repeatability") if name in idata.posterior]
-    if not member.paper_parameters:  # sampled in its own coordinates
-        return [c.site for c in member.coordinates] + noise
-    free = json.loads(idata.posterior.attrs.get("free_parameters", json.dumps(PARAM_NAMES)))
-    return [
-        name
-        for name in SAMPLER_COORDINATES
-        if name in idata.posterior and (_PAPER_NAME.get(name, name) in free or name in noise)
-    ]
-
-
-def coordinate_labels(idata: az.InferenceData, short: bool = False) -> dict[str, str]:
-    """Axis label of each sampled coordinate (the family's descriptions for other families)."""
-    member = _family(idata)
-    labels = dict(SHORT_NAMES if short else SAMPLER_COORDINATES)
-    if not member.paper_parameters:
-        labels.update({c.site: c.site if short else c.description for c in member.coordinates})
-    return labels
-
-
-def coordinate_note(idata: az.InferenceData) -> str:
-    """What the pair plot's coordinates are, in words with units."""
-    member = _family(idata)
-    if member.paper_parameters:  # its whitened coordinates
-        return COORDINATE_NOTE
-    return "; ".join(f"{c.site}: {c.description}" for c in member.coordinates)
-
-
-def _labeller(idata: az.InferenceData, short: bool = False):
-    return az.MapLabeller(var_name_map=coordinate_labels(idata, short))
-
-
-def trace(idata: az.InferenceData):
-    names = sampled_coordinates(idata)
-    axes = az.plot_trace(
-        idata,
-        var_names=names,
-        compact=False,
-        figsize=(11, 1.6 * len(names)),
-        labeller=_labeller(idata),
-    )
-    figure = axes.ravel()[0].figure
-    for axis in axes.ravel():
-        axis.tick_params(labelsize=7)
-        axis.title.set_fontsize(9)
-    figure.suptitle("Trace in the sampler's coordinates (left: density per chain; right: draws)")
-    figure.tight_layout()
-    return figure
-
-
-def rank(idata: az.InferenceData):
-    names = sampled_coordinates(idata)
-    columns = 4
-    lines = int(np.ceil(len(names) / columns))
-    figure, axes = plt.subplots(lines, columns, figsize=(12, 2.8 * lines), squeeze=False)
-    az.plot_rank(idata, var_names=names, ax=axes.ravel()[: len(names)], labeller=_labeller(idata))
-    for axis in axes.ravel():
-        axis.tick_params(labelsize=7)
-        axis.title.set_fontsize(9)
-        axis.xaxis.label.set_fontsize(8)
-        axis.yaxis.label.set_fontsize(8)
-    for axis in axes.ravel()[len(names) :]:
-        axis.set_visible(False)
-    figure.suptitle("Rank plots per chain (uniform when chains agree)")
-    figure.tight_layout()
-    return figure
-
-
-def pair(idata: az.InferenceData):
-    has_divergences = "diverging" in idata.sample_stats
-    names = sampled_coordinates(idata)
-    axes = az.plot_pair(
-        idata,
-        var_names=names,
-        kind="scatter",
-        divergences=has_divergences,
-        marginals=True,
-        figsize=(12, 12),
-        textsize=9,
-        labeller=_labeller(idata, short=True),
-        scatter_kwargs={"alpha": 0.15, "s": 2},
-    )
-    figure = np.ravel(axes)[0].figure
-    for axis in np.ravel(axes):
-        axis.tick_params(labelsize=7)
-    note = " (divergences in red)" if has_divergences else ""
-    figure.suptitle(
-        f"Pairs in the sampler's coordinates{note}:\n{coordinate_note(idata)}", fontsize=10
-    )
-    figure.subplots_adjust(top=0.93, left=0.07, bottom=0.06, right=0.98)
-    return figure
-
-
-def energy(idata: az.InferenceData):
-    figure, axis = plt.subplots(figsize=(6, 4))
-    az.plot_energy(idata, ax=axis)
-    axis.set_title("NUTS energy: marginal vs transition (BFMI in legend)")
-    axis.set_xlabel("energy − mean [-]")
-    figure.tight_layout()
-    return figure
-
-
-def posterior_predictive(idata: az.InferenceData, rows) -> plt.Figure:
+def posterior_predictive(idata: az.InferenceData, rows) -> Figure:
     """The measured in-plane rows (out-of-plane rows have their own view) against their 95 %
     posterior predictive, per series; colours by θi, a colour bar beyond eight angles."""
     observed = np.exp(np.asarray(idata.observed_data["obs"]))
@@ -172,9 +37,11 @@ def posterior_predictive(idata: az.InferenceData, rows) -> plt.Figure:
     sigma = np.asarray(idata.constant_data["sigma_row"])
     plane = in_plane(rows)
     names = list(dict.fromkeys(rows.series[plane]))
-    figure, axes = plt.subplots(
-        1, len(names), figsize=(5.5 * len(names), 4.2), squeeze=False, layout="constrained"
+    bars = any(  # colour bars right of their panels: room for their tick labels and label
+        len(np.unique(theta_i[(rows.series == name) & plane])) > MAX_LEGEND_ANGLES for name in names
     )
+    margins = Margins(left=0.75, right=0.1 + 0.9 * bars, bottom=0.5, top=0.3, across=0.85 + bars)
+    figure, axes = panels(((5.5 + 1.5 * bars) * len(names), 4.2), 1, len(names), margins)
     for axis, name in zip(axes[0], names, strict=True):
         shown = np.flatnonzero((rows.series == name) & plane)
         specular = np.allclose(theta_s[shown], theta_i[shown])
@@ -205,27 +72,28 @@ def posterior_predictive(idata: az.InferenceData, rows) -> plt.Figure:
     return figure
 
 
-_ANGLE_COLOURS = ListedColormap(plt.cm.viridis(np.linspace(0.0, 0.9, 256)))
+_ANGLE_COLOURS = ListedColormap(matplotlib.colormaps["viridis"](np.linspace(0.0, 0.9, 256)))
 
 
 def _angle_key(figure, axis, angles: np.ndarray) -> None:
     """Which colour is which θi: a legend up to eight angles, else a colour bar (its ticks the
     angles, one colour step each)."""
-    if len(angles) <= 8:
+    if len(angles) <= MAX_LEGEND_ANGLES:
         axis.legend(fontsize=8)
         return
     steps = BoundaryNorm(np.arange(len(angles) + 1) - 0.5, len(angles))
     colours = ListedColormap(_ANGLE_COLOURS(np.linspace(0.0, 1.0, len(angles))))
     bar = figure.colorbar(
-        plt.cm.ScalarMappable(norm=steps, cmap=colours), ax=axis, label="incidence angle θi [deg]"
+        ScalarMappable(norm=steps, cmap=colours), ax=axis, label="incidence angle θi [deg]"
     )
     bar.set_ticks(np.arange(len(angles)), labels=[f"{a:g}" for a in angles])
     bar.ax.tick_params(labelsize=7)
 
 
-def pareto_k(loo: dict) -> plt.Figure:
+def pareto_k(loo: dict) -> Figure:
     """Every row's Pareto k of a run's PSIS-LOO (``summary.json``'s ``predictive``)."""
-    figure, axis = plt.subplots(figsize=(7, 3.6))
+    figure, axes = panels((7, 3.6), margins=Margins(left=0.7, bottom=0.5, top=0.3))
+    axis = axes[0, 0]
     k = np.asarray(loo["pareto_k"])
     limit = loo.get("pareto_k_limit", PARETO_K_LIMIT)
     axis.scatter(np.arange(k.size), k, s=14, c=np.where(k > limit, "crimson", "tab:blue"))
@@ -234,11 +102,10 @@ def pareto_k(loo: dict) -> plt.Figure:
     axis.set_ylabel("Pareto k [-]")
     axis.set_title(f"PSIS-LOO: elpd = {loo['elpd_loo']:.1f} ± {loo['se']:.1f}")
     axis.legend()
-    figure.tight_layout()
     return figure
 
 
-def brdf_bands(bands: Bands, scene: Scene, rows) -> plt.Figure:
+def brdf_bands(bands: Bands, scene: Scene, rows) -> Figure:
     """In-plane BRDF median and bands per θi on a log axis, the in-plane rows (φs 0° or 180°;
     out-of-plane rows have their own view, ``_table_views.residual_hemisphere``) and the
     reference
@@ -250,22 +117,34 @@ def brdf_bands(bands: Bands, scene: Scene, rows) -> plt.Figure:
     measured = np.exp(scene.measured_log_brdf(rows))
     lines, columns, (width, height) = panel_grid(len(angles))
     many = len(angles) > 6
-    figure, axes = plt.subplots(
+    margins = (  # small multiples share their axes: labels on the outer panels only
+        Margins(left=1.0, right=0.15, bottom=0.5, top=0.75, across=0.15, between=0.3)
+        if many
+        else Margins(left=1.0, right=0.15, bottom=0.5, top=0.3, across=1.05, between=0.75)
+    )
+    figure, axes = panels(
+        (width * columns, height * lines + 0.6 * many),
         lines,
         columns,
-        figsize=(width * columns, height * lines + 0.6 * many),
-        squeeze=False,
+        margins,
         sharex=many,
         sharey=many,
-        layout="constrained",
     )
+    reference = scene.outputs.reference_params
+    if reference is not None:  # every angle's curve at once: Eq. (7) traced once, not per angle
+        curves = np.asarray(
+            jax.jit(brdf_inplane, static_argnums=3)(
+                np.asarray(angles, float)[:, None],
+                theta_s,
+                PARAMETER_SETS[reference],
+                scene.outputs.fold,
+            )
+        )
     for index, angle in enumerate(angles):
         axis = axes.ravel()[index]
         _band(axis, theta_s, band, index)
-        reference = scene.outputs.reference_params
         if reference is not None:
-            curve = brdf_inplane(angle, theta_s, PARAMETER_SETS[reference], scene.outputs.fold)
-            axis.plot(theta_s, np.asarray(curve), "k--", lw=1, label=f"reference ({reference})")
+            axis.plot(theta_s, curves[index], "k--", lw=1, label=f"reference ({reference})")
         here = plane & (rows.theta_i_deg == angle)
         if here.any():
             axis.plot(
@@ -290,7 +169,7 @@ def brdf_bands(bands: Bands, scene: Scene, rows) -> plt.Figure:
         axis.set_xlabel("θs [deg]")
     if many:  # a legend in a small panel hides data: above the grid
         handles, labels = axes.ravel()[0].get_legend_handles_labels()
-        figure.legend(handles, labels, loc="outside upper center", ncols=len(labels), fontsize=8)
+        figure.legend(handles, labels, loc="upper center", ncols=len(labels), fontsize=8)
     else:
         axes.ravel()[0].legend(fontsize=7)
     return figure
@@ -305,11 +184,12 @@ def _band(axis, theta_s: np.ndarray, band: dict, index: int) -> None:
     axis.plot(theta_s, band["median"][index], color="tab:blue", label="posterior median")
 
 
-def tis_band(bands: Bands, reference: list[tuple[float, float, str]] = ()) -> plt.Figure:
+def tis_band(bands: Bands, reference: list[tuple[float, float, str]] = ()) -> Figure:
     """TIS median and bands against θi, with the scene's reference points (e.g. Table 3)."""
     band = bands["tis"]
     theta = np.asarray(band["theta_i_deg"])
-    figure, axis = plt.subplots(figsize=(7, 4.2))
+    figure, axes = panels((7, 4.2), margins=Margins(left=0.7, bottom=0.5, top=0.3))
+    axis = axes[0, 0]
     axis.fill_between(
         theta,
         100 * np.asarray(band["lo95"]),
@@ -337,29 +217,48 @@ def tis_band(bands: Bands, reference: list[tuple[float, float, str]] = ()) -> pl
     axis.set_ylabel("TIS [%]")
     axis.set_title("Total integrated scatter, Eq. (9)")
     axis.legend(fontsize=8)
-    figure.tight_layout()
     return figure
 
 
-def hemisphere_maps(member: ModelFamily, physical: dict, draws: int = 400) -> plt.Figure:
-    """Polar maps (Fig. 9 convention) of the posterior median BRDF of ``member`` (every draw of
-    its physical parameters in ``physical``) on one shared logarithmic colour scale, and of the
-    relative width of its 95 % band on one shared linear scale."""
-    from matplotlib.colors import LogNorm, Normalize
+class HemisphereMaps(NamedTuple):
+    """Per angle of :data:`MAP_THETA_I_DEG`, on a grid of θ [deg] × φ [deg] (46 × 91 points):
+    the posterior median BRDF [sr⁻¹] and the relative width of its 95 % band [-]."""
 
+    theta_deg: np.ndarray
+    phi_deg: np.ndarray
+    medians: list[np.ndarray]
+    widths: list[np.ndarray]
+
+
+def hemisphere_values(member: ModelFamily, physical: dict, draws: int = 400) -> HemisphereMaps:
+    """The hemisphere maps' values: the BRDF of ``member`` at ``draws`` draws (evenly spread)
+    of its physical parameters in ``physical``. JAX and NumPy do the work, the GIL released:
+    the report computes them in a thread while it draws other figures."""
     count = np.size(next(iter(physical.values())))
     take = np.linspace(0, count - 1, min(draws, count)).astype(int)
     batch = {name: np.asarray(v)[take][:, None, None] for name, v in physical.items()}
     theta = np.linspace(0.0, 89.0, 46)
     phi = np.linspace(0.0, 360.0, 91)
     grid_theta, grid_phi = np.meshgrid(theta, phi, indexing="ij")
+    brdf = jax.jit(lambda *args: jnp.exp(member.log_brdf(*args)))  # XLA's exp: 4× NumPy's
+    values = [brdf(angle, grid_theta[None], grid_phi[None], batch) for angle in MAP_THETA_I_DEG]
     medians, widths = [], []
-    log_brdf = jax.jit(member.log_brdf)
-    for angle in MAP_THETA_I_DEG:
-        values = np.exp(np.asarray(log_brdf(angle, grid_theta[None], grid_phi[None], batch)))
-        low, median, high = np.quantile(values, [0.025, 0.5, 0.975], axis=0)
+    for value in values:  # every angle dispatched: JAX computes the next while NumPy sorts one
+        low, median, high = np.quantile(np.asarray(value), [0.025, 0.5, 0.975], axis=0)
         medians.append(median)
         widths.append((high - low) / median)
+    return HemisphereMaps(grid_theta, grid_phi, medians, widths)
+
+
+def hemisphere_maps(
+    member: ModelFamily, physical: dict, draws: int = 400, maps: HemisphereMaps | None = None
+) -> Figure:
+    """Polar maps (Fig. 9 convention) of the posterior median BRDF of ``member`` (every draw of
+    its physical parameters in ``physical``) on one shared logarithmic colour scale, and of the
+    relative width of its 95 % band on one shared linear scale; ``maps``: their values
+    (:func:`hemisphere_values`), when computed already."""
+    maps = hemisphere_values(member, physical, draws) if maps is None else maps
+    medians, widths = maps.medians, maps.widths
     floor = max(
         min(float(np.min(m)) for m in medians), 1e-6 * max(float(np.max(m)) for m in medians)
     )
@@ -368,22 +267,27 @@ def hemisphere_maps(member: ModelFamily, physical: dict, draws: int = 400) -> pl
         Normalize(vmin=0.0, vmax=max(float(np.max(w)) for w in widths)),
     )
     labels = ("BRDF [sr⁻¹], posterior median", "95 % band width / median [-]")
-    figure, axes = plt.subplots(
-        2, 4, figsize=(15, 7.6), subplot_kw={"projection": "polar"}, layout="constrained"
-    )
-    for row, (maps, norm, label, cmap) in enumerate(
+    margins = Margins(left=0.45, right=1.9, bottom=0.3, top=0.85, across=0.75, between=0.55)
+    figure, axes = panels((15, 7.6), 2, 4, margins, subplot_kw={"projection": "polar"})
+    for row, (values, norm, label, cmap) in enumerate(
         zip((medians, widths), norms, labels, ("viridis", "cividis"), strict=True)
     ):
         for column, angle in enumerate(MAP_THETA_I_DEG):
             axis = axes[row, column]
             mesh = axis.pcolormesh(
-                np.radians(grid_phi), grid_theta, maps[column], shading="auto", cmap=cmap, norm=norm
+                np.radians(maps.phi_deg),
+                maps.theta_deg,
+                values[column],
+                shading="auto",
+                cmap=cmap,
+                norm=norm,
             )
             axis.set_ylim(0, 90)
             axis.set_yticks([30, 60, 90])
             axis.tick_params(labelsize=7)
-            axis.set_title(f"θi = {angle:g}°" if row == 0 else "", pad=10)
-        figure.colorbar(mesh, ax=axes[row, :].tolist(), shrink=0.8, label=label)
+            axis.set_title(f"θi = {angle:g}°" if row == 0 else "", pad=26)  # above φ = 90°
+        bar_axis = colour_bar_axis(figure, axes[row, :].tolist(), gap=0.55, shrink=0.8)
+        figure.colorbar(mesh, cax=bar_axis, label=label)
     model = member.title
     figure.suptitle(
         f"Full-hemisphere BRDF, {model}: radius θ [deg], angle φ [deg] "

@@ -7,6 +7,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from brdf_infer._internal import arviz as az
+from brdf_infer.report._canvas import Margins, panels
 from brdf_infer.studies.uniformity import ecdf_band
 
 
@@ -16,10 +17,12 @@ def loo_pit_comparison(pits: dict[str, tuple[np.ndarray, float]]) -> Figure:
     Args:
         pits: error model name → (LOO-PIT values, KS p-value).
     """
-    figure = Figure(figsize=(5.2 * len(pits), 3.9), layout="constrained")
-    axes = figure.subplots(1, len(pits), squeeze=False)[0]
+    # one panel (5.2 in) is narrower than the title on one line: two lines then
+    joint = ": " if len(pits) > 1 else ":\n"
+    margins = Margins(left=0.8, right=0.15, bottom=0.5, top=0.55 + 0.25 * (len(pits) == 1))
+    figure, axes = panels((5.2 * len(pits), 3.9), 1, len(pits), margins)
     grid = np.linspace(0.0, 1.0, 201)[1:-1]
-    for axis, (name, (values, p_value)) in zip(axes, pits.items(), strict=True):
+    for axis, (name, (values, p_value)) in zip(axes[0], pits.items(), strict=True):
         values = np.asarray(values)
         low, high = ecdf_band(values.size, grid)
         ecdf = np.mean(values[:, None] <= grid[None, :], axis=0)
@@ -30,8 +33,6 @@ def loo_pit_comparison(pits: dict[str, tuple[np.ndarray, float]]) -> Figure:
         axis.set_xlabel("LOO-PIT value [-]")
         axis.set_ylabel("ECDF − uniform CDF [-]")
         axis.legend(fontsize=7, loc="lower right")
-    # one panel (5.2 in) is narrower than the title on one line: two lines then
-    joint = ": " if len(pits) > 1 else ":\n"
     figure.suptitle(f"Leave-one-out predictive calibration{joint}inside the band when calibrated")
     return figure
 
@@ -61,8 +62,8 @@ def spread_check(idata: az.InferenceData) -> Figure | None:
     replicated = np.asarray(idata.posterior_predictive["obs"])
     replicated = replicated.reshape(-1, replicated.shape[-1])
     angles = sorted(groups)
-    figure = Figure(figsize=(7, 4.2), layout="constrained")
-    axis = figure.subplots()
+    figure, axes = panels((7, 4.2), margins=Margins(left=0.75, bottom=0.5, top=0.3))
+    axis = axes[0, 0]
     for position, angle in enumerate(angles):
         rows = groups[angle]
         predicted = np.std(replicated[:, rows], axis=1, ddof=1)
