@@ -20,8 +20,15 @@ from brdf_infer.model import (
     log_brdf0_bound,
     max_log_tis,
 )
-from brdf_infer.model._energy import LOG_TIS_LIMIT
-from brdf_infer.model.params import PAPER_CONSTANTS, PARAM_NAMES, Params, with_dphi_scale
+from brdf_infer.model._energy import ENERGY_NODES, ENERGY_THETA_I_DEG, LOG_TIS_LIMIT
+from brdf_infer.model._tis import log_tis
+from brdf_infer.model.params import (
+    PAPER_CONSTANTS,
+    PARAM_NAMES,
+    UV_PAPER,
+    Params,
+    with_dphi_scale,
+)
 from brdf_infer.posterior import build_posterior_model
 from brdf_infer.posterior._potential import FlatPotential
 
@@ -65,6 +72,35 @@ def test_the_tis_is_proportional_to_brdf0_so_energy_conservation_bounds_ln_brdf0
     kept = np.asarray(conserves_energy(params))
     assert 0.2 < kept.mean() < 0.9  # both sides are drawn
     assert np.array_equal(kept, log_brdf0 <= bound)
+
+
+def test_the_largest_ln_tis_and_its_gradient_are_the_maximum_over_the_check_angles():
+    """max_log_tis evaluates ln TIS again at the largest angle, its gradient through that one
+    angle only: its value and gradient are those of the maximum over all check angles (the
+    reference here), for parameter sets whose largest angle differs, one Δφ each."""
+    rng = np.random.default_rng(5)
+    count = 24
+    base = np.array(UV_PAPER, float)
+    fields = base[None, :] * np.exp(rng.normal(0.0, 0.3, (count, 6)))
+    fields[:, 4] = rng.uniform(1.5, 6.0, count)  # alpha
+    fields[:, 5] = rng.uniform(-10.0, 10.0, count)  # theta_s0 [deg]
+    params = Params(*(jnp.asarray(column) for column in fields.T))
+    constants = with_dphi_scale(PAPER_CONSTANTS, jnp.exp(rng.normal(0.0, 0.3, count)))
+
+    def reference(params, constants):
+        angles = jnp.asarray(ENERGY_THETA_I_DEG)
+        return jnp.max(log_tis(angles, params, False, constants, ENERGY_NODES), axis=-1)
+
+    values = reference(params, constants)
+    largest = jnp.argmax(
+        log_tis(jnp.asarray(ENERGY_THETA_I_DEG), params, False, constants, ENERGY_NODES), -1
+    )
+    assert len(np.unique(np.asarray(largest))) >= 3  # several largest angles are tried
+    np.testing.assert_allclose(max_log_tis(params, constants), values, rtol=0, atol=1e-13)
+    ours = jax.grad(lambda p, c: max_log_tis(p, c).sum(), argnums=(0, 1))(params, constants)
+    theirs = jax.grad(lambda p, c: reference(p, c).sum(), argnums=(0, 1))(params, constants)
+    for mine, expected in zip(jax.tree.leaves(ours), jax.tree.leaves(theirs), strict=True):
+        np.testing.assert_allclose(mine, expected, rtol=1e-12, atol=1e-14)
 
 
 @pytest.mark.full
