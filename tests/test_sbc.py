@@ -73,6 +73,12 @@ def test_simultaneous_ecdf_band_holds_95_percent_of_uniform_ecdfs():
     assert 0.93 <= np.mean(inside) <= 0.97  # binomial sd of 1000 trials ≈ 0.7 %
 
 
+def test_the_ecdf_band_refuses_points_that_do_not_increase_within_zero_and_one():
+    for points in ([0.5, 0.2], [-0.1, 0.5], [0.5, 1.5]):
+        with pytest.raises(ValueError, match="increase within"):
+            ecdf_band(N, np.array(points))
+
+
 @pytest.mark.parametrize("draws", [100, 29])
 def test_rank_tests_reject_uniform_ranks_no_more_often_than_their_level(draws):
     """Exactly uniform ranks, 4000 sets: each test's p-value falls below 5 % and 1 % no more

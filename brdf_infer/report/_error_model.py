@@ -116,7 +116,7 @@ def variants_comparison(run: RunFolder, idata) -> str:
     stored = run.path / VARIANTS_DIR
     for name in sorted(p.name for p in stored.glob("*/")) if stored.is_dir() else []:
         if (posterior := run.variant(name).posterior_file).is_file():
-            variants[name] = az.from_netcdf(posterior)
+            variants[name] = az.from_netcdf_groups(posterior, ("posterior", "log_likelihood"))
     if len(variants) < 2:
         return "<p>No model variants in this run to compare (variants/NAME/posterior.nc).</p>"
     loos = {

@@ -4,7 +4,7 @@ in hundredths of a second.
 
 The second process is a bare interpreter that imports matplotlib only (``python -c``; a
 multiprocessing worker would import this package, its JAX and ArviZ: seconds of start-up),
-started before the run is read where a core is free for it (:func:`spare_core`). The figures
+started before the run is read where there is a second core (:func:`spare_core`). The figures
 travel as pickles through a temporary folder, one line on its standard input each, and it
 answers each with the line once the PNG is written. Whatever it cannot take (it did not start,
 it failed, a figure that does not pickle) this process saves itself, to the same bytes.
@@ -43,11 +43,12 @@ for line in sys.stdin:
 
 
 def spare_core() -> bool:
-    """Whether a core is free for a second process: this one may run on more than one, and
-    fewer are busy (the 1-minute load average) than the others. On a machine busy with other
-    work the second process only adds its start-up and the pickles to the load."""
+    """Whether this process may run on more than one core. Not the load average: after
+    sampling on every core, the 1-minute average counts this run's own chains for a minute
+    and kept the second process out of every ``brdf-infer run``; on a machine busy with other
+    work the second process adds its start-up and the pickles (≈ 0.3 s of CPU) to the load."""
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    return (cores or 1) > 1 and os.getloadavg()[0] <= cores - 1
+    return (cores or 1) > 1
 
 
 class FigureSaver:

@@ -7,8 +7,6 @@ from __future__ import annotations
 import numpy as np
 from scipy import stats
 
-from brdf_infer._internal import arviz as az
-
 
 def uniform_rank_band(replicates: int, bins: int, level: float = 0.99) -> tuple[float, float]:
     """Central ``level`` range of one bin's count under uniform ranks: Binomial(N, 1/bins)."""
@@ -19,26 +17,26 @@ def uniform_rank_band(replicates: int, bins: int, level: float = 0.99) -> tuple[
 def ecdf_band(
     replicates: int, points: np.ndarray, level: float = 0.95, seed: int = 0, simulations: int = 2000
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Simultaneous ``level`` band for the ECDF of N uniform values at ``points`` (fractions).
+    """Simultaneous ``level`` band for the ECDF of N uniform values at ``points`` (fractions,
+    increasing).
 
-    ArviZ's simulation method (Säilynoja, Bürkner & Vehtari 2022, Stat. Comput. 32, 32): the
-    pointwise level γ such that a fraction ``level`` of ``simulations`` uniform ECDFs stays
-    inside every pointwise Binomial(N, z) central-(1 − γ) interval, and those intervals. The
-    simulation rather than ArviZ's optimised default, whose cost grows faster with N: a whole
-    table's LOO-PIT has N in the 10⁴s.
+    The simulation method of Säilynoja, Bürkner & Vehtari (2022, Stat. Comput. 32, 32, Sec.
+    2.2): for each of ``simulations`` ECDFs of N uniform values, the smallest central level γ
+    of the pointwise Binomial(N, z) intervals that holds it at every point (1 − 2 × its
+    smallest tail probability); the band is the pointwise central intervals at the ``level``
+    quantile of those γ. The simulation, not an optimisation, because a whole table's LOO-PIT
+    has N in the 10⁴s. An ECDF at the points is drawn as its counts: those between
+    consecutive points are multinomial, so a band costs the same for any N (≈ 0.1 s for 199
+    points; ArviZ's loop over ECDFs took 0.4 s for N = 42, 0.9 s for N = 5000).
     """
-    return az.ecdf_confidence_band(
-        replicates,
-        points,
-        points,
-        prob=level,
-        method="simulated",
-        rvs=_uniform,
-        num_trials=simulations,
-        random_state=np.random.default_rng(seed),
-    )
-
-
-def _uniform(size: int, random_state: np.random.Generator | None = None) -> np.ndarray:
-    """Uniform(0, 1) values, the reference distribution of the band."""
-    return stats.uniform.rvs(size=size, random_state=random_state)
+    points = np.asarray(points, float)
+    if np.any(np.diff(points) < 0) or points.min() < 0 or points.max() > 1:
+        raise ValueError("ecdf_band: the points must increase within [0, 1]")
+    widths = np.diff(np.concatenate([[0.0], points, [1.0]]))
+    between = np.random.default_rng(seed).multinomial(replicates, widths, size=simulations)
+    counts = np.cumsum(between, axis=1)[:, : points.size]  # values ≤ each point
+    lower = stats.binom.cdf(counts, replicates, points).min(axis=1)
+    upper = stats.binom.sf(counts - 1, replicates, points).min(axis=1)
+    pointwise = np.quantile(1.0 - 2.0 * np.minimum(lower, upper), level)
+    low, high = stats.binom.interval(pointwise, replicates, points)
+    return low / replicates, high / replicates
