@@ -163,10 +163,12 @@ def test_a_stored_function_compiles_once_per_shape_and_loads_warm(tmp_path, monk
         StoredFunction(_scaled(3.0), ("scaled", 3.0))(x)
 
 
-def test_a_program_export_refuses_is_compiled_and_not_stored(tmp_path):
-    """LAPACK's ``ormqr`` (lineax's QR solve, as in the least-squares solver on some tables)
-    has no export compatibility guarantee, and lineax's checks are host callbacks: jax.export
-    refuses both."""
+def test_a_program_export_refuses_is_compiled_not_stored_and_not_exported_again(
+    tmp_path, monkeypatch
+):
+    """lineax's checks are host callbacks, which jax.export refuses: the program is compiled,
+    not stored, and the refusal is remembered, so the next compilation traces it for jit only
+    (export.export patched to fail)."""
     import lineax
 
     matrix = jnp.asarray(np.random.default_rng(0).normal(size=(6, 3)))
@@ -178,6 +180,32 @@ def test_a_program_export_refuses_is_compiled_and_not_stored(tmp_path):
     program = compile_stored(solve, (matrix, target), identity=b"qr", folder=tmp_path)
     np.testing.assert_allclose(program(matrix, target), [1.0, -2.0, 0.5], atol=1e-12)
     assert not list(tmp_path.glob(f"*{stored_programs.SUFFIX}"))
+    assert len(list(tmp_path.glob(f"*{stored_programs.REFUSED_SUFFIX}"))) == 1
+    _no_tracing(monkeypatch)
+    again = compile_stored(solve, (matrix, target), identity=b"qr", folder=tmp_path)
+    np.testing.assert_allclose(again(matrix, target), [1.0, -2.0, 0.5], atol=1e-12)
+
+
+def test_a_lapack_call_without_a_compatibility_guarantee_is_stored(tmp_path, monkeypatch):
+    """LAPACK's ``ormqr`` (a QR's Q applied, as in the least-squares solver) has no
+    jax.export compatibility guarantee across jaxlib versions; the key holds the version, so
+    it is stored and loaded without tracing."""
+
+    from jax.lax.linalg import ormqr
+
+    def project(a, b):
+        reflectors, taus = jnp.linalg.qr(a, mode="raw")
+        return ormqr(reflectors.mT, taus, b[:, None])[:, 0]  # Q b
+
+    matrix = jnp.asarray(np.random.default_rng(1).normal(size=(6, 3)))
+    target = jnp.arange(6.0)
+    expected = compile_stored(project, (matrix, target), identity=b"ormqr", folder=tmp_path)(
+        matrix, target
+    )
+    assert len(list(tmp_path.glob(f"*{stored_programs.SUFFIX}"))) == 1
+    _no_tracing(monkeypatch)
+    loaded = compile_stored(project, (matrix, target), identity=b"ormqr", folder=tmp_path)
+    np.testing.assert_array_equal(loaded(matrix, target), expected)
 
 
 @pytest.mark.full
