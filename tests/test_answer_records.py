@@ -250,16 +250,17 @@ def test_a_one_sample_scene_names_its_sample_effect_set_by_its_prior(tmp_path, l
     )
     (tmp_path / "one.scene.toml").write_text(text)
     scene = load_scene(tmp_path / "one.scene.toml")
-    # 2 × 500 draws: no sampler diagnostic is checked here (REDUCED_NUTS's 4 × 1000 are for the
-    # noise scales' tail ESS); a one-sample structure's program is compiled for this test alone
+    # 4 × 1000 draws: the variance share's Monte Carlo error with 2 × 500 was 0.10–0.12 for a
+    # share of 0.39–0.56 (two draws of the chains, 3.7 and 4.6 errors from 0), too coarse to
+    # tell it from 0 at MC_BOUND; a one-sample structure's program is compiled for this alone
     run = run_posterior(
         scene,
         scene.load_measurements(),
         progress=False,
         out=tmp_path / "run",
-        chains=2,
+        chains=4,
         warmup=SUITE_WARMUP,
-        draws=500,
+        draws=1000,
     )
     summary = json.loads((tmp_path / "run" / "summary.json").read_text())
     sample = summary["learned"]["sample_sd"]

@@ -60,8 +60,9 @@ import numpy as np
 from scipy.special import logsumexp
 
 from brdf_infer._internal import arviz as az
+from brdf_infer._internal.stored_programs import StoredFunction, register_tree_types
 from brdf_infer.model import ModelFamily, energy_log_factor
-from brdf_infer.model.params import DPHI_NAME, Params
+from brdf_infer.model.params import DPHI_NAME, HemisphereConstants, Params
 from brdf_infer.model.priors import Prior
 from brdf_infer.posterior._bands import draws_physical, tis_curve_draws
 from brdf_infer.posterior._likelihood import noise_prior
@@ -285,6 +286,12 @@ def variant_model(
     return build_posterior_model(scene, measurements, member)
 
 
+register_tree_types((Params, HemisphereConstants))
+# the energy factor of many draws, one compiled program per shape, loaded on a warm run
+# (traced eagerly, its operations took ≈ 1 s of every run's width record)
+_ENERGY_FACTOR = StoredFunction(energy_log_factor, ("energy_log_factor",))
+
+
 def _prior_ratio(model: PosteriorModel, variant: PosteriorModel, flat: dict) -> np.ndarray:
     """ln p_alt(θ) − ln p(θ) of every draw where the alternative changes the prior: the
     physical prior's energy factor at the alternative's Δφ against the draw's (the factor
@@ -292,9 +299,14 @@ def _prior_ratio(model: PosteriorModel, variant: PosteriorModel, flat: dict) -> 
     if variant.family.dphi_free == model.family.dphi_free:
         return np.zeros(len(next(iter(flat.values()))))
     params = Params(*(np.asarray(flat[name]) for name in Params._fields))
-    ours = energy_log_factor(params, model.family.constants_of(flat))
-    theirs = energy_log_factor(params, variant.family.constants_of(flat))
+    ours = _ENERGY_FACTOR(params, _as_arrays(model.family.constants_of(flat)))
+    theirs = _ENERGY_FACTOR(params, _as_arrays(variant.family.constants_of(flat)))
     return np.asarray(theirs) - np.asarray(ours)
+
+
+def _as_arrays(constants: HemisphereConstants) -> HemisphereConstants:
+    """Eq. (8)'s constants as float64 arrays (a Python float has no dtype for a program)."""
+    return HemisphereConstants(*(np.asarray(value, float) for value in constants))
 
 
 def variant_elpd(
