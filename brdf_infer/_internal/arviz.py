@@ -33,6 +33,11 @@ with warnings.catch_warnings():
 
 VERSION: str = _arviz.__version__  # written into posterior.nc's provenance
 
+# ArviZ's statistics the same with numba installed (the peers extra brings it) as without:
+# its numba paths compile on first use in every process (≈ 0.25 s of each report, for
+# arrays of a few thousand draws) and round differently from the NumPy ones
+_arviz.Numba.disable_numba()
+
 
 def from_netcdf_groups(path, groups: tuple[str, ...]) -> InferenceData:
     """Only ``groups`` of the InferenceData in ``path``, loaded into memory: a third of
