@@ -223,3 +223,27 @@ def test_a_loaded_start_with_a_traced_step_program_samples(tmp_path, monkeypatch
     again = NutsProgram(model, warmup=30).run(model.data, keys, 20, workers=1)
     for name, values in traced.sites.items():
         np.testing.assert_array_equal(again.sites[name], values)
+
+
+def test_the_draws_likelihood_parts_are_stored_and_load_without_tracing(tmp_path, monkeypatch):
+    """The program of every draw's likelihood parts takes the noise scales and returns the
+    parts, named tuples jax.export must know: without their registration it refused the
+    program in every run (a ``.refused`` marker, traced each time)."""
+    from brdf_infer.model.error_model import NoiseScales
+    from brdf_infer.posterior._likelihood import drawn_noise_scales
+
+    monkeypatch.setattr(stored_programs, "_folder", lambda: tmp_path)
+    model = _lya_model()
+    count = 3
+    physical = {name: jnp.full(count, 1.0) for name in model.family.parameters}
+    sites = {**physical, "alpha": jnp.full(count, 3.0), "sample_sd": jnp.full(count, 0.05)}
+    sites["repeatability"] = jnp.full(count, 0.03)
+    scales = drawn_noise_scales(model.errors, model.data.noise, sites, count)
+    assert isinstance(scales, NoiseScales)
+    parts = model.draw_parts(sites)
+    assert not list(tmp_path.glob(f"*{stored_programs.REFUSED_SUFFIX}"))
+    assert len(list(tmp_path.glob(f"*{stored_programs.SUFFIX}"))) == 1
+    _no_tracing(monkeypatch)
+    again = _lya_model().draw_parts(sites)
+    for loaded, traced in zip(again, parts, strict=True):
+        np.testing.assert_array_equal(loaded, traced)

@@ -51,7 +51,7 @@ import numpy as np
 import numpyro
 import numpyro.distributions as dist
 
-from brdf_infer._internal.stored_programs import StoredFunction
+from brdf_infer._internal.stored_programs import StoredFunction, register_tree_types
 from brdf_infer.errors import BadInputError
 from brdf_infer.model import (
     BOUND_GAP,
@@ -85,6 +85,10 @@ from brdf_infer.posterior._whitening import (
 from brdf_infer.predict.observations import family_log_reflectance_at, log_reflectance
 from brdf_infer.scene import Scene
 from brdf_infer.tables.measurements import Measurements
+
+# the draws' likelihood parts take the noise scales and return the parts: tree types a stored
+# program must name (jax.export refused every such program in every run without them)
+register_tree_types((NoiseScales, LikelihoodParts))
 
 LINEAR = ("brdf0", "a1", "a2", "a3")  # priors of c = (ln BRDF0, b1, b2, b3)
 LINEAR_SITES = ("log_brdf0", "b1", "b2", "b3")
