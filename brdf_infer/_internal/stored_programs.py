@@ -175,21 +175,27 @@ def compile_stored(
         return jax.jit(function).lower(*arguments).compile(compiler_options)
     path = folder / f"{program_key(identity, arguments)}{SUFFIX}"
     refused = path.with_suffix(REFUSED_SUFFIX)
-    exported = None if refused.is_file() else _load(path, arguments)
-    if exported is None and not refused.is_file():
-        try:
-            exported = export.export(jax.jit(function), disabled_checks=ANY_CUSTOM_CALL)(*arguments)
-            serialised = exported.serialize()
-        except (ValueError, NotImplementedError):  # export refuses it: compiled, not stored
-            exported = None
-        with contextlib.suppress(OSError):  # a read-only cache: traced again next time
-            if exported is None:
-                atomic_write_bytes(refused, b"")
-            else:
-                atomic_write_bytes(path, bytes(serialised))
+    exported = (
+        None if refused.is_file() else _load(path, arguments) or _export(function, arguments, path)
+    )
     if exported is None:
         return jax.jit(function).lower(*arguments).compile(compiler_options)
     return jax.jit(exported.call).lower(*arguments).compile(compiler_options)
+
+
+def _export(function: Callable, arguments: Sequence[Any], path: Path) -> export.Exported | None:
+    """``function`` traced and exported, stored at ``path``; None, and the refusal marked
+    beside it, where jax.export refuses it."""
+    try:
+        exported = export.export(jax.jit(function), disabled_checks=ANY_CUSTOM_CALL)(*arguments)
+        serialised = bytes(exported.serialize())
+    except (ValueError, NotImplementedError):  # export refuses it: compiled, not stored
+        exported, serialised = None, b""
+    with contextlib.suppress(OSError):  # a read-only cache: traced again next time
+        atomic_write_bytes(
+            path if exported is not None else path.with_suffix(REFUSED_SUFFIX), serialised
+        )
+    return exported
 
 
 def _folder() -> Path | None:

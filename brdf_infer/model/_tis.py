@@ -78,21 +78,46 @@ def _log_tis_single(
     return jax.nn.logsumexp(terms, b=jnp.broadcast_to(branch_weights[:, None, None], terms.shape))
 
 
+def _flat_batch(
+    params, constants, *more
+) -> tuple[tuple[int, ...], Params, HemisphereConstants, list]:
+    """The parameters' fields, the constants' (a Δφ per draw,
+    :func:`~brdf_infer.model.params.with_dphi_scale`) and ``more`` arrays as float64,
+    broadcast to one batch shape and flattened: (batch shape, params, constants, more)."""
+    fields = [jnp.asarray(value, float) for value in (*params, *constants, *more)]
+    batch_shape = jnp.broadcast_shapes(*(value.shape for value in fields))
+    flat = [jnp.broadcast_to(value, batch_shape).reshape(-1) for value in fields]
+    count, terms = len(params), len(params) + len(constants)
+    flat_params = Params(*flat[:count])
+    return batch_shape, flat_params, HemisphereConstants(*flat[count:terms]), flat[terms:]
+
+
 def _batched_log_tis(theta_i_deg, params, fold, constants, nodes):
-    """ln TIS over a batch: the parameters' fields and the constants' (a Δφ per draw,
-    :func:`~brdf_infer.model.params.with_dphi_scale`) broadcast to one batch shape."""
+    """ln TIS over a batch of parameter sets (:func:`_flat_batch`), at every θi."""
     theta_i = jnp.asarray(theta_i_deg, float)
-    fields = [jnp.asarray(value, float) for value in params]
-    terms = [jnp.asarray(value, float) for value in constants]
-    batch_shape = jnp.broadcast_shapes(*(value.shape for value in [*fields, *terms]))
-    flat = Params(*(jnp.broadcast_to(field, batch_shape).reshape(-1) for field in fields))
-    flat_constants = HemisphereConstants(
-        *(jnp.broadcast_to(term, batch_shape).reshape(-1) for term in terms)
-    )
+    batch_shape, flat, flat_constants, _ = _flat_batch(params, constants)
     over_angles = jax.vmap(_log_tis_single, in_axes=(0, None, None, None, None))
     over_params = jax.vmap(over_angles, in_axes=(None, 0, None, 0, None))
     values = over_params(theta_i.reshape(-1), flat, fold, flat_constants, nodes)
     return values.reshape(batch_shape + theta_i.shape)
+
+
+def log_tis_at(
+    theta_i_deg: ArrayLike,
+    params: Params,
+    fold: bool = False,
+    constants: HemisphereConstants = PAPER_CONSTANTS,
+    nodes: int = TIS_NODES,
+) -> jnp.ndarray:
+    """ln TIS at one θi per parameter set: θi, the parameters' fields and the constants
+    broadcast to one batch shape (where :func:`log_tis` evaluates every θi for every set).
+
+    Returns:
+        ln TIS [-], of the batch shape.
+    """
+    batch_shape, flat, flat_constants, (theta_i,) = _flat_batch(params, constants, theta_i_deg)
+    single = jax.vmap(_log_tis_single, in_axes=(0, 0, None, 0, None))
+    return single(theta_i, flat, fold, flat_constants, nodes).reshape(batch_shape)
 
 
 @partial(jax.jit, static_argnames=("fold", "nodes"))
